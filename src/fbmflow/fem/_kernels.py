@@ -1,0 +1,221 @@
+"""Numba kernels of the finite element assembly: pure functions over plain arrays.
+
+Notation: ``nb`` cells in a batch, ``nq`` quadrature points, ``nl`` local Q2 nodes, ``d`` the
+dimension. ``Jinv[c, q, l, i] = d xi_l / d x_i`` is the inverse Jacobian of the multilinear cell
+map, ``detJw[c, q] = |det J| w_q``. Every kernel is checked against a plain NumPy reference in
+``tests/fem/test_kernels.py``.
+"""
+import numpy as np
+
+from .._jit import njit, prange
+
+
+@njit(parallel=True)
+def cell_geometry(cell_coords, dN, weights):
+    """Jacobians of the multilinear maps at the quadrature points.
+
+    Parameters
+    ----------
+    cell_coords : (n_cells, n_v, d) float64   vertex coordinates per cell
+    dN : (nq, n_v, d) float64                  reference gradients of the Q1 basis
+    weights : (nq,) float64                    quadrature weights
+
+    Returns
+    -------
+    detJw : (n_cells, nq) float64   |det J| times the weight
+    Jinv : (n_cells, nq, d, d) float64   ``Jinv[c, q, l, i] = d xi_l / d x_i``
+    """
+    n_cells, n_v, d = cell_coords.shape
+    nq = dN.shape[0]
+    detJw = np.empty((n_cells, nq))
+    Jinv = np.empty((n_cells, nq, d, d))
+    for c in prange(n_cells):
+        J = np.zeros((d, d))
+        for q in range(nq):
+            J[:, :] = 0.0
+            for v in range(n_v):
+                for i in range(d):
+                    for l in range(d):
+                        J[i, l] += cell_coords[c, v, i] * dN[q, v, l]  # J[i, l] = dx_i/dxi_l
+            if d == 2:
+                det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+                Jinv[c, q, 0, 0] = J[1, 1] / det
+                Jinv[c, q, 0, 1] = -J[0, 1] / det
+                Jinv[c, q, 1, 0] = -J[1, 0] / det
+                Jinv[c, q, 1, 1] = J[0, 0] / det
+            else:
+                det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1])
+                       - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
+                       + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
+                for l in range(3):
+                    for i in range(3):
+                        # inverse = adjugate / det; adj[l, i] = cofactor[i, l]
+                        r0, r1 = (i + 1) % 3, (i + 2) % 3
+                        c0, c1 = (l + 1) % 3, (l + 2) % 3
+                        Jinv[c, q, l, i] = (J[r0, c0] * J[r1, c1] - J[r0, c1] * J[r1, c0]) / det
+            detJw[c, q] = abs(det) * weights[q]
+    return detJw, Jinv
+
+
+@njit(parallel=True)
+def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton):
+    """Quadrature-point coefficients of the convection and Newton (reaction) terms.
+
+    With ``u_h = sum_a u_a phi_a`` (component-wise) the local matrices are
+
+        N[a, b] = sum_q sum_l conv[q, l] phi_a(q) dphi_b/dxi_l(q)              (u . grad) term
+        R_ik[a, b] = sum_q react[i, k, q] phi_a(q) phi_b(q)                      (grad u) term
+
+    where ``conv[q, l] = detJw (Jinv u_h)_l`` and ``react[i, k, q] = detJw d u_i / d x_k``.
+
+    Parameters
+    ----------
+    cells : (nb,) int64             cells of the batch
+    u : (d, n_dofs) float64         velocity, component-blocked
+    cell_dofs : (n_cells, nl) int64
+    phi : (nq, nl), dphi : (nq, nl, d) float64   reference tabulation
+    detJw : (n_cells, nq), Jinv : (n_cells, nq, d, d) float64
+    newton : bool                   also compute ``react``
+
+    Returns
+    -------
+    conv : (nb, nq * d) float64
+    react : (nb * d * d, nq) float64 (zero rows when ``newton`` is False)
+    """
+    nb = cells.shape[0]
+    nq, nl, d = dphi.shape
+    conv = np.zeros((nb, nq * d))
+    react = np.zeros((nb * d * d, nq)) if newton else np.zeros((0, nq))
+    for e in prange(nb):
+        c = cells[e]
+        uq = np.zeros(d)
+        gref = np.zeros((d, d))
+        for q in range(nq):
+            uq[:] = 0.0
+            gref[:, :] = 0.0
+            for a in range(nl):
+                dof = cell_dofs[c, a]
+                for i in range(d):
+                    ua = u[i, dof]
+                    uq[i] += ua * phi[q, a]
+                    for l in range(d):
+                        gref[i, l] += ua * dphi[q, a, l]
+            w = detJw[c, q]
+            for l in range(d):
+                s = 0.0
+                for i in range(d):
+                    s += Jinv[c, q, l, i] * uq[i]
+                conv[e, q * d + l] = w * s
+            if newton:
+                for i in range(d):
+                    for k in range(d):
+                        s = 0.0
+                        for l in range(d):
+                            s += gref[i, l] * Jinv[c, q, l, k]
+                        react[(e * d + i) * d + k, q] = w * s
+    return conv, react
+
+
+@njit(parallel=True)
+def laplace_coefficients(detJw, Jinv):
+    """``detJw * (Jinv Jinv^T)[l, m]`` per cell and point: (n_cells, nq * d * d) float64."""
+    n_cells, nq, d, _ = Jinv.shape
+    out = np.zeros((n_cells, nq * d * d))
+    for c in prange(n_cells):
+        for q in range(nq):
+            for l in range(d):
+                for m in range(d):
+                    s = 0.0
+                    for i in range(d):
+                        s += Jinv[c, q, l, i] * Jinv[c, q, m, i]
+                    out[c, (q * d + l) * d + m] = detJw[c, q] * s
+    return out
+
+
+@njit(parallel=True)
+def scatter_scalar(cells, local, slots, out):
+    """``out[slots[c, a, b]] += local[e, a * nl + b]`` for the cells of one colour.
+
+    cells (nb,) int64; local (nb, nl * nl) float64; slots (n_cells, nl, nl) int32 positions in the
+    CSR data of the scalar Q2 pattern; out (nnz,) float64, updated in place. Cells must not share
+    DOFs (one colour) because the loop over them runs in parallel.
+    """
+    nl = slots.shape[1]
+    for e in prange(cells.shape[0]):
+        c = cells[e]
+        for a in range(nl):
+            for b in range(nl):
+                out[slots[c, a, b]] += local[e, a * nl + b]
+
+
+@njit(parallel=True)
+def scatter_coupled(cells, local, scale, slots, cell_dofs, indptr, d, out):
+    """Scatter ``scale * R_ik`` blocks into the coupled velocity matrix.
+
+    The coupled matrix has rows ``(i, r)`` = ``i * n + r`` and, within a row, the columns of
+    component 0, then 1, ... each in the order of the scalar pattern. Hence the entry
+    ``(i, r), (k, s)`` sits at ``i d nnz + d indptr[r] + k len_r + (slot_s(r, s) - indptr[r])``.
+
+    cells (nb,) int64 one colour; local (nb * d * d, nl * nl) float64 rows ordered (e, i, k);
+    slots (n_cells, nl, nl) int32; cell_dofs (n_cells, nl) int64; indptr (n + 1,) int64 of the
+    scalar pattern; d int; out (d * d * nnz,) float64 updated in place.
+    """
+    nl = slots.shape[1]
+    nnz = indptr[-1]
+    for e in prange(cells.shape[0]):
+        c = cells[e]
+        for a in range(nl):
+            r = cell_dofs[c, a]
+            start = indptr[r]
+            ln = indptr[r + 1] - start
+            for b in range(nl):
+                off = slots[c, a, b] - start
+                for i in range(d):
+                    base = i * d * nnz + d * start + off
+                    for k in range(d):
+                        out[base + k * ln] += scale * local[(e * d + i) * d + k, a * nl + b]
+
+
+@njit(parallel=True)
+def add_scalar_blocks(scalar, indptr, d, out):
+    """Add the scalar operator to every diagonal block of the coupled matrix.
+
+    scalar (nnz,) float64 on the scalar pattern; indptr (n + 1,) int64; out (d * d * nnz,) float64.
+    """
+    n = indptr.shape[0] - 1
+    nnz = indptr[-1]
+    for r in prange(n):
+        start = indptr[r]
+        ln = indptr[r + 1] - start
+        for i in range(d):
+            base = i * d * nnz + d * start + i * ln
+            for off in range(ln):
+                out[base + off] += scalar[start + off]
+
+
+@njit(parallel=True)
+def divergence_local(dphi, detJw, Jinv, psi, rank, out):
+    """Data of ``B^T``: ``B^T[(c, m), (i, a)] = -int_c psi_m d phi_a / d x_i``.
+
+    Row ``(c, m)`` of the CSR matrix ``B^T`` holds ``d * nl`` entries: component ``i``, then the
+    cell's DOFs in ascending global order (``rank[c, a]`` is the position of local node ``a``).
+
+    dphi (nq, nl, d); detJw (n_cells, nq); Jinv (n_cells, nq, d, d); psi (n_cells, nq, d + 1)
+    pressure basis at the quadrature points; rank (n_cells, nl) int64;
+    out (n_cells * (d + 1) * d * nl,) float64, overwritten.
+    """
+    nq, nl, d = dphi.shape
+    n_cells = detJw.shape[0]
+    npl = d + 1
+    for c in prange(n_cells):
+        for m in range(npl):
+            row = (c * npl + m) * d * nl
+            for i in range(d):
+                for a in range(nl):
+                    s = 0.0
+                    for q in range(nq):
+                        g = 0.0
+                        for l in range(d):
+                            g += dphi[q, a, l] * Jinv[c, q, l, i]
+                        s += psi[c, q, m] * g * detJw[c, q]
+                    out[row + i * nl + rank[c, a]] = -s

@@ -1,0 +1,121 @@
+"""Assembly of the Q2/P1disc operators into precomputed CSR patterns.
+
+Local matrices are computed in *tensor form* (Kirby & Logg's reference-tensor representation):
+for a batch of cells, the quadrature-point coefficients (a Numba kernel) are multiplied by a
+constant reference table with one BLAS GEMM,
+
+    local[c, (a, b)] = sum_{q, l, ...} coeff[c, (q, l, ...)] * table[(q, l, ...), (a, b)],
+
+and a Numba kernel scatters them straight into ``csr.data`` through the per-cell slot map. No COO
+matrix is ever built.
+
+Weak forms (``phi`` test, ``psi`` trial pressure; velocity components are blocked):
+
+* mass ``M[a, b] = int phi_a phi_b``
+* viscous term in *gradient form* ``L[a, b] = int grad phi_a . grad phi_b`` per component. We use
+  the gradient form (not the deformation tensor ``2 D(u) : D(v)``) because its natural boundary
+  condition ``nu du/dn - p n = 0`` is the classical "do-nothing" outflow that leaves Poiseuille
+  flow undisturbed; for divergence-free fields both forms give the same interior operator, and the
+  particle forces are evaluated with the full Cauchy stress anyway.
+* convection ``N(w)[a, b] = int phi_a (w . grad phi_b)`` per component,
+* Newton term ``R_ik(w)[a, b] = int phi_a phi_b d w_i / d x_k`` coupling components,
+* gradient/divergence ``B[(i, a), (c, m)] = -int_c psi_m d phi_a/dx_i``; ``B^T u = 0`` is the
+  discrete continuity equation.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import _kernels
+from .space import FlowSpace
+
+
+def _assemble_scalar(space: FlowSpace, coeff: np.ndarray, table: np.ndarray) -> np.ndarray:
+    data = np.zeros(space.nnz)
+    for cells in space.batches:
+        local = coeff[cells] @ table
+        _kernels.scatter_scalar(cells, local, space.slots, data)
+    return data
+
+
+def assemble_mass(space: FlowSpace) -> np.ndarray:
+    """Data (nnz,) of the scalar Q2 mass matrix on ``space``'s pattern."""
+    return _assemble_scalar(space, space.detJw, space.table_mass)
+
+
+def assemble_laplace(space: FlowSpace) -> np.ndarray:
+    """Data (nnz,) of the scalar Q2 stiffness matrix ``int grad phi_a . grad phi_b``."""
+    coeff = _kernels.laplace_coefficients(space.detJw, space.Jinv)
+    return _assemble_scalar(space, coeff, space.table_laplace)
+
+
+def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float, scalar_out: np.ndarray,
+                        newton_out: np.ndarray | None = None) -> None:
+    """Add ``scale * N(u)`` to ``scalar_out`` and, if given, ``scale * R(u)`` to ``newton_out``.
+
+    Parameters
+    ----------
+    u : (dim * n_v,) float64, component-blocked convecting velocity
+    scale : float
+    scalar_out : (nnz,) float64, scalar pattern data, updated in place
+    newton_out : (dim * dim * nnz,) float64, coupled pattern data, updated in place, optional
+    """
+    d = space.dim
+    uu = np.ascontiguousarray(u.reshape(d, space.n_v))
+    newton = newton_out is not None
+    for cells in space.batches:
+        conv, react = _kernels.convection_coefficients(
+            cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
+        local = conv @ space.table_convection
+        local *= scale
+        _kernels.scatter_scalar(cells, local, space.slots, scalar_out)
+        if newton:
+            local = react @ space.table_mass
+            _kernels.scatter_coupled(cells, local, scale, space.slots, space.V.cell_dofs,
+                                     space.indptr, d, newton_out)
+
+
+def expand_to_coupled(space: FlowSpace, scalar: np.ndarray, out: np.ndarray) -> None:
+    """Add the scalar operator to every diagonal block of coupled data ``out``."""
+    _kernels.add_scalar_blocks(scalar, space.indptr, space.dim, out)
+
+
+def assemble_divergence(space: FlowSpace) -> sp.csr_matrix:
+    """``B^T`` as CSR, shape (n_p, dim * n_v); ``B = B^T.T`` is its zero-copy CSC transpose."""
+    d = space.dim
+    cd = space.V.cell_dofs
+    nl = cd.shape[1]
+    npl = d + 1
+    order = np.argsort(cd, axis=1)
+    rank = np.empty_like(order)
+    np.put_along_axis(rank, order, np.arange(nl)[None, :], axis=1)
+    data = np.empty(space.mesh.n_cells * npl * d * nl)
+    _kernels.divergence_local(space.dphi, space.detJw, space.Jinv, space.psi, rank, data)
+    sorted_dofs = np.take_along_axis(cd, order, axis=1)  # (n_cells, nl)
+    cols = (sorted_dofs[:, None, :] + space.n_v * np.arange(d)[None, :, None]).reshape(-1, d * nl)
+    indices = np.repeat(cols, npl, axis=0).ravel().astype(np.int32)
+    indptr = np.arange(space.n_p + 1, dtype=np.int64) * (d * nl)
+    return sp.csr_matrix((data, indices, indptr), shape=(space.n_p, space.n_u))
+
+
+def assemble_load(space: FlowSpace, values: np.ndarray) -> np.ndarray:
+    """Load vector ``F[(i, a)] = int f_i phi_a`` from point values of ``f``.
+
+    Parameters
+    ----------
+    values : (n_cells, nq, dim) float64, ``f`` at ``space.xq``
+
+    Returns
+    -------
+    (dim * n_v,) float64
+    """
+    local = np.einsum("cqi,cq,qa->ica", values, space.detJw, space.phi)
+    cd = space.V.cell_dofs.ravel()
+    return np.concatenate([np.bincount(cd, weights=local[i].ravel(), minlength=space.n_v)
+                           for i in range(space.dim)])
+
+
+def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
+    """``int psi_j dx`` for every pressure DOF: (n_p,) float64 (so ``w . p = int p``)."""
+    return np.einsum("cq,cqm->cm", space.detJw, space.psi).ravel()

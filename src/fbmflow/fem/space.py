@@ -1,0 +1,127 @@
+"""The Q2/P1disc discretisation of one mesh: spaces, quadrature, geometry and sparsity.
+
+Everything here depends only on the mesh and is computed once: the cell geometry at the
+quadrature points, the CSR sparsity pattern of the scalar Q2 operator with the position of every
+local entry in it (so re-assembly scatters straight into ``csr.data``), the pattern of the coupled
+``dim x dim`` velocity block derived from it, and the colouring of the cells.
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..mesh import StructuredMesh
+from . import _kernels
+from .dofmap import DofMap, PressureDofMap
+from .elements import ElementQ1
+from .quadrature import gauss_tensor
+
+
+class FlowSpace:
+    """Q2 velocity / P1disc pressure spaces on a structured mesh.
+
+    Parameters
+    ----------
+    mesh : StructuredMesh
+    n_quad : int, default 3
+        Gauss points per axis (3 integrates the Q2 mass and stiffness matrices exactly on
+        affine cells).
+    batch_size : int, optional
+        Cells per assembly batch (bounds the temporary element-matrix memory).
+
+    Notes
+    -----
+    Velocity vectors are component-blocked: ``u.reshape(dim, n_v)``; the coupled velocity
+    unknown ``(i, r)`` is ``i * n_v + r``. Pressure DOF ``m`` of cell ``c`` is ``c (dim+1) + m``.
+    """
+
+    def __init__(self, mesh: StructuredMesh, n_quad: int = 3, batch_size: int | None = None):
+        self.mesh = mesh
+        self.dim = d = mesh.dim
+        self.V = DofMap(mesh)
+        self.Q = PressureDofMap(mesh)
+        self.n_v = self.V.n_dofs
+        self.n_u = d * self.n_v
+        self.n_p = self.Q.n_dofs
+        self.n_dofs = self.n_u + self.n_p
+        self.points, self.weights = gauss_tensor(d, n_quad)
+        self.phi, self.dphi = self.V.element.tabulate(self.points)
+        _, dN = ElementQ1(d).tabulate(self.points)
+        coords = mesh.cell_coordinates()
+        self.detJw, self.Jinv = _kernels.cell_geometry(coords, dN, self.weights)
+        self.xq = mesh.map_to_physical(self.points)  # (n_cells, nq, d)
+        self.psi = self.Q.element.tabulate(self.xq, self.Q.centre[:, None, :], self.Q.scale[:, None, :])
+        self.batch_size = batch_size or (4096 if d == 2 else 512)
+        self._build_pattern()
+
+    # -- sparsity -----------------------------------------------------------------------------
+    def _build_pattern(self):
+        cd = self.V.cell_dofs
+        n = self.n_v
+        nl = cd.shape[1]
+        keys = (cd[:, :, None] * n + cd[:, None, :]).ravel()
+        unique = np.unique(keys)
+        rows = unique // n
+        self.indices = (unique % n).astype(np.int32)
+        self.indptr = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(rows, minlength=n), out=self.indptr[1:])
+        self.nnz = int(self.indptr[-1])
+        self.slots = np.searchsorted(unique, keys).astype(np.int32).reshape(-1, nl, nl)
+
+    @cached_property
+    def coupled_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR ``(indptr, indices)`` of the ``(d n_v) x (d n_v)`` coupled velocity block."""
+        d, n = self.dim, self.n_v
+        lengths = np.diff(self.indptr)
+        indptr = np.zeros(d * n + 1, dtype=np.int64)
+        indptr[1:] = np.cumsum(np.tile(d * lengths, d))
+        row_of = np.repeat(np.arange(n), lengths)
+        within = np.arange(self.nnz) - self.indptr[row_of]
+        block = np.empty(d * self.nnz, dtype=np.int32)
+        for k in range(d):
+            block[d * self.indptr[row_of] + k * lengths[row_of] + within] = self.indices + k * n
+        indices = np.tile(block, d)
+        return indptr, indices
+
+    @cached_property
+    def batches(self) -> list[np.ndarray]:
+        """Cell batches, each inside one colour (no shared DOFs), for parallel scatter."""
+        out = []
+        for colour in self.mesh.cell_colours():
+            for start in range(0, colour.size, self.batch_size):
+                out.append(colour[start:start + self.batch_size])
+        return out
+
+    # -- reference tables (local matrix = coefficients @ table) --------------------------------
+    @cached_property
+    def table_mass(self) -> np.ndarray:
+        """``phi_a phi_b`` per point: (nq, nl * nl)."""
+        return np.einsum("qa,qb->qab", self.phi, self.phi).reshape(self.phi.shape[0], -1)
+
+    @cached_property
+    def table_convection(self) -> np.ndarray:
+        """``phi_a dphi_b/dxi_l``, rows ``(q, l)``: (nq * d, nl * nl)."""
+        t = np.einsum("qa,qbl->qlab", self.phi, self.dphi)
+        return t.reshape(t.shape[0] * t.shape[1], -1)
+
+    @cached_property
+    def table_laplace(self) -> np.ndarray:
+        """``dphi_a/dxi_l dphi_b/dxi_m``, rows ``(q, l, m)``: (nq * d * d, nl * nl)."""
+        t = np.einsum("qal,qbm->qlmab", self.dphi, self.dphi)
+        return t.reshape(t.shape[0] * t.shape[1] * t.shape[2], -1)
+
+    # -- helpers ------------------------------------------------------------------------------
+    def scalar_matrix(self, data: np.ndarray) -> sp.csr_matrix:
+        """CSR matrix on the scalar Q2 pattern with the given data (no copy)."""
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_v, self.n_v))
+
+    def coupled_matrix(self, data: np.ndarray) -> sp.csr_matrix:
+        """CSR matrix on the coupled velocity pattern with the given data (no copy)."""
+        indptr, indices = self.coupled_pattern
+        return sp.csr_matrix((data, indices, indptr), shape=(self.n_u, self.n_u))
+
+    def __repr__(self) -> str:
+        return (f"FlowSpace(dim={self.dim}, cells={self.mesh.n_cells}, n_v={self.n_v}, "
+                f"n_p={self.n_p}, n_dofs={self.n_dofs})")

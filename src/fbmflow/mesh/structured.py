@@ -1,0 +1,211 @@
+"""Structured quadrilateral (2D) and hexahedral (3D) meshes.
+
+A :class:`StructuredMesh` is logically a box of ``shape = (n_x, n_y[, n_z])`` cells. Its vertex
+coordinates are stored explicitly, so they may be moved later (grid deformation) without changing
+the topology, the refinement hierarchy or the DOF maps. The geometry of every cell is the
+multilinear (Q1) map of its ``2**dim`` vertices.
+
+Numbering is lexicographic with x fastest:
+
+* vertex ``(i, j[, k])`` -> ``i + (n_x + 1) * (j + (n_y + 1) * k)``
+* cell ``(a, b[, c])`` -> ``a + n_x * (b + n_y * c)``
+* local vertex ``(di, dj[, dk])`` of a cell, ``d* in {0, 1}`` -> ``di + 2 dj + 4 dk``
+
+Boundary faces of the box carry the tags ``xmin, xmax, ymin, ymax[, zmin, zmax]``. A periodic
+direction has no boundary faces: its two sides are identified by the DOF maps (the vertex array
+keeps both sides so that the geometry stays explicit).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+AXES = "xyz"
+
+
+def face_tags(dim: int) -> tuple[str, ...]:
+    """Names of the box faces, ``('xmin', 'xmax', 'ymin', ...)`` for ``dim`` axes."""
+    return tuple(f"{AXES[d]}{side}" for d in range(dim) for side in ("min", "max"))
+
+
+@dataclass(frozen=True, eq=False)
+class StructuredMesh:
+    """A logically box-shaped mesh of quadrilaterals or hexahedra.
+
+    Parameters
+    ----------
+    shape : tuple of int, length dim
+        Number of cells per axis.
+    lower, upper : tuple of float, length dim
+        Corners of the box (used for the initial uniform vertex placement and for point location).
+    periodic : tuple of bool, length dim
+        Periodic directions; a periodic direction needs at least 2 cells.
+    vertices : (n_vertices, dim) float64, optional
+        Explicit vertex coordinates; uniform placement in the box when omitted.
+    """
+
+    shape: tuple[int, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    periodic: tuple[bool, ...]
+    vertices: np.ndarray
+
+    @classmethod
+    def box(cls, shape, lower=None, upper=None, periodic=None) -> "StructuredMesh":
+        """Uniform mesh of the box ``[lower, upper]`` with ``shape`` cells per axis."""
+        shape = tuple(int(n) for n in shape)
+        dim = len(shape)
+        if dim not in (2, 3):
+            raise ValueError(f"a structured mesh has 2 or 3 axes, got shape {shape}")
+        if any(n < 1 for n in shape):
+            raise ValueError(f"every axis needs at least one cell, got shape {shape}")
+        lower = tuple(float(v) for v in (lower if lower is not None else (0.0,) * dim))
+        upper = tuple(float(v) for v in (upper if upper is not None else (1.0,) * dim))
+        periodic = tuple(bool(p) for p in (periodic if periodic is not None else (False,) * dim))
+        if len(lower) != dim or len(upper) != dim or len(periodic) != dim:
+            raise ValueError("lower, upper and periodic need one entry per axis")
+        if any(u <= lo for lo, u in zip(lower, upper)):
+            raise ValueError(f"upper {upper} must exceed lower {lower} on every axis")
+        for d in range(dim):
+            if periodic[d] and shape[d] < 2:
+                raise ValueError(f"periodic axis {AXES[d]} needs at least 2 cells")
+        axes = [np.linspace(lower[d], upper[d], shape[d] + 1) for d in range(dim)]
+        grids = np.meshgrid(*axes, indexing="ij")
+        vertices = np.stack([g.ravel(order="F") for g in grids], axis=1)
+        return cls(shape, lower, upper, periodic, vertices)
+
+    def __post_init__(self):
+        n_vertices = int(np.prod([n + 1 for n in self.shape]))
+        if self.vertices.shape != (n_vertices, self.dim):
+            raise ValueError(f"vertices must have shape {(n_vertices, self.dim)}")
+
+    # -- sizes --------------------------------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return len(self.shape)
+
+    @property
+    def n_cells(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def n_vertices(self) -> int:
+        return self.vertices.shape[0]
+
+    @property
+    def vertex_shape(self) -> tuple[int, ...]:
+        return tuple(n + 1 for n in self.shape)
+
+    @property
+    def spacing(self) -> np.ndarray:
+        """Nominal cell size per axis, ``(upper - lower) / shape``, (dim,) float64."""
+        return (np.array(self.upper) - np.array(self.lower)) / np.array(self.shape)
+
+    @property
+    def tags(self) -> tuple[str, ...]:
+        """Boundary face tags of the non-periodic directions."""
+        return tuple(t for t in face_tags(self.dim) if not self.periodic[AXES.index(t[0])])
+
+    # -- topology -----------------------------------------------------------------------------
+    def cell_indices(self) -> np.ndarray:
+        """Logical index of every cell, (n_cells, dim) int64."""
+        idx = np.indices(self.shape).reshape(self.dim, -1, order="F").T
+        return np.ascontiguousarray(idx, dtype=np.int64)
+
+    @cached_property
+    def cell_vertices(self) -> np.ndarray:
+        """Vertex numbers of every cell, (n_cells, 2**dim) int64, local order x fastest."""
+        idx = self.cell_indices()
+        local = np.indices((2,) * self.dim).reshape(self.dim, -1, order="F").T
+        strides = np.cumprod((1,) + self.vertex_shape[:-1])
+        return ((idx[:, None, :] + local[None, :, :]) * strides).sum(axis=2)
+
+    def cell_coordinates(self) -> np.ndarray:
+        """Vertex coordinates per cell, (n_cells, 2**dim, dim) float64."""
+        return self.vertices[self.cell_vertices]
+
+    def cell_colours(self) -> list[np.ndarray]:
+        """Cells grouped so that cells of one group share no vertex (periodicity included).
+
+        Returns a list of (n_in_colour,) int64 arrays. Cells of the same parity in every axis do
+        not touch; a periodic axis with an odd cell count gives its last layer a third colour.
+        """
+        idx = self.cell_indices()
+        colour = np.zeros(self.n_cells, dtype=np.int64)
+        for d in range(self.dim):
+            c_d = idx[:, d] % 2
+            if self.periodic[d] and self.shape[d] % 2 == 1:
+                c_d[idx[:, d] == self.shape[d] - 1] = 2
+            colour += c_d * 3**d
+        return [np.flatnonzero(colour == c) for c in np.unique(colour)]
+
+    # -- geometry -----------------------------------------------------------------------------
+    def map_to_physical(self, xi: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
+        """Multilinear map of reference points ``xi in [-1, 1]^dim``.
+
+        Parameters
+        ----------
+        xi : (n_points, dim) float64
+        cells : (n_sel,) int64, optional, default all cells
+
+        Returns
+        -------
+        (n_sel, n_points, dim) float64
+        """
+        coords = self.cell_coordinates() if cells is None else self.vertices[self.cell_vertices[cells]]
+        return np.einsum("pv,cvd->cpd", q1_basis(xi), coords)
+
+    @property
+    def is_uniform(self) -> bool:
+        """True when the vertices still sit on the uniform box lattice (point location by index)."""
+        ref = StructuredMesh.box(self.shape, self.lower, self.upper, self.periodic).vertices
+        return bool(np.allclose(ref, self.vertices, rtol=0, atol=1e-12 * np.max(self.spacing)))
+
+    def refine(self) -> "StructuredMesh":
+        """Uniform refinement: every cell splits into ``2**dim`` children.
+
+        New vertices are placed by the current multilinear cell maps, so a moved mesh refines into
+        a nested mesh of the same geometry.
+        """
+        fine_shape = tuple(2 * n for n in self.shape)
+        fine = StructuredMesh.box(fine_shape, self.lower, self.upper, self.periodic)
+        # each fine vertex = coarse vertex lattice at half index; evaluate coarse map there
+        fidx = np.indices(fine.vertex_shape).reshape(self.dim, -1, order="F").T
+        cell = np.minimum(fidx // 2, np.array(self.shape) - 1)
+        xi = (fidx - 2 * cell).astype(float) - 1.0  # in {-1, 0, 1}
+        strides = np.cumprod((1,) + self.shape[:-1])
+        cell_id = (cell * strides).sum(axis=1)
+        basis = q1_basis(xi)  # (n_fine_vertices, 2**dim), row per point
+        coords = self.vertices[self.cell_vertices[cell_id]]  # (n, 2**dim, dim)
+        vertices = np.einsum("pv,pvd->pd", basis, coords)
+        return StructuredMesh(fine_shape, self.lower, self.upper, self.periodic, vertices)
+
+    def hierarchy(self, levels: int) -> list["StructuredMesh"]:
+        """``[self, self.refine(), ...]`` with ``levels + 1`` nested meshes."""
+        meshes = [self]
+        for _ in range(levels):
+            meshes.append(meshes[-1].refine())
+        return meshes
+
+    def boundary_vertices(self, tag: str) -> np.ndarray:
+        """Vertex numbers on the box face ``tag`` (e.g. ``'xmin'``), (n,) int64."""
+        axis, side = self._parse_tag(tag)
+        idx = np.indices(self.vertex_shape).reshape(self.dim, -1, order="F").T
+        target = 0 if side == "min" else self.shape[axis]
+        return np.flatnonzero(idx[:, axis] == target)
+
+    def _parse_tag(self, tag: str) -> tuple[int, str]:
+        if tag not in self.tags:
+            raise ValueError(f"unknown boundary tag {tag!r}; this mesh has {', '.join(self.tags)}")
+        return AXES.index(tag[0]), tag[1:]
+
+
+def q1_basis(xi: np.ndarray) -> np.ndarray:
+    """Multilinear basis on ``[-1, 1]^dim`` at points ``xi (n, dim)`` -> (n, 2**dim) float64."""
+    xi = np.atleast_2d(xi)
+    dim = xi.shape[1]
+    local = np.indices((2,) * dim).reshape(dim, -1, order="F").T  # (2**dim, dim) in {0,1}
+    sign = 2 * local - 1
+    return np.prod(0.5 * (1.0 + sign[None, :, :] * xi[:, None, :]), axis=2)
