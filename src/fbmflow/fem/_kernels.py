@@ -219,3 +219,15 @@ def divergence_local(dphi, detJw, Jinv, psi, rank, out):
                             g += dphi[q, a, l] * Jinv[c, q, l, i]
                         s += psi[c, q, m] * g * detJw[c, q]
                     out[row + i * nl + rank[c, a]] = -s
+
+
+@njit(parallel=True)
+def set_identity_rows(indptr, indices, rows, data):
+    """Replace CSR rows ``rows`` by unit rows (1 on the diagonal, 0 elsewhere), in place.
+
+    indptr (n + 1,) int64; indices (nnz,) int32; rows (n_rows,) int64; data (nnz,) float64.
+    """
+    for j in prange(rows.shape[0]):
+        r = rows[j]
+        for s in range(indptr[r], indptr[r + 1]):
+            data[s] = 1.0 if indices[s] == r else 0.0

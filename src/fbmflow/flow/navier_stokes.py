@@ -1,0 +1,169 @@
+"""The incompressible Navier–Stokes problem on a Q2/P1disc space (knows no particles).
+
+    rho (du/dt + (u . grad) u) - mu Laplace u + grad p = f,     div u = 0.
+
+Every solve (steady, or one implicit substep of a time scheme) is the nonlinear system
+
+    F_u(u, p) = m rho M u + a (mu L u + rho N(u) u) + B p - rhs = 0,      F_p = B^T u = 0,
+
+with ``m = 0, a = 1, rhs = f`` for the steady problem; :mod:`fbmflow.flow.time_schemes` supplies
+``m, a, rhs`` for the time steps. Newton's Jacobian of ``F_u`` is
+``m rho M + a (mu L + rho N(u) + rho R(u))``. The unknown vector is ``x = [u (dim * n_v), p (n_p)]``,
+velocity component-blocked.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Callable
+
+import numpy as np
+
+from ..fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
+                   assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights)
+from ..fem.constraints import DirichletConstraints
+from ..mesh import StructuredMesh
+from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
+from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
+
+log = logging.getLogger(__name__)
+
+
+class NavierStokesProblem:
+    """Incompressible (Navier–)Stokes flow on a structured mesh.
+
+    Parameters
+    ----------
+    mesh : StructuredMesh
+    viscosity : float
+        Dynamic viscosity ``mu`` [Pa s] (> 0).
+    boundary : dict tag -> condition
+        One of :mod:`fbmflow.flow.boundary`'s conditions for every non-periodic face.
+    density : float, default 1
+        ``rho`` [kg/m^3] (> 0).
+    body_force : callable ``f(x (n, dim), t) -> (n, dim)``, optional
+        Force per unit volume [N/m^3].
+    convection : bool, default True
+        False solves the (time-dependent) Stokes equations.
+    linear_solver : str, default "direct"
+        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`.
+    newton : NewtonSettings
+    """
+
+    def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict,
+                 density: float = 1.0, body_force: Callable | None = None,
+                 convection: bool = True, linear_solver: str = "direct",
+                 newton: NewtonSettings = NewtonSettings()):
+        if not viscosity > 0:
+            raise ValueError(f"viscosity must be positive, got {viscosity}")
+        if not density > 0:
+            raise ValueError(f"density must be positive, got {density}")
+        check_boundary(mesh.tags, boundary)
+        self.mesh = mesh
+        self.mu = float(viscosity)
+        self.rho = float(density)
+        self.boundary = dict(boundary)
+        self.body_force = body_force
+        self.convection = convection
+        self.newton = newton
+        self.linear_solver = make_linear_solver(linear_solver)
+        self.space = space = FlowSpace(mesh)
+        self.M = assemble_mass(space)
+        self.L = assemble_laplace(space)
+        self.BT = assemble_divergence(space)
+        self.mean_weights = None if pressure_is_determined(boundary) else pressure_mean_weights(space)
+        self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
+        self._constraints: DirichletConstraints | None = None
+
+    # -- data ---------------------------------------------------------------------------------
+    @property
+    def n_dofs(self) -> int:
+        return self.space.n_dofs
+
+    def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity (dim, n_v) and pressure (n_p,) views of ``x``."""
+        s = self.space
+        return x[:s.n_u].reshape(s.dim, s.n_v), x[s.n_u:]
+
+    def constraints(self, t: float = 0.0) -> DirichletConstraints:
+        """Dirichlet constraints at time ``t`` (cached when they do not depend on time)."""
+        if self._steady_bc:
+            if self._constraints is None:
+                self._constraints = build_constraints(self.space.V, self.boundary, t)
+            return self._constraints
+        return build_constraints(self.space.V, self.boundary, t)
+
+    def load(self, t: float = 0.0) -> np.ndarray:
+        """``int f . v`` for every velocity DOF, (dim * n_v,) float64."""
+        s = self.space
+        if self.body_force is None:
+            return np.zeros(s.n_u)
+        x = s.xq.reshape(-1, s.dim)
+        f = np.asarray(self.body_force(x, t), dtype=float).reshape(s.mesh.n_cells, -1, s.dim)
+        return assemble_load(s, f)
+
+    def zero_state(self, t: float = 0.0) -> np.ndarray:
+        """Zero flow with the boundary values at time ``t``: x (n_dofs,) float64."""
+        x = np.zeros(self.n_dofs)
+        self.constraints(t).apply_to_vector(x)
+        return x
+
+    # -- operators ----------------------------------------------------------------------------
+    def _scalar_operator(self, u: np.ndarray, m: float, a: float, newton_out=None) -> np.ndarray:
+        S = (m * self.rho) * self.M + (a * self.mu) * self.L
+        if self.convection and a != 0.0:
+            assemble_convection(self.space, u, a * self.rho, S, newton_out)
+        return S
+
+    def _apply_scalar(self, S: np.ndarray, u: np.ndarray) -> np.ndarray:
+        s = self.space
+        return (s.scalar_matrix(S) @ u.reshape(s.dim, s.n_v).T).T.ravel()
+
+    def apply_spatial(self, u: np.ndarray) -> np.ndarray:
+        """``mu L u + rho N(u) u`` for a velocity (dim * n_v,) -> (dim * n_v,)."""
+        return self._apply_scalar(self._scalar_operator(u, 0.0, 1.0), u)
+
+    def residual(self, x: np.ndarray, m: float, a: float, rhs: np.ndarray,
+                 con: DirichletConstraints) -> np.ndarray:
+        """``[F_u, F_p]`` (n_dofs,) with the constrained rows of ``F_u`` zero."""
+        n_u = self.space.n_u
+        u, p = x[:n_u], x[n_u:]
+        Fu = self._apply_scalar(self._scalar_operator(u, m, a), u) + self.BT.T @ p - rhs
+        Fu[con.dofs] = 0.0
+        return np.concatenate([Fu, self.BT @ u])
+
+    def linear_system(self, x: np.ndarray, m: float, a: float,
+                      con: DirichletConstraints) -> SaddlePointSystem:
+        """Newton linearisation at ``x`` with constraints applied."""
+        s = self.space
+        u = x[:s.n_u]
+        J = np.zeros(s.dim * s.dim * s.nnz)
+        S = self._scalar_operator(u, m, a, newton_out=J if self.convection else None)
+        expand_to_coupled(s, S, J)
+        A = s.coupled_matrix(J)
+        con.zero_rows(A)
+        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs)
+
+    # -- solves -------------------------------------------------------------------------------
+    def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float):
+        """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
+
+        Returns x (n_dofs,) and the NewtonReport.
+        """
+        con = self.constraints(t)
+        x0 = x0.copy()
+        con.apply_to_vector(x0)
+
+        def linear_step(x, F):
+            system = self.linear_system(x, m, a, con)
+            du, dp, report = self.linear_solver.solve(system, -F[:system.n_u], -F[system.n_u:])
+            return np.concatenate([du, dp]), report
+
+        return solve_newton(lambda x: self.residual(x, m, a, rhs, con), linear_step, x0, self.newton)
+
+    def solve_steady(self, x0: np.ndarray | None = None, t: float = 0.0):
+        """Steady solution (Newton from ``x0``, default the zero flow). Returns x, NewtonReport."""
+        x0 = self.zero_state(t) if x0 is None else x0
+        x, report = self.solve(x0, 0.0, 1.0, self.load(t), t)
+        log.info("steady solve: %d Newton iterations, |F| %.2e -> %.2e", report.iterations,
+                 report.residuals[0], report.residuals[-1])
+        return x, report

@@ -1,0 +1,96 @@
+"""Newton's method with a backtracking line search and a work report (deal.II step-57 style)."""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+class ConvergenceError(RuntimeError):
+    """A nonlinear or linear solver did not converge; the message says how far it got."""
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Stopping rule: ``|F| <= max(atol, rtol |F_0|)`` or ``|dx| <= step_tol |x|`` (2-norms)."""
+
+    rtol: float = 1e-10
+    atol: float = 1e-12
+    step_tol: float = 1e-12
+    max_iterations: int = 30
+    max_backtracks: int = 8
+
+
+@dataclass
+class NewtonReport:
+    """What one Newton solve did."""
+
+    converged: bool = False
+    iterations: int = 0
+    residuals: list[float] = field(default_factory=list)
+    line_search_steps: int = 0
+    linear_iterations: int = 0
+    linear_time_s: float = 0.0
+
+
+def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
+                 linear_step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, object]],
+                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings()):
+    """Solve ``F(x) = 0``.
+
+    Parameters
+    ----------
+    residual : x -> F(x), both (n,) float64
+    linear_step : (x, F) -> (dx, LinearReport) solving ``J(x) dx = -F``
+    x0 : (n,) float64, first iterate (constraints already applied)
+
+    Returns
+    -------
+    x : (n,) float64
+    report : NewtonReport
+
+    Raises
+    ------
+    ConvergenceError
+        when the iteration count is exhausted or a residual is not finite.
+    """
+    x = x0.copy()
+    report = NewtonReport()
+    F = residual(x)
+    norm = float(np.linalg.norm(F))
+    report.residuals.append(norm)
+    target = max(settings.atol, settings.rtol * norm)
+    while norm > target:
+        if report.iterations >= settings.max_iterations or not np.isfinite(norm):
+            raise ConvergenceError(
+                f"Newton did not converge: residual {norm:.3e} after {report.iterations} iterations "
+                f"(started at {report.residuals[0]:.3e}, target {target:.3e})")
+        dx, lin = linear_step(x, F)
+        report.linear_iterations += lin.iterations
+        report.linear_time_s += lin.wall_time_s
+        if np.linalg.norm(dx) <= settings.step_tol * max(np.linalg.norm(x), 1.0):
+            x = x + dx  # update below round-off: converged as far as arithmetic allows
+            break
+        step = 1.0
+        for _ in range(settings.max_backtracks + 1):
+            x_new = x + step * dx
+            F_new = residual(x_new)
+            norm_new = float(np.linalg.norm(F_new))
+            if np.isfinite(norm_new) and norm_new <= (1.0 - 1e-4 * step) * norm:
+                break
+            step *= 0.5
+            report.line_search_steps += 1
+        else:
+            raise ConvergenceError(
+                f"Newton line search failed at iteration {report.iterations + 1}: residual "
+                f"{norm:.3e} did not decrease (target {target:.3e})")
+        x, F, norm = x_new, F_new, norm_new
+        report.iterations += 1
+        report.residuals.append(norm)
+        log.debug("newton %d: |F| = %.3e (step %.3g)", report.iterations, norm, step)
+    report.converged = True
+    return x, report
