@@ -1,0 +1,165 @@
+"""Parameters: frozen, documented dataclasses with strict loading from TOML-like dictionaries.
+
+Every scene's parameters are a tree of frozen dataclasses whose fields are declared with
+:func:`param` (default, unit, documentation and constraints). :func:`from_dict` builds them from
+nested dictionaries and rejects unknown keys, wrong types and values outside the constraints with
+a :class:`ParamError` that names the dotted key and what is allowed. ``--set a.b=value`` overrides
+use :func:`set_dotted` and :func:`parse_value`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import typing
+from typing import Any
+
+from .solvers.newton import NewtonSettings
+
+
+class ParamError(ValueError):
+    """Invalid user input (scene file, parameter, command line); the message is one line."""
+
+
+def param(default, doc: str, unit: str = "", *, positive: bool = False, nonnegative: bool = False,
+          choices: tuple | None = None, minimum: float | None = None, maximum: float | None = None):
+    """A documented dataclass field with validation metadata."""
+    meta = dict(doc=doc, unit=unit, positive=positive, nonnegative=nonnegative, choices=choices,
+                minimum=minimum, maximum=maximum)
+    if dataclasses.is_dataclass(default):
+        return dataclasses.field(default_factory=lambda: default, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def section(cls, doc: str = ""):
+    """A nested parameter section with its default instance."""
+    return dataclasses.field(default_factory=cls, metadata=dict(doc=doc or (cls.__doc__ or "").strip()))
+
+
+def _check_value(key: str, value: Any, ftype, meta) -> Any:
+    if ftype is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParamError(f"{key}: expected a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(f"{key}: must be finite, got {value!r}")
+    elif ftype is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParamError(f"{key}: expected an integer, got {value!r}")
+    elif ftype is bool:
+        if not isinstance(value, bool):
+            raise ParamError(f"{key}: expected true or false, got {value!r}")
+    elif ftype is str:
+        if not isinstance(value, str):
+            raise ParamError(f"{key}: expected a string, got {value!r}")
+    if meta.get("choices") is not None and value not in meta["choices"]:
+        allowed = ", ".join(repr(c) for c in meta["choices"])
+        raise ParamError(f"{key}: {value!r} is not allowed; choose one of {allowed}")
+    if meta.get("positive") and not value > 0:
+        raise ParamError(f"{key}: must be positive, got {value!r}")
+    if meta.get("nonnegative") and not value >= 0:
+        raise ParamError(f"{key}: must be zero or positive, got {value!r}")
+    if meta.get("minimum") is not None and value < meta["minimum"]:
+        raise ParamError(f"{key}: must be at least {meta['minimum']}, got {value!r}")
+    if meta.get("maximum") is not None and value > meta["maximum"]:
+        raise ParamError(f"{key}: must be at most {meta['maximum']}, got {value!r}")
+    return value
+
+
+def from_dict(cls, data: dict | None, prefix: str = ""):
+    """Build the dataclass ``cls`` from a nested dict, validating every key and value."""
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise ParamError(f"{prefix.rstrip('.') or 'scene'}: expected a table of parameters, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = [k for k in data if k not in fields]
+    if unknown:
+        raise ParamError(f"unknown parameter '{prefix}{unknown[0]}'; allowed keys here: "
+                         f"{', '.join(prefix + k for k in fields)}")
+    kwargs = {}
+    for name, f in fields.items():
+        if name not in data:
+            continue
+        ftype = hints[name]
+        if dataclasses.is_dataclass(ftype):
+            kwargs[name] = from_dict(ftype, data[name], f"{prefix}{name}.")
+        else:
+            kwargs[name] = _check_value(prefix + name, data[name], ftype, f.metadata)
+    obj = cls(**kwargs)
+    validate = getattr(obj, "validate", None)
+    if validate is not None:
+        validate()
+    return obj
+
+
+def to_dict(obj) -> dict:
+    """Nested plain dict of a parameter dataclass (for summary files)."""
+    return dataclasses.asdict(obj)
+
+
+def parse_value(text: str) -> Any:
+    """A command-line value as a TOML literal (``1e-3``, ``true``, ``"E2"``); bare words stay strings."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def set_dotted(data: dict, key: str, value: Any) -> None:
+    """``data['a']['b'] = value`` for ``key = 'a.b'``, creating intermediate tables."""
+    parts = key.split(".")
+    if not all(parts):
+        raise ParamError(f"malformed parameter key {key!r}; use dotted names like fluid.viscosity")
+    node = data
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise ParamError(f"'{key}': '{part}' is a value, not a section")
+    node[parts[-1]] = value
+
+
+def describe(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
+    """Rows ``(dotted key, default, unit, doc)`` for every parameter of ``cls`` (for the docs)."""
+    rows = []
+    hints = typing.get_type_hints(cls)
+    default = cls()
+    for f in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(hints[f.name]):
+            rows.extend(describe(hints[f.name], f"{prefix}{f.name}."))
+        else:
+            doc = f.metadata.get("doc", "")
+            if f.metadata.get("choices"):
+                doc += " (one of " + ", ".join(map(str, f.metadata["choices"])) + ")"
+            rows.append((prefix + f.name, repr(getattr(default, f.name)), f.metadata.get("unit", ""), doc))
+    return rows
+
+
+# -- sections shared by scenes -------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class SolverParams:
+    """Nonlinear and linear solver settings."""
+
+    linear: str = param("direct", "linear solver for the Newton systems", choices=("direct",))
+    newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
+    newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
+    newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
+
+    def newton_settings(self) -> NewtonSettings:
+        return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,
+                              max_iterations=self.newton_max_iterations)
+
+
+@dataclasses.dataclass(frozen=True)
+class TimeParams:
+    """Time stepping."""
+
+    dt: float = param(0.01, "time step", "s", positive=True)
+    t_end: float = param(1.0, "final time", "s", positive=True)
+    scheme: str = param("fractional-step-theta", "implicit time scheme",
+                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+
+    @property
+    def n_steps(self) -> int:
+        """Steps to reach ``t_end`` (the last one lands on it: ``dt`` is shortened evenly)."""
+        return max(1, math.ceil(self.t_end / self.dt - 1e-9))

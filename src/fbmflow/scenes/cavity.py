@@ -1,0 +1,100 @@
+"""Lid-driven cavity: the unit square with the lid ``y = 1`` moving at speed 1, steady.
+
+The corners of the lid belong to the resting walls (no-slip wins), i.e. the non-leaky cavity.
+Above Re = 100 the steady state is reached by continuation in Re (doubling from 100), each Newton
+solve starting from the previous solution.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..fem.functions import sample_velocity
+from ..flow import Dirichlet, NavierStokesProblem, NoSlip
+from ..mesh import StructuredMesh
+from ..params import SolverParams, param, section
+from .base import Scene, SceneResult
+from .data import ghia1982
+
+
+@dataclass(frozen=True)
+class CavityFluid:
+    """Fluid of the cavity (density 1, lid speed 1, side 1, so viscosity = 1 / re)."""
+
+    re: float = param(100.0, "Reynolds number U L / nu", positive=True, maximum=5000.0)
+
+
+@dataclass(frozen=True)
+class CavityParams:
+    """Parameters of ``cavity-2d``."""
+
+    fluid: CavityFluid = section(CavityFluid)
+    solver: SolverParams = section(SolverParams)
+
+
+class Cavity2D(Scene):
+    name = "cavity-2d"
+    description = "lid-driven unit square, steady Navier-Stokes (Ghia et al. 1982 centrelines)"
+    Params = CavityParams
+    default_level = 3  # 64 x 64 cells: Q2 nodes coincide with the 129 sample points
+
+    @staticmethod
+    def mesh(level: int) -> StructuredMesh:
+        n = 8 * 2**level
+        return StructuredMesh.box((n, n))
+
+    def run(self, params: CavityParams, level: int, progress=None) -> SceneResult:
+        mesh = self.mesh(level)
+        bcs = {"xmin": NoSlip(), "xmax": NoSlip(), "ymin": NoSlip(), "ymax": Dirichlet((1.0, 0.0))}
+        re_path = [params.fluid.re]
+        while re_path[0] > 100.0:
+            re_path.insert(0, max(100.0, re_path[0] / 2))
+        problem = NavierStokesProblem(mesh, 1.0 / re_path[0], bcs, linear_solver=params.solver.linear,
+                                      newton=params.solver.newton_settings())
+        x, newton_its = None, 0
+        for k, re in enumerate(re_path):
+            problem.mu = 1.0 / re
+            x, report = problem.solve_steady(x)
+            newton_its += report.iterations
+            if progress:
+                progress(k + 1, len(re_path), 0.0)
+        s = np.linspace(0.0, 1.0, 129)
+        space = problem.space
+        u_vert = sample_velocity(space, x[:space.n_u], np.stack([np.full_like(s, 0.5), s], axis=1))[:, 0]
+        v_horiz = sample_velocity(space, x[:space.n_u], np.stack([s, np.full_like(s, 0.5)], axis=1))[:, 1]
+        q = {"u_vertical_centerline": u_vert.tolist(), "v_horizontal_centerline": v_horiz.tolist(),
+             "y_samples": s.tolist()}
+        re_int = int(round(params.fluid.re))
+        if re_int in ghia1982.U and abs(params.fluid.re - re_int) < 1e-12:
+            q["ghia_max_deviation_u"] = float(np.max(np.abs(np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int])))
+            q["ghia_max_deviation_v"] = float(np.max(np.abs(np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int])))
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=0, newton_iterations=newton_its)
+
+    def plot(self, summary: dict, path) -> bool:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        q = summary["quantities"]
+        s = np.array(q["y_samples"])
+        re = summary["params"]["fluid"]["re"]
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4.5))
+        ax[0].plot(q["u_vertical_centerline"], s, label="fbmflow")
+        ax[0].set_xlabel("u(0.5, y)")
+        ax[0].set_ylabel("y")
+        ax[1].plot(s, q["v_horizontal_centerline"], label="fbmflow")
+        ax[1].set_xlabel("x")
+        ax[1].set_ylabel("v(x, 0.5)")
+        re_int = int(round(re))
+        if re_int in ghia1982.U and abs(re - re_int) < 1e-12:
+            ax[0].plot(ghia1982.U[re_int], ghia1982.Y, "o", mfc="none", label="Ghia et al. 1982")
+            ax[1].plot(ghia1982.X, ghia1982.V[re_int], "o", mfc="none", label="Ghia et al. 1982")
+        for a in ax:
+            a.grid(alpha=0.3)
+            a.legend()
+        fig.suptitle(f"cavity-2d, Re = {re:g}, level {summary['level']} ({summary['n_cells']} cells)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return True

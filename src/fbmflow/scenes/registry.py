@@ -1,0 +1,89 @@
+"""Scene lookup, scene files and the run that writes ``summary.json``."""
+from __future__ import annotations
+
+import json
+import logging
+import time
+import tomllib
+from pathlib import Path
+
+from .. import __version__
+from ..params import ParamError, from_dict, parse_value, set_dotted, to_dict
+from .base import Scene
+from .cavity import Cavity2D
+from .channel import Channel2D, Channel3D
+from .taylor_green import TaylorGreen2D
+
+log = logging.getLogger(__name__)
+
+SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D())}
+
+
+def get_scene(name: str) -> Scene:
+    """A built-in scene by name; ParamError listing the names otherwise."""
+    try:
+        return SCENES[name]
+    except KeyError:
+        raise ParamError(f"unknown scene {name!r}; built-in scenes: {', '.join(SCENES)} "
+                         "(or give a path to a .toml scene file)") from None
+
+
+def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
+    """Resolve a scene name or TOML file plus ``KEY=VALUE`` overrides.
+
+    A scene file names its base scene and may set the level and any parameter section::
+
+        scene = "cavity-2d"
+        level = 4
+        [fluid]
+        re = 400
+
+    Returns ``(scene, params, level)``; raises ParamError on any bad input.
+    """
+    data: dict = {}
+    if spec.endswith(".toml") or Path(spec).is_file():
+        path = Path(spec)
+        if not path.is_file():
+            raise ParamError(f"scene file {spec!r} not found")
+        try:
+            data = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+            raise ParamError(f"scene file {spec!r} is not valid TOML: {err}") from None
+        if "scene" not in data:
+            raise ParamError(f"scene file {spec!r} lacks the key 'scene' naming a built-in scene")
+        name = data.pop("scene")
+        if not isinstance(name, str):
+            raise ParamError(f"scene file {spec!r}: 'scene' must be a string, got {name!r}")
+        file_level = data.pop("level", None)
+        if file_level is not None and level is None:
+            level = file_level
+    else:
+        name = spec
+    scene = get_scene(name)
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParamError(f"--set expects KEY=VALUE, got {item!r}")
+        set_dotted(data, key.strip(), parse_value(value.strip()))
+    params = from_dict(scene.Params, data)
+    level = scene.default_level if level is None else level
+    if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= scene.max_level:
+        raise ParamError(f"level must be an integer from 0 to {scene.max_level} for {scene.name}, got {level!r}")
+    return scene, params, level
+
+
+def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True) -> dict:
+    """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    result = scene.run(params, level, progress)
+    wall = time.perf_counter() - t0
+    summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
+               "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
+               "steps": result.steps, "wall_time_s": wall,
+               "newton_iterations": result.newton_iterations, "quantities": result.quantities}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    if plot and scene.plot(summary, out / f"{scene.name}.png"):
+        log.info("plot written to %s", out / f"{scene.name}.png")
+    return summary
