@@ -1,0 +1,68 @@
+"""Newton's method: iteration bounds, line search, failure reporting; the direct solver."""
+import numpy as np
+import pytest
+
+from fbmflow.flow import Dirichlet, NavierStokesProblem, NoSlip
+from fbmflow.mesh import StructuredMesh
+from fbmflow.solvers import ConvergenceError, LinearReport, NewtonSettings, solve_newton
+
+
+def _scalar_problem(f, df):
+    def step(x, F):
+        return -F / df(x), LinearReport("scalar", 0.0, 1)
+    return (lambda x: f(x)), step
+
+
+def test_quadratic_convergence_on_a_scalar_equation():
+    res, step = _scalar_problem(lambda x: x**3 - 2.0, lambda x: 3 * x**2)
+    x, report = solve_newton(res, step, np.array([1.0]))
+    assert abs(x[0] - 2 ** (1 / 3)) < 1e-12
+    assert report.iterations <= 6
+    r = report.residuals
+    assert r[-2] < 1e-3 * r[-3]  # superlinear tail
+
+
+def test_line_search_globalises_arctan():
+    """Plain Newton diverges for arctan from x0 = 3; the backtracking line search converges."""
+    res, step = _scalar_problem(np.arctan, lambda x: 1.0 / (1.0 + x**2))
+    x, report = solve_newton(res, step, np.array([3.0]))
+    assert abs(x[0]) < 1e-10
+    assert report.line_search_steps > 0
+
+
+def test_failure_is_reported_not_hidden():
+    res, step = _scalar_problem(lambda x: x**2 + 1.0, lambda x: 2 * x + 1e-3)
+    with pytest.raises(ConvergenceError, match="Newton"):
+        solve_newton(res, step, np.array([0.5]), NewtonSettings(max_iterations=5))
+
+
+@pytest.mark.parametrize("re, max_its", [(100, 6), (400, 10)])
+def test_cavity_newton_iterations_are_bounded(re, max_its):
+    mesh = StructuredMesh.box((16, 16))
+    bcs = {"xmin": NoSlip(), "xmax": NoSlip(), "ymin": NoSlip(), "ymax": Dirichlet((1.0, 0.0))}
+    prob = NavierStokesProblem(mesh, 1.0 / re, bcs)
+    x, report = prob.solve_steady()
+    assert report.converged and report.iterations <= max_its
+    assert report.residuals[-1] <= 1e-10 * report.residuals[0]
+    # the discrete solution is divergence free and the pressure has zero mean
+    u, p = prob.split(x)
+    assert np.linalg.norm(prob.BT @ x[:prob.space.n_u]) < 1e-12
+    assert abs(prob.mean_weights @ p) < 1e-12
+
+
+def test_direct_solver_matches_dense_solve():
+    mesh = StructuredMesh.box((2, 2))
+    bcs = {"xmin": NoSlip(), "xmax": NoSlip(), "ymin": NoSlip(), "ymax": Dirichlet((1.0, 0.0))}
+    prob = NavierStokesProblem(mesh, 0.1, bcs)
+    x = prob.zero_state()
+    system = prob.linear_system(x, 0.0, 1.0, prob.constraints())
+    rng = np.random.default_rng(0)
+    f, g = rng.standard_normal(system.n_u), rng.standard_normal(system.n_p)
+    f[system.fixed] = 0.0
+    g -= system.mean_weights * (system.mean_weights @ g) / (system.mean_weights @ system.mean_weights)
+    du, dp, _ = prob.linear_solver.solve(system, f, g)
+    K = system.matrix().toarray()
+    rhs = np.concatenate([f, g, [0.0]])
+    sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+    assert np.allclose(du, sol[:system.n_u], atol=1e-10)
+    assert np.allclose(dp, sol[system.n_u:-1], atol=1e-10)

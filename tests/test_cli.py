@@ -1,0 +1,94 @@
+"""The command line and scene contract (issue 2, item 6)."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from fbmflow import __version__
+from fbmflow.cli import main
+from fbmflow.scenes import SCENES
+
+REQUIRED = {"scene", "fbmflow_version", "params", "level", "n_cells", "n_dofs", "steps",
+            "wall_time_s", "newton_iterations", "quantities"}
+
+
+def test_scenes_lists_one_per_line(capsys):
+    assert main(["scenes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split("  ")[0] for line in lines] == list(SCENES)
+    assert all(len(line.split("  ", 1)[1]) > 10 for line in lines)
+
+
+def test_run_as_a_separate_process(tmp_path):
+    """The installed console script runs a scene and writes summary.json and its plot."""
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "fbmflow.cli", "run", "channel-2d", "--level", "1",
+                           "--set", "fluid.viscosity=0.02", "--out", str(out), "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert REQUIRED <= set(summary)
+    assert summary["fbmflow_version"] == __version__
+    assert summary["params"]["fluid"]["viscosity"] == 0.02
+    assert summary["level"] == 1 and summary["n_cells"] == 8 * 2
+    q = summary["quantities"]
+    assert q["max_velocity_error"] < 1e-10
+    assert q["pressure_drop"] == pytest.approx(32 * 0.02, rel=1e-10)
+
+
+def test_scene_file_with_overrides(tmp_path, capsys):
+    scene = tmp_path / "my.toml"
+    scene.write_text('scene = "cavity-2d"\nlevel = 0\n[fluid]\nre = 50\n')
+    out = tmp_path / "o"
+    assert main(["run", str(scene), "--set", "fluid.re=80", "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["params"]["fluid"]["re"] == 80 and summary["level"] == 0
+    assert len(summary["quantities"]["u_vertical_centerline"]) == 129
+    assert (out / "cavity-2d.png").stat().st_size > 1000
+    assert main(["plot", str(out)]) == 0
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "no-such-scene"], "unknown scene 'no-such-scene'"),
+    (["run", "cavity-2d", "--set", "fluid.viscosity=1"], "unknown parameter 'fluid.viscosity'"),
+    (["run", "cavity-2d", "--set", "fluid.re=-5"], "fluid.re: must be positive"),
+    (["run", "cavity-2d", "--set", "fluid.re=fast"], "fluid.re: expected a number"),
+    (["run", "cavity-2d", "--set", "solver.linear=magic"], "solver.linear: 'magic' is not allowed"),
+    (["run", "cavity-2d", "--set", "fluid"], "--set expects KEY=VALUE"),
+    (["run", "cavity-2d", "--level", "99"], "level must be an integer from 0 to"),
+    (["run", "taylor-green-2d", "--set", "time.dt=0"], "time.dt: must be positive"),
+    (["run", "taylor-green-2d", "--set", "time.scheme=rk4"], "time.scheme: 'rk4' is not allowed"),
+    (["run", "missing.toml"], "scene file 'missing.toml' not found"),
+    (["run", "cavity-2d", "--bogus"], "unrecognized arguments"),
+    (["plot", "/nonexistent-dir"], "not found"),
+])
+def test_bad_input_exits_2_with_one_line(argv, needle, capsys):
+    assert _exit_code(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
+    assert "Traceback" not in err
+
+
+def test_bad_scene_files(tmp_path, capsys):
+    cases = {
+        "nosc.toml": ("[fluid]\nre = 1\n", "lacks the key 'scene'"),
+        "bad.toml": ("scene = cavity-2d\n", "not valid TOML"),
+        "unknownsec.toml": ('scene = "cavity-2d"\n[fluidd]\nre = 1\n', "unknown parameter 'fluidd'"),
+        "wrongtype.toml": ('scene = "cavity-2d"\n[fluid]\nre = "high"\n', "fluid.re: expected a number"),
+        "section.toml": ('scene = "cavity-2d"\nfluid = 3\n', "expected a table"),
+    }
+    for name, (text, needle) in cases.items():
+        path = tmp_path / name
+        path.write_text(text)
+        assert main(["run", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and needle in err, (name, err)
+
+
+def _exit_code(argv) -> int:
+    """``main``'s return value, or the status of the SystemExit that argparse raises."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return exc.code
