@@ -1,0 +1,493 @@
+"""Numba kernels and the assembled Q2/P1disc operators against plain NumPy references.
+
+House rule: every kernel of ``fbmflow.fem._kernels`` is compared with a straightforward NumPy
+reference on a tiny mesh (2x2 in 2D, 2x2x2 in 3D) to 1e-12. The meshes are deformed (random
+interior vertex moves of ~10 % of h plus a global shear) so that the Jacobians differ between
+cells and quadrature points and are not symmetric.
+
+The assembled operators are compared with a dense reference assembly: element matrices by direct
+quadrature with physical gradients from ``numpy.linalg.inv`` of the Jacobian, scattered through
+``cell_dofs`` into dense arrays.
+"""
+import numpy as np
+import pytest
+
+from fbmflow.fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
+                         assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights)
+from fbmflow.fem import _kernels
+from fbmflow.fem.constraints import DirichletConstraints
+from fbmflow.fem.elements import ElementQ1, ElementQ2
+from fbmflow.fem.quadrature import gauss_tensor
+from fbmflow.mesh import StructuredMesh
+
+RTOL = 1e-12
+UPPER = (1.0, 0.75, 1.25)
+SHEAR = {2: np.array([[1.0, 0.2], [-0.1, 1.0]]),
+         3: np.array([[1.0, 0.2, -0.1], [-0.1, 1.0, 0.15], [0.05, -0.2, 1.0]])}
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def deformed_mesh(dim, periodic=None, shape=None, seed=0, amount=0.1):
+    """Tiny box mesh with interior vertices moved randomly by up to ``amount * h`` and sheared.
+
+    Boundary vertices stay on the box faces before the shear; on a periodic axis the two sides
+    receive the same displacement, so the mesh stays periodic.
+    """
+    shape = shape or (2,) * dim
+    periodic = periodic or (False,) * dim
+    mesh = StructuredMesh.box(shape, upper=UPPER[:dim], periodic=periodic)
+    rng = np.random.default_rng(seed)
+    disp = amount * mesh.spacing * rng.uniform(-1, 1, size=mesh.vertex_shape + (dim,))
+    for d in range(dim):
+        sl_lo = [slice(None)] * dim
+        sl_hi = [slice(None)] * dim
+        sl_lo[d], sl_hi[d] = 0, shape[d]
+        if periodic[d]:
+            disp[tuple(sl_hi)] = disp[tuple(sl_lo)]
+        else:
+            disp[tuple(sl_lo)] = 0.0
+            disp[tuple(sl_hi)] = 0.0
+    # lattice (i, j[, k]) -> vertex number with x fastest: Fortran-order ravel of the lattice axes
+    vertices = mesh.vertices + np.moveaxis(disp, -1, 0).reshape(dim, -1, order="F").T
+    vertices = vertices @ SHEAR[dim].T
+    return StructuredMesh(mesh.shape, mesh.lower, mesh.upper, mesh.periodic, vertices)
+
+
+def assert_rel(actual, expected, rtol=RTOL):
+    actual = np.asarray(actual)
+    expected = np.asarray(expected)
+    assert actual.shape == expected.shape, (actual.shape, expected.shape)
+    scale = max(np.max(np.abs(expected)), 1e-300)
+    err = np.max(np.abs(actual - expected)) if expected.size else 0.0
+    assert err <= rtol * scale, f"max error {err:.3e} vs scale {scale:.3e}"
+
+
+def q1_reference(xi):
+    """Q1 basis and reference gradients by explicit formulas: (nq, 2**d), (nq, 2**d, d)."""
+    nq, dim = xi.shape
+    nv = 2**dim
+    N = np.ones((nq, nv))
+    dN = np.ones((nq, nv, dim))
+    for v in range(nv):
+        s = np.array([2 * ((v >> d) & 1) - 1 for d in range(dim)], dtype=float)  # x fastest
+        f = 0.5 * (1.0 + s[None, :] * xi)  # (nq, d)
+        N[:, v] = np.prod(f, axis=1)
+        for l in range(dim):
+            dN[:, v, l] = 0.5 * s[l] * np.prod(np.delete(f, l, axis=1), axis=1)
+    return N, dN
+
+
+def reference_geometry(mesh, points, weights):
+    """detJ w, J^{-1} (c, q, l, i) and physical quadrature points with NumPy linear algebra."""
+    N, dN = q1_reference(points)
+    X = mesh.cell_coordinates()
+    J = np.einsum("cvi,qvl->cqil", X, dN)
+    detJ = np.linalg.det(J)
+    assert np.all(detJ > 0), "deformed mesh must keep positive Jacobians"
+    return detJ * weights[None, :], np.linalg.inv(J), np.einsum("qv,cvi->cqi", N, X)
+
+
+class DenseReference:
+    """Element matrices by direct quadrature, scattered into dense arrays via ``cell_dofs``."""
+
+    def __init__(self, space):
+        self.space = space
+        mesh = space.mesh
+        self.d = d = mesh.dim
+        self.n_v = space.n_v
+        self.cd = space.V.cell_dofs
+        self.points, self.weights = gauss_tensor(d, 3)
+        self.phi, self.dphi = ElementQ2(d).tabulate(self.points)
+        self.W, self.Jinv, self.xq = reference_geometry(mesh, self.points, self.weights)
+        # physical gradients G[c, q, a, i] = sum_l dphi_a/dxi_l dxi_l/dx_i
+        self.G = np.einsum("qal,cqli->cqai", self.dphi, self.Jinv)
+        X = mesh.cell_coordinates()
+        centre = X.mean(axis=1)
+        scale = 0.5 * (X.max(axis=1) - X.min(axis=1))
+        rel = (self.xq - centre[:, None, :]) / scale[:, None, :]
+        self.psi = np.concatenate([np.ones(rel.shape[:2] + (1,)), rel], axis=2)  # (c, q, d+1)
+
+    def _scalar(self, element_matrix):
+        A = np.zeros((self.n_v, self.n_v))
+        for c, dofs in enumerate(self.cd):
+            A[np.ix_(dofs, dofs)] += element_matrix(c)
+        return A
+
+    def mass(self):
+        return self._scalar(lambda c: np.einsum("q,qa,qb->ab", self.W[c], self.phi, self.phi))
+
+    def laplace(self):
+        return self._scalar(lambda c: np.einsum("q,qai,qbi->ab", self.W[c], self.G[c], self.G[c]))
+
+    def _velocity(self, u, c):
+        ul = u.reshape(self.d, self.n_v)[:, self.cd[c]]  # (d, nl)
+        return np.einsum("ia,qa->qi", ul, self.phi), np.einsum("ia,qak->qik", ul, self.G[c])
+
+    def convection(self, u):
+        def element(c):
+            uq, _ = self._velocity(u, c)
+            return np.einsum("q,qa,qi,qbi->ab", self.W[c], self.phi, uq, self.G[c])
+        return self._scalar(element)
+
+    def newton(self, u):
+        d, n = self.d, self.n_v
+        R = np.zeros((d * n, d * n))
+        for c, dofs in enumerate(self.cd):
+            _, gu = self._velocity(u, c)
+            for i in range(d):
+                for k in range(d):
+                    local = np.einsum("q,qa,qb,q->ab", self.W[c], self.phi, self.phi, gu[:, i, k])
+                    R[np.ix_(i * n + dofs, k * n + dofs)] += local
+        return R
+
+    def divergence_t(self):
+        d, n = self.d, self.n_v
+        BT = np.zeros(((d + 1) * len(self.cd), d * n))
+        for c, dofs in enumerate(self.cd):
+            local = -np.einsum("q,qm,qai->mia", self.W[c], self.psi[c], self.G[c])
+            for m in range(d + 1):
+                for i in range(d):
+                    BT[c * (d + 1) + m, i * n + dofs] += local[m, i]
+        return BT
+
+    def load(self, values):
+        F = np.zeros((self.d, self.n_v))
+        for c, dofs in enumerate(self.cd):
+            F[:, dofs] += np.einsum("q,qi,qa->ia", self.W[c], values[c], self.phi)
+        return F.ravel()
+
+    def pressure_weights(self):
+        return np.einsum("cq,cqm->cm", self.W, self.psi).ravel()
+
+
+MESHES = {
+    "2d": dict(dim=2),
+    "3d": dict(dim=3),
+    "2d-periodic-x": dict(dim=2, periodic=(True, False)),
+    "2d-periodic-xy": dict(dim=2, periodic=(True, True)),
+    "3d-periodic-x": dict(dim=3, periodic=(True, False, False)),
+}
+
+
+@pytest.fixture(scope="module", params=list(MESHES))
+def case(request):
+    mesh = deformed_mesh(**MESHES[request.param], seed=len(request.param))
+    space = FlowSpace(mesh)
+    return space, DenseReference(space)
+
+
+@pytest.fixture(scope="module", params=[2, 3], ids=["2d", "3d"])
+def space(request):
+    """The house-rule tiny mesh: 2x2 / 2x2x2, deformed."""
+    return FlowSpace(deformed_mesh(request.param, seed=10 + request.param))
+
+
+# -- the mesh used here is really deformed ------------------------------------------------------
+@pytest.mark.parametrize("dim", [2, 3])
+def test_deformed_mesh_is_general(dim):
+    mesh = deformed_mesh(dim)
+    pts, w = gauss_tensor(dim, 3)
+    W, Jinv, _ = reference_geometry(mesh, pts, w)
+    # Jacobians vary between points of one cell and are not symmetric
+    detJ = W[0] / w
+    assert np.ptp(detJ) > 1e-2 * detJ.mean()
+    assert np.max(np.abs(Jinv - np.swapaxes(Jinv, 2, 3))) > 1e-2
+    # total volume = box volume * det(shear) (boundary vertices stay on the sheared box)
+    assert_rel(W.sum(), np.prod(UPPER[:dim]) * np.linalg.det(SHEAR[dim]))
+
+
+# -- kernels ----------------------------------------------------------------------------------
+def test_cell_geometry(space):
+    mesh = space.mesh
+    pts, w = space.points, space.weights
+    _, dN = ElementQ1(mesh.dim).tabulate(pts)
+    np.testing.assert_allclose(dN, q1_reference(pts)[1], rtol=0, atol=1e-15)
+    detJw, Jinv = _kernels.cell_geometry(mesh.cell_coordinates(), dN, w)
+    W_ref, Jinv_ref, _ = reference_geometry(mesh, pts, w)
+    assert detJw.shape == (mesh.n_cells, len(w))
+    assert Jinv.shape == (mesh.n_cells, len(w), mesh.dim, mesh.dim)
+    assert_rel(detJw, W_ref)
+    assert_rel(Jinv, Jinv_ref)
+    # the space stores exactly these
+    assert_rel(space.detJw, W_ref)
+    assert_rel(space.Jinv, Jinv_ref)
+
+
+def test_cell_geometry_orientation():
+    """|det J| is used: a mirrored cell has the same weights."""
+    mesh = deformed_mesh(2)
+    pts, w = gauss_tensor(2, 2)
+    _, dN = ElementQ1(2).tabulate(pts)
+    X = mesh.cell_coordinates()
+    mirrored = X * np.array([-1.0, 1.0])
+    detJw, Jinv = _kernels.cell_geometry(X, dN, w)
+    detJw_m, Jinv_m = _kernels.cell_geometry(np.ascontiguousarray(mirrored), dN, w)
+    assert_rel(detJw_m, detJw)
+    J_m = np.einsum("cvi,qvl->cqil", mirrored, dN)
+    assert_rel(Jinv_m, np.linalg.inv(J_m))
+
+
+@pytest.mark.parametrize("newton", [True, False])
+def test_convection_coefficients(space, newton):
+    d, nq = space.dim, len(space.weights)
+    rng = np.random.default_rng(20)
+    u = np.ascontiguousarray(rng.normal(size=(d, space.n_v)))
+    cells = np.array([3, 0, 2], dtype=np.int64)  # any subset, any order
+    conv, react = _kernels.convection_coefficients(cells, u, space.V.cell_dofs, space.phi,
+                                                   space.dphi, space.detJw, space.Jinv, newton)
+    conv_ref = np.zeros((len(cells), nq * d))
+    react_ref = np.zeros((len(cells) * d * d, nq))
+    for e, c in enumerate(cells):
+        ul = u[:, space.V.cell_dofs[c]]  # (d, nl)
+        for q in range(nq):
+            uq = ul @ space.phi[q]  # (d,)
+            gref = ul @ space.dphi[q]  # (d, d): d u_i / d xi_l
+            conv_ref[e, q * d:(q + 1) * d] = space.detJw[c, q] * space.Jinv[c, q] @ uq
+            grad = gref @ space.Jinv[c, q]  # d u_i / d x_k
+            for i in range(d):
+                for k in range(d):
+                    react_ref[(e * d + i) * d + k, q] = space.detJw[c, q] * grad[i, k]
+    assert_rel(conv, conv_ref)
+    if newton:
+        assert_rel(react, react_ref)
+    else:
+        assert react.shape == (0, nq)
+
+
+def test_laplace_coefficients(space):
+    out = _kernels.laplace_coefficients(space.detJw, space.Jinv)
+    ref = np.einsum("cq,cqli,cqmi->cqlm", space.detJw, space.Jinv, space.Jinv)
+    assert_rel(out, ref.reshape(space.mesh.n_cells, -1))
+
+
+def _dense_scalar(space, data):
+    return space.scalar_matrix(data).toarray()
+
+
+def test_scatter_scalar(space):
+    rng = np.random.default_rng(21)
+    nl = space.V.cell_dofs.shape[1]
+    out = rng.normal(size=space.nnz)
+    ref = _dense_scalar(space, out.copy())
+    for cells in space.mesh.cell_colours():
+        local = rng.normal(size=(len(cells), nl * nl))
+        _kernels.scatter_scalar(cells, local, space.slots, out)
+        for e, c in enumerate(cells):
+            dofs = space.V.cell_dofs[c]
+            ref[np.ix_(dofs, dofs)] += local[e].reshape(nl, nl)
+    assert_rel(_dense_scalar(space, out), ref)
+
+
+def test_scatter_coupled(space):
+    rng = np.random.default_rng(22)
+    d, n = space.dim, space.n_v
+    nl = space.V.cell_dofs.shape[1]
+    out = rng.normal(size=d * d * space.nnz)
+    ref = space.coupled_matrix(out.copy()).toarray()
+    scale = 0.7
+    for cells in space.mesh.cell_colours():
+        local = rng.normal(size=(len(cells) * d * d, nl * nl))
+        _kernels.scatter_coupled(cells, local, scale, space.slots, space.V.cell_dofs, space.indptr,
+                                 d, out)
+        for e, c in enumerate(cells):
+            dofs = space.V.cell_dofs[c]
+            for i in range(d):
+                for k in range(d):
+                    ref[np.ix_(i * n + dofs, k * n + dofs)] += \
+                        scale * local[(e * d + i) * d + k].reshape(nl, nl)
+    assert_rel(space.coupled_matrix(out).toarray(), ref)
+
+
+def test_add_scalar_blocks(space):
+    rng = np.random.default_rng(23)
+    d = space.dim
+    scalar = rng.normal(size=space.nnz)
+    out = rng.normal(size=d * d * space.nnz)
+    ref = space.coupled_matrix(out.copy()).toarray() + np.kron(np.eye(d), _dense_scalar(space, scalar))
+    _kernels.add_scalar_blocks(scalar, space.indptr, d, out)
+    assert_rel(space.coupled_matrix(out).toarray(), ref)
+
+
+def test_divergence_local(space):
+    rng = np.random.default_rng(24)
+    d = space.dim
+    n_cells = space.mesh.n_cells
+    nl = space.V.cell_dofs.shape[1]
+    npl = d + 1
+    rank = np.stack([rng.permutation(nl) for _ in range(n_cells)]).astype(np.int64)
+    out = np.full(n_cells * npl * d * nl, np.nan)
+    _kernels.divergence_local(space.dphi, space.detJw, space.Jinv, space.psi, rank, out)
+    ref = np.full_like(out, np.nan)
+    for c in range(n_cells):
+        grad = np.einsum("qal,qli->qai", space.dphi, space.Jinv[c])
+        for m in range(npl):
+            for i in range(d):
+                for a in range(nl):
+                    ref[(c * npl + m) * d * nl + i * nl + rank[c, a]] = \
+                        -np.sum(space.psi[c, :, m] * grad[:, a, i] * space.detJw[c])
+    assert not np.isnan(out).any()
+    assert_rel(out, ref)
+
+
+def test_set_identity_rows(space):
+    rng = np.random.default_rng(25)
+    A = space.coupled_matrix(rng.normal(size=space.dim**2 * space.nnz))
+    rows = np.sort(rng.choice(space.n_u, size=space.n_u // 3, replace=False)).astype(np.int64)
+    ref = A.toarray()
+    ref[rows] = 0.0
+    ref[rows, rows] = 1.0
+    _kernels.set_identity_rows(A.indptr, A.indices, rows, A.data)
+    assert_rel(A.toarray(), ref)
+    # the same through DirichletConstraints.zero_rows on the scalar pattern
+    S = space.scalar_matrix(rng.normal(size=space.nnz))
+    rows = space.V.all_boundary_dofs() if space.mesh.tags else np.arange(3, dtype=np.int64)
+    ref = S.toarray()
+    ref[rows] = 0.0
+    ref[rows, rows] = 1.0
+    DirichletConstraints(rows, np.zeros(rows.size)).zero_rows(S)
+    assert_rel(S.toarray(), ref)
+
+
+# -- sparsity pattern -------------------------------------------------------------------------
+def test_patterns(case):
+    space, ref = case
+    cd = space.V.cell_dofs
+    coupling = np.zeros((space.n_v, space.n_v), dtype=bool)
+    for dofs in cd:
+        coupling[np.ix_(dofs, dofs)] = True
+    S = space.scalar_matrix(np.ones(space.nnz))
+    assert S.has_sorted_indices
+    np.testing.assert_array_equal(S.toarray() != 0, coupling)
+    C = space.coupled_matrix(np.ones(space.dim**2 * space.nnz))
+    assert C.has_sorted_indices
+    np.testing.assert_array_equal(C.toarray() != 0, np.tile(coupling, (space.dim, space.dim)))
+    # slots point at the (row, col) entry of the pattern
+    rows = np.repeat(np.arange(space.n_v), np.diff(space.indptr))
+    np.testing.assert_array_equal(rows[space.slots], np.broadcast_to(cd[:, :, None], space.slots.shape))
+    np.testing.assert_array_equal(space.indices[space.slots],
+                                  np.broadcast_to(cd[:, None, :], space.slots.shape))
+
+
+# -- assembled operators vs dense reference ---------------------------------------------------
+@pytest.mark.parametrize("batch_size", [None, 1])
+def test_assemble_mass(case, batch_size):
+    space, ref = case
+    if batch_size:
+        space = FlowSpace(space.mesh, batch_size=batch_size)
+    assert_rel(_dense_scalar(space, assemble_mass(space)), ref.mass())
+
+
+def test_assemble_laplace(case):
+    space, ref = case
+    K = _dense_scalar(space, assemble_laplace(space))
+    assert_rel(K, ref.laplace())
+    assert_rel(K, K.T)
+    np.testing.assert_allclose(K.sum(axis=1), 0.0, atol=1e-12 * np.abs(K).max())
+
+
+@pytest.mark.parametrize("newton", [True, False])
+@pytest.mark.parametrize("batch_size", [None, 1])
+def test_assemble_convection(case, newton, batch_size):
+    space, ref = case
+    if batch_size:
+        space = FlowSpace(space.mesh, batch_size=batch_size)
+    rng = np.random.default_rng(30)
+    d = space.dim
+    u = rng.normal(size=d * space.n_v)
+    scale = -1.3
+    scalar0 = rng.normal(size=space.nnz)
+    coupled0 = rng.normal(size=d * d * space.nnz)
+    scalar_out = scalar0.copy()
+    newton_out = coupled0.copy() if newton else None
+    assemble_convection(space, u, scale, scalar_out, newton_out)
+    assert_rel(_dense_scalar(space, scalar_out) - _dense_scalar(space, scalar0),
+               scale * ref.convection(u))
+    if newton:
+        assert_rel(space.coupled_matrix(newton_out).toarray()
+                   - space.coupled_matrix(coupled0).toarray(), scale * ref.newton(u))
+
+
+def test_convection_newton_is_jacobian(case):
+    """kron(I, N(u)) + R(u) is the derivative of u -> N(u) u (exact central difference)."""
+    space, _ = case
+    d, n = space.dim, space.n_v
+    rng = np.random.default_rng(31)
+    u, du = rng.normal(size=d * n), rng.normal(size=d * n)
+
+    def residual(w):
+        S = np.zeros(space.nnz)
+        assemble_convection(space, w, 1.0, S)
+        return (space.scalar_matrix(S) @ w.reshape(d, n).T).T.ravel()
+
+    S = np.zeros(space.nnz)
+    Jd = np.zeros(d * d * space.nnz)
+    assemble_convection(space, u, 1.0, S, Jd)
+    expand_to_coupled(space, S, Jd)
+    eps = 1e-3  # residual is quadratic: the central difference is exact up to round-off
+    fd = (residual(u + eps * du) - residual(u - eps * du)) / (2 * eps)
+    assert_rel(space.coupled_matrix(Jd) @ du, fd, rtol=1e-9)
+
+
+def test_expand_to_coupled(case):
+    space, ref = case
+    rng = np.random.default_rng(32)
+    d = space.dim
+    scalar = assemble_laplace(space)
+    out0 = rng.normal(size=d * d * space.nnz)
+    out = out0.copy()
+    expand_to_coupled(space, scalar, out)
+    assert_rel(space.coupled_matrix(out).toarray() - space.coupled_matrix(out0).toarray(),
+               np.kron(np.eye(d), ref.laplace()))
+
+
+def test_assemble_divergence(case):
+    space, ref = case
+    BT = assemble_divergence(space)
+    assert BT.shape == (space.n_p, space.n_u)
+    assert BT.has_sorted_indices
+    assert_rel(BT.toarray(), ref.divergence_t())
+    # B = B^T.T is the gradient operator
+    assert_rel(BT.T.toarray(), ref.divergence_t().T)
+
+
+def test_divergence_of_polynomial_fields(case):
+    """B^T u = 0 for constant u; for u = x_i e_i (in Q2 on Q1-mapped cells) B^T u = -int psi."""
+    space, _ = case
+    BT = assemble_divergence(space)
+    d, n = space.dim, space.n_v
+    x = space.V.coordinates
+    for i in range(d):
+        const = np.zeros((d, n))
+        const[i] = 1.0
+        np.testing.assert_allclose(BT @ const.ravel(), 0.0, atol=1e-13)
+        if any(space.mesh.periodic):
+            continue  # x is not a periodic field
+        lin = np.zeros((d, n))
+        lin[i] = x[:, i]
+        assert_rel(BT @ lin.ravel(), -pressure_mean_weights(space))
+
+
+def test_assemble_load(case):
+    space, ref = case
+    rng = np.random.default_rng(33)
+    values = rng.normal(size=space.xq.shape)
+    assert space.xq.shape == (space.mesh.n_cells, len(space.weights), space.dim)
+    assert_rel(space.xq, ref.xq)
+    F = assemble_load(space, values)
+    assert F.shape == (space.n_u,)
+    assert_rel(F, ref.load(values))
+    # a constant load integrates to volume * f
+    ones = np.ones_like(values)
+    assert_rel(assemble_load(space, ones).reshape(space.dim, -1).sum(axis=1),
+               np.full(space.dim, ref.W.sum()))
+
+
+def test_pressure_mean_weights(case):
+    space, ref = case
+    w = pressure_mean_weights(space)
+    assert w.shape == (space.n_p,)
+    assert_rel(space.psi, ref.psi)
+    assert_rel(w, ref.pressure_weights())
+    p_one = np.zeros(space.n_p)
+    p_one[::space.dim + 1] = 1.0
+    assert_rel(w @ p_one, ref.W.sum())
