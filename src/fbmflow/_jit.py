@@ -11,4 +11,10 @@ import numba
 njit = partial(numba.njit, cache=True)
 prange = numba.prange
 
-__all__ = ["njit", "prange"]
+
+def numba_threads() -> int:
+    """Number of threads Numba's parallel loops use."""
+    return numba.get_num_threads()
+
+
+__all__ = ["njit", "prange", "numba_threads"]

@@ -232,12 +232,14 @@ def test_convection_coefficients(space, newton):
     d, nq = space.dim, len(space.weights)
     rng = np.random.default_rng(20)
     u = np.ascontiguousarray(rng.normal(size=(d, space.n_v)))
-    cells = np.array([3, 0, 2], dtype=np.int64)  # any subset, any order
+    cells = np.array([3, 0, -1, 2], dtype=np.int64)  # any subset, any order, -1 = padding
     conv, react = _kernels.convection_coefficients(cells, u, space.V.cell_dofs, space.phi,
                                                    space.dphi, space.detJw, space.Jinv, newton)
     conv_ref = np.zeros((len(cells), nq * d))
     react_ref = np.zeros((len(cells) * d * d, nq))
     for e, c in enumerate(cells):
+        if c < 0:
+            continue
         ul = u[:, space.V.cell_dofs[c]]  # (d, nl)
         for q in range(nq):
             uq = ul @ space.phi[q]  # (d,)
@@ -264,15 +266,24 @@ def _dense_scalar(space, data):
     return space.scalar_matrix(data).toarray()
 
 
+def _batches(space):
+    """The space's own batches plus a hand-made one: a single group with padding inside."""
+    yield from space.batches
+    first = space.mesh.cell_colours()[0][0]
+    yield np.array([[first[0], -1, first[-1]]], dtype=np.int64)
+
+
 def test_scatter_scalar(space):
     rng = np.random.default_rng(21)
     nl = space.V.cell_dofs.shape[1]
     out = rng.normal(size=space.nnz)
     ref = _dense_scalar(space, out.copy())
-    for cells in space.mesh.cell_colours():
-        local = rng.normal(size=(len(cells), nl * nl))
+    for cells in _batches(space):
+        local = rng.normal(size=(cells.size, nl * nl))
         _kernels.scatter_scalar(cells, local, space.slots, out)
-        for e, c in enumerate(cells):
+        for e, c in enumerate(cells.ravel()):
+            if c < 0:
+                continue
             dofs = space.V.cell_dofs[c]
             ref[np.ix_(dofs, dofs)] += local[e].reshape(nl, nl)
     assert_rel(_dense_scalar(space, out), ref)
@@ -282,29 +293,38 @@ def test_scatter_coupled(space):
     rng = np.random.default_rng(22)
     d, n = space.dim, space.n_v
     nl = space.V.cell_dofs.shape[1]
+    _, sym = space.table_mass_upper
+    ia, ib = np.triu_indices(nl)
     out = rng.normal(size=d * d * space.nnz)
     ref = space.coupled_matrix(out.copy()).toarray()
     scale = 0.7
-    for cells in space.mesh.cell_colours():
-        local = rng.normal(size=(len(cells) * d * d, nl * nl))
-        _kernels.scatter_coupled(cells, local, scale, space.slots, space.V.cell_dofs, space.indptr,
-                                 d, out)
-        for e, c in enumerate(cells):
+    for cells in _batches(space):
+        conv = rng.normal(size=(cells.size, nl * nl))
+        react = rng.normal(size=(cells.size * d * d, ia.size))
+        _kernels.scatter_coupled(cells, conv, react, sym, scale, space.slots, space.V.cell_dofs,
+                                 space.indptr, d, out)
+        for e, c in enumerate(cells.ravel()):
+            if c < 0:
+                continue
             dofs = space.V.cell_dofs[c]
             for i in range(d):
                 for k in range(d):
-                    ref[np.ix_(i * n + dofs, k * n + dofs)] += \
-                        scale * local[(e * d + i) * d + k].reshape(nl, nl)
+                    block = np.zeros((nl, nl))
+                    block[ia, ib] = react[(e * d + i) * d + k]
+                    block[ib, ia] = react[(e * d + i) * d + k]
+                    if i == k:
+                        block += conv[e].reshape(nl, nl)
+                    ref[np.ix_(i * n + dofs, k * n + dofs)] += scale * block
     assert_rel(space.coupled_matrix(out).toarray(), ref)
 
 
-def test_add_scalar_blocks(space):
+def test_init_coupled(space):
     rng = np.random.default_rng(23)
     d = space.dim
     scalar = rng.normal(size=space.nnz)
     out = rng.normal(size=d * d * space.nnz)
-    ref = space.coupled_matrix(out.copy()).toarray() + np.kron(np.eye(d), _dense_scalar(space, scalar))
-    _kernels.add_scalar_blocks(scalar, space.indptr, d, out)
+    ref = np.kron(np.eye(d), _dense_scalar(space, scalar))
+    _kernels.init_coupled(scalar, space.indptr, d, out)
     assert_rel(space.coupled_matrix(out).toarray(), ref)
 
 
@@ -397,14 +417,22 @@ def test_assemble_convection(case, newton, batch_size):
     scale = -1.3
     scalar0 = rng.normal(size=space.nnz)
     coupled0 = rng.normal(size=d * d * space.nnz)
-    scalar_out = scalar0.copy()
-    newton_out = coupled0.copy() if newton else None
-    assemble_convection(space, u, scale, scalar_out, newton_out)
-    assert_rel(_dense_scalar(space, scalar_out) - _dense_scalar(space, scalar0),
-               scale * ref.convection(u))
     if newton:
-        assert_rel(space.coupled_matrix(newton_out).toarray()
-                   - space.coupled_matrix(coupled0).toarray(), scale * ref.newton(u))
+        newton_out = coupled0.copy()
+        assemble_convection(space, u, scale, newton_out=newton_out)
+        assert_rel(space.coupled_matrix(newton_out).toarray() - space.coupled_matrix(coupled0).toarray(),
+                   scale * (np.kron(np.eye(d), ref.convection(u)) + ref.newton(u)))
+    else:
+        scalar_out = scalar0.copy()
+        assemble_convection(space, u, scale, scalar_out=scalar_out)
+        assert_rel(_dense_scalar(space, scalar_out) - _dense_scalar(space, scalar0),
+                   scale * ref.convection(u))
+
+
+def test_assemble_convection_needs_one_output(case):
+    space, _ = case
+    with pytest.raises(ValueError, match="exactly one"):
+        assemble_convection(space, np.zeros(space.n_u), 1.0)
 
 
 def test_convection_newton_is_jacobian(case):
@@ -416,13 +444,11 @@ def test_convection_newton_is_jacobian(case):
 
     def residual(w):
         S = np.zeros(space.nnz)
-        assemble_convection(space, w, 1.0, S)
+        assemble_convection(space, w, 1.0, scalar_out=S)
         return (space.scalar_matrix(S) @ w.reshape(d, n).T).T.ravel()
 
-    S = np.zeros(space.nnz)
     Jd = np.zeros(d * d * space.nnz)
-    assemble_convection(space, u, 1.0, S, Jd)
-    expand_to_coupled(space, S, Jd)
+    assemble_convection(space, u, 1.0, newton_out=Jd)
     eps = 1e-3  # residual is quadratic: the central difference is exact up to round-off
     fd = (residual(u + eps * du) - residual(u - eps * du)) / (2 * eps)
     assert_rel(space.coupled_matrix(Jd) @ du, fd, rtol=1e-9)
@@ -433,11 +459,9 @@ def test_expand_to_coupled(case):
     rng = np.random.default_rng(32)
     d = space.dim
     scalar = assemble_laplace(space)
-    out0 = rng.normal(size=d * d * space.nnz)
-    out = out0.copy()
+    out = rng.normal(size=d * d * space.nnz)  # overwritten, not added to
     expand_to_coupled(space, scalar, out)
-    assert_rel(space.coupled_matrix(out).toarray() - space.coupled_matrix(out0).toarray(),
-               np.kron(np.eye(d), ref.laplace()))
+    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), ref.laplace()))
 
 
 def test_assemble_divergence(case):

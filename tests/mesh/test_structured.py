@@ -208,29 +208,37 @@ def test_vertex_array_shape_checked():
     ((2, 4, 3), (True, True, True)),
 ])
 def test_cell_colours_share_no_vertex(shape, periodic):
+    """Slabs of one colour are vertex-disjoint; each slab is lexicographically ordered."""
     mesh = StructuredMesh.box(shape, periodic=periodic)
-    colours = mesh.cell_colours()
+    slabs_by_colour = mesh.cell_colours()
+    colours = [np.concatenate(slabs) for slabs in slabs_by_colour]
     # a partition of all cells
     all_cells = np.concatenate(colours)
     assert all(c.dtype == np.int64 for c in colours)
     assert np.array_equal(np.sort(all_cells), np.arange(mesh.n_cells))
-    assert len(colours) <= 3**mesh.dim
+    assert len(colours) <= 3
+    for slabs in slabs_by_colour:
+        for slab in slabs:
+            assert np.all(np.diff(slab) == 1)
+            assert slab.size == mesh.n_cells // mesh.shape[-1]
     # identified vertex: index n on a periodic axis is index 0
     vidx = _lattice_index(mesh, mesh.cell_vertices)  # (n_cells, 2**dim, dim)
     for d in range(mesh.dim):
         if periodic[d]:
             vidx[..., d] %= shape[d]
     key = np.ravel_multi_index(tuple(np.moveaxis(vidx, -1, 0)), mesh.vertex_shape, order="F")
-    for colour in colours:
-        used = key[colour].ravel()
-        assert np.unique(used).size == used.size, f"cells of colour {colour} share a vertex"
+    for slabs in slabs_by_colour:
+        used = [np.unique(key[slab]) for slab in slabs]
+        merged = np.concatenate(used)
+        assert np.unique(merged).size == merged.size, "slabs of one colour share a vertex"
 
 
-def test_cell_colours_count_non_periodic():
-    assert len(StructuredMesh.box((4, 4)).cell_colours()) == 4
-    assert len(StructuredMesh.box((4, 4, 4)).cell_colours()) == 8
-    # odd periodic axis needs a third colour in that direction
-    assert len(StructuredMesh.box((3, 4), periodic=(True, False)).cell_colours()) == 6
+def test_cell_colours_count():
+    assert len(StructuredMesh.box((4, 4)).cell_colours()) == 2
+    assert len(StructuredMesh.box((4, 4, 4)).cell_colours()) == 2
+    assert len(StructuredMesh.box((4, 3), periodic=(True, False)).cell_colours()) == 2
+    # an odd periodic slab axis needs a third colour
+    assert len(StructuredMesh.box((4, 3), periodic=(False, True)).cell_colours()) == 3
 
 
 # -- refinement -------------------------------------------------------------------------------

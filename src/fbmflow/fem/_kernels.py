@@ -70,7 +70,7 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
 
     Parameters
     ----------
-    cells : (nb,) int64             cells of the batch
+    cells : (nb,) int64             cells of the batch (-1 = padding, left zero)
     u : (d, n_dofs) float64         velocity, component-blocked
     cell_dofs : (n_cells, nl) int64
     phi : (nq, nl), dphi : (nq, nl, d) float64   reference tabulation
@@ -88,6 +88,8 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
     react = np.zeros((nb * d * d, nq)) if newton else np.zeros((0, nq))
     for e in prange(nb):
         c = cells[e]
+        if c < 0:
+            continue
         uq = np.zeros(d)
         gref = np.zeros((d, d))
         for q in range(nq):
@@ -134,51 +136,68 @@ def laplace_coefficients(detJw, Jinv):
 
 @njit(parallel=True)
 def scatter_scalar(cells, local, slots, out):
-    """``out[slots[c, a, b]] += local[e, a * nl + b]`` for the cells of one colour.
+    """``out[slots[c, a, b]] += local[e, a * nl + b]`` for a batch of cells.
 
-    cells (nb,) int64; local (nb, nl * nl) float64; slots (n_cells, nl, nl) int32 positions in the
-    CSR data of the scalar Q2 pattern; out (nnz,) float64, updated in place. Cells must not share
-    DOFs (one colour) because the loop over them runs in parallel.
+    cells (n_groups, length) int64, -1 = padding; local (n_groups * length, nl * nl) float64 with
+    row ``e = g * length + j`` for ``cells[g, j]``; slots (n_cells, nl, nl) int32 positions in the
+    CSR data of the scalar Q2 pattern; out (nnz,) float64, updated in place. Groups must not share
+    DOFs: they run in parallel, each sequentially.
     """
+    n_groups, length = cells.shape
     nl = slots.shape[1]
-    for e in prange(cells.shape[0]):
-        c = cells[e]
-        for a in range(nl):
-            for b in range(nl):
-                out[slots[c, a, b]] += local[e, a * nl + b]
+    for g in prange(n_groups):
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            e = g * length + j
+            for a in range(nl):
+                for b in range(nl):
+                    out[slots[c, a, b]] += local[e, a * nl + b]
 
 
 @njit(parallel=True)
-def scatter_coupled(cells, local, scale, slots, cell_dofs, indptr, d, out):
-    """Scatter ``scale * R_ik`` blocks into the coupled velocity matrix.
+def scatter_coupled(cells, conv, react, sym, scale, slots, cell_dofs, indptr, d, out):
+    """Scatter ``scale * (delta_ik N + R_ik)`` into the coupled velocity matrix.
 
     The coupled matrix has rows ``(i, r)`` = ``i * n + r`` and, within a row, the columns of
     component 0, then 1, ... each in the order of the scalar pattern. Hence the entry
     ``(i, r), (k, s)`` sits at ``i d nnz + d indptr[r] + k len_r + (slot_s(r, s) - indptr[r])``.
 
-    cells (nb,) int64 one colour; local (nb * d * d, nl * nl) float64 rows ordered (e, i, k);
-    slots (n_cells, nl, nl) int32; cell_dofs (n_cells, nl) int64; indptr (n + 1,) int64 of the
-    scalar pattern; d int; out (d * d * nnz,) float64 updated in place.
+    cells (n_groups, length) int64, -1 = padding, groups DOF-disjoint; conv
+    (n_groups * length, nl * nl) float64 local convection matrices, row ``e = g * length + j``;
+    react (n_groups * length * d * d, n_sym) float64 local Newton blocks, rows ordered (e, i, k),
+    stored as upper triangles (they are symmetric in ``a, b``); sym (nl, nl) int64 maps ``(a, b)``
+    to the triangle column; slots (n_cells, nl, nl) int32; cell_dofs (n_cells, nl) int64; indptr
+    (n + 1,) int64 of the scalar pattern; d int; out (d * d * nnz,) float64 updated in place.
     """
+    n_groups, length = cells.shape
     nl = slots.shape[1]
     nnz = indptr[-1]
-    for e in prange(cells.shape[0]):
-        c = cells[e]
-        for a in range(nl):
-            r = cell_dofs[c, a]
-            start = indptr[r]
-            ln = indptr[r + 1] - start
-            for b in range(nl):
-                off = slots[c, a, b] - start
+    for g in prange(n_groups):
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            e = g * length + j
+            for a in range(nl):
+                r = cell_dofs[c, a]
+                start = indptr[r]
+                ln = indptr[r + 1] - start
                 for i in range(d):
-                    base = i * d * nnz + d * start + off
-                    for k in range(d):
-                        out[base + k * ln] += scale * local[(e * d + i) * d + k, a * nl + b]
+                    base = i * d * nnz + d * start - start
+                    row = (e * d + i) * d
+                    for b in range(nl):
+                        off = base + slots[c, a, b]
+                        t = sym[a, b]
+                        for k in range(d):
+                            out[off + k * ln] += scale * react[row + k, t]
+                        out[off + i * ln] += scale * conv[e, a * nl + b]
 
 
 @njit(parallel=True)
-def add_scalar_blocks(scalar, indptr, d, out):
-    """Add the scalar operator to every diagonal block of the coupled matrix.
+def init_coupled(scalar, indptr, d, out):
+    """Overwrite coupled data with the scalar operator on the diagonal blocks, zero elsewhere.
 
     scalar (nnz,) float64 on the scalar pattern; indptr (n + 1,) int64; out (d * d * nnz,) float64.
     """
@@ -188,9 +207,10 @@ def add_scalar_blocks(scalar, indptr, d, out):
         start = indptr[r]
         ln = indptr[r + 1] - start
         for i in range(d):
-            base = i * d * nnz + d * start + i * ln
-            for off in range(ln):
-                out[base + off] += scalar[start + off]
+            base = i * d * nnz + d * start
+            for k in range(d):
+                for off in range(ln):
+                    out[base + k * ln + off] = scalar[start + off] if k == i else 0.0
 
 
 @njit(parallel=True)

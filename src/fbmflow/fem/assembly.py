@@ -24,18 +24,36 @@ Weak forms (``phi`` test, ``psi`` trial pressure; velocity components are blocke
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
+from threadpoolctl import ThreadpoolController
 
 from . import _kernels
 from .space import FlowSpace
 
 
+@functools.cache
+def _threadpool_controller() -> ThreadpoolController:
+    return ThreadpoolController()
+
+
+def single_threaded_blas():
+    """Context in which BLAS runs on one thread.
+
+    The assembly alternates small BLAS GEMMs with Numba parallel loops; with both thread pools
+    active on 2 cores they oversubscribe and each phase slows down several-fold (PERFORMANCE.md).
+    """
+    return _threadpool_controller().limit(limits=1, user_api="blas")
+
+
 def _assemble_scalar(space: FlowSpace, coeff: np.ndarray, table: np.ndarray) -> np.ndarray:
     data = np.zeros(space.nnz)
-    for cells in space.batches:
-        local = coeff[cells] @ table
-        _kernels.scatter_scalar(cells, local, space.slots, data)
+    with single_threaded_blas():
+        for cells in space.batches:
+            local = coeff[cells.ravel()] @ table
+            _kernels.scatter_scalar(cells, local, space.slots, data)
     return data
 
 
@@ -50,35 +68,41 @@ def assemble_laplace(space: FlowSpace) -> np.ndarray:
     return _assemble_scalar(space, coeff, space.table_laplace)
 
 
-def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float, scalar_out: np.ndarray,
+def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
+                        scalar_out: np.ndarray | None = None,
                         newton_out: np.ndarray | None = None) -> None:
-    """Add ``scale * N(u)`` to ``scalar_out`` and, if given, ``scale * R(u)`` to ``newton_out``.
+    """Add ``scale * N(u)`` to ``scalar_out``, or ``scale * (N(u) + R(u))`` to ``newton_out``.
 
     Parameters
     ----------
     u : (dim * n_v,) float64, component-blocked convecting velocity
     scale : float
-    scalar_out : (nnz,) float64, scalar pattern data, updated in place
-    newton_out : (dim * dim * nnz,) float64, coupled pattern data, updated in place, optional
+    scalar_out : (nnz,) float64, scalar pattern data, updated in place (Picard operator)
+    newton_out : (dim * dim * nnz,) float64, coupled pattern data, updated in place (Newton
+        Jacobian: the convection on the diagonal blocks plus the Newton blocks ``R_ik``)
     """
+    if (scalar_out is None) == (newton_out is None):
+        raise ValueError("give exactly one of scalar_out and newton_out")
     d = space.dim
     uu = np.ascontiguousarray(u.reshape(d, space.n_v))
     newton = newton_out is not None
-    for cells in space.batches:
-        conv, react = _kernels.convection_coefficients(
-            cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
-        local = conv @ space.table_convection
-        local *= scale
-        _kernels.scatter_scalar(cells, local, space.slots, scalar_out)
-        if newton:
-            local = react @ space.table_mass
-            _kernels.scatter_coupled(cells, local, scale, space.slots, space.V.cell_dofs,
-                                     space.indptr, d, newton_out)
+    mass_upper, sym = space.table_mass_upper
+    with single_threaded_blas():
+        for cells in space.batches:
+            conv, react = _kernels.convection_coefficients(
+                cells.ravel(), uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
+            local = conv @ space.table_convection
+            if newton:
+                _kernels.scatter_coupled(cells, local, react @ mass_upper, sym, scale, space.slots,
+                                         space.V.cell_dofs, space.indptr, d, newton_out)
+            else:
+                local *= scale
+                _kernels.scatter_scalar(cells, local, space.slots, scalar_out)
 
 
 def expand_to_coupled(space: FlowSpace, scalar: np.ndarray, out: np.ndarray) -> None:
-    """Add the scalar operator to every diagonal block of coupled data ``out``."""
-    _kernels.add_scalar_blocks(scalar, space.indptr, space.dim, out)
+    """Overwrite coupled data ``out`` with ``scalar`` on every diagonal block and zeros elsewhere."""
+    _kernels.init_coupled(scalar, space.indptr, space.dim, out)
 
 
 def assemble_divergence(space: FlowSpace) -> sp.csr_matrix:

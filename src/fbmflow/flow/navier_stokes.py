@@ -73,6 +73,7 @@ class NavierStokesProblem:
         self.mean_weights = None if pressure_is_determined(boundary) else pressure_mean_weights(space)
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
+        self._jacobian_data: np.ndarray | None = None
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -108,10 +109,11 @@ class NavierStokesProblem:
         return x
 
     # -- operators ----------------------------------------------------------------------------
-    def _scalar_operator(self, u: np.ndarray, m: float, a: float, newton_out=None) -> np.ndarray:
+    def _scalar_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
+        """Data of the Picard operator ``m rho M + a (mu L + rho N(u))`` on the scalar pattern."""
         S = (m * self.rho) * self.M + (a * self.mu) * self.L
         if self.convection and a != 0.0:
-            assemble_convection(self.space, u, a * self.rho, S, newton_out)
+            assemble_convection(self.space, u, a * self.rho, scalar_out=S)
         return S
 
     def _apply_scalar(self, S: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -133,12 +135,19 @@ class NavierStokesProblem:
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints) -> SaddlePointSystem:
-        """Newton linearisation at ``x`` with constraints applied."""
+        """Newton linearisation at ``x`` with constraints applied.
+
+        The velocity block's data lives in a buffer owned by the problem and is overwritten by the
+        next call: use the returned system before linearising again.
+        """
         s = self.space
         u = x[:s.n_u]
-        J = np.zeros(s.dim * s.dim * s.nnz)
-        S = self._scalar_operator(u, m, a, newton_out=J if self.convection else None)
-        expand_to_coupled(s, S, J)
+        if self._jacobian_data is None:
+            self._jacobian_data = np.empty(s.dim * s.dim * s.nnz)
+        J = self._jacobian_data
+        expand_to_coupled(s, (m * self.rho) * self.M + (a * self.mu) * self.L, J)
+        if self.convection and a != 0.0:
+            assemble_convection(s, u, a * self.rho, newton_out=J)
         A = s.coupled_matrix(J)
         con.zero_rows(A)
         return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs)

@@ -126,20 +126,23 @@ class StructuredMesh:
         """Vertex coordinates per cell, (n_cells, 2**dim, dim) float64."""
         return self.vertices[self.cell_vertices]
 
-    def cell_colours(self) -> list[np.ndarray]:
-        """Cells grouped so that cells of one group share no vertex (periodicity included).
+    def cell_colours(self) -> list[list[np.ndarray]]:
+        """Cells grouped into independent slabs for race-free parallel assembly.
 
-        Returns a list of (n_in_colour,) int64 arrays. Cells of the same parity in every axis do
-        not touch; a periodic axis with an odd cell count gives its last layer a third colour.
+        A slab is one layer of cells normal to the last axis (a row of cells in 2D, a plane in
+        3D), in lexicographic order. Slabs ``s`` and ``s + 2`` share no vertex, so the slabs of one
+        colour (even / odd layers; a periodic last axis with an odd count gives its last layer a
+        third colour) may be processed in parallel, each sequentially in cache-friendly order.
+
+        Returns a list over colours of lists of (cells_per_slab,) int64 arrays.
         """
-        idx = self.cell_indices()
-        colour = np.zeros(self.n_cells, dtype=np.int64)
-        for d in range(self.dim):
-            c_d = idx[:, d] % 2
-            if self.periodic[d] and self.shape[d] % 2 == 1:
-                c_d[idx[:, d] == self.shape[d] - 1] = 2
-            colour += c_d * 3**d
-        return [np.flatnonzero(colour == c) for c in np.unique(colour)]
+        n_last = self.shape[-1]
+        per_slab = self.n_cells // n_last
+        colour = np.arange(n_last) % 2
+        if self.periodic[-1] and n_last % 2 == 1:
+            colour[-1] = 2
+        return [[np.arange(s * per_slab, (s + 1) * per_slab) for s in np.flatnonzero(colour == c)]
+                for c in np.unique(colour)]
 
     # -- geometry -----------------------------------------------------------------------------
     def map_to_physical(self, xi: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
