@@ -43,12 +43,12 @@ def velocity_field(space: FlowSpace) -> np.ndarray:
     return np.concatenate([np.sin(np.pi * x[:, 1]), np.cos(np.pi * x[:, 0]), x[:, 0] * x[:, 2]])
 
 
-def jacobian(space: FlowSpace, M, L, u, mu=0.01, rho=1.0, m=10.0):
-    """Data of the coupled Jacobian ``m rho M + mu L + rho (N(u) + R(u))``."""
-    S = (m * rho) * M + mu * L
-    J = np.zeros(space.dim**2 * space.nnz)
-    assemble_convection(space, u, rho, S, J)
-    expand_to_coupled(space, S, J)
+def jacobian(space: FlowSpace, M, L, u, J=None, mu=0.01, rho=1.0, m=10.0):
+    """Data of the coupled Jacobian ``m rho M + mu L + rho (N(u) + R(u))``, into buffer ``J``
+    (as :class:`~fbmflow.flow.NavierStokesProblem` does it for every Newton step)."""
+    J = np.empty(space.dim**2 * space.nnz) if J is None else J
+    expand_to_coupled(space, J, m * rho, M, mu, L)
+    assemble_convection(space, u, rho, newton_out=J)
     return J
 
 
@@ -66,7 +66,7 @@ def time_fbmflow(n: int, repeats: int = 3) -> dict:
     newton = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        J = jacobian(space, M, L, u)
+        J = jacobian(space, M, L, u, J)
         newton.append(time.perf_counter() - t0)
     cells = space.mesh.n_cells
     return {"cells_per_axis": n, "n_cells": cells, "n_velocity_dofs": space.n_u, "n_pressure_dofs": space.n_p,

@@ -323,8 +323,9 @@ def test_init_coupled(space):
     d = space.dim
     scalar = rng.normal(size=space.nnz)
     out = rng.normal(size=d * d * space.nnz)
-    ref = np.kron(np.eye(d), _dense_scalar(space, scalar))
-    _kernels.init_coupled(scalar, space.indptr, d, out)
+    other = rng.normal(size=space.nnz)
+    ref = np.kron(np.eye(d), 0.5 * _dense_scalar(space, scalar) - 2.0 * _dense_scalar(space, other))
+    _kernels.init_coupled(0.5, scalar, -2.0, other, space.indptr, d, out)
     assert_rel(space.coupled_matrix(out).toarray(), ref)
 
 
@@ -460,8 +461,11 @@ def test_expand_to_coupled(case):
     d = space.dim
     scalar = assemble_laplace(space)
     out = rng.normal(size=d * d * space.nnz)  # overwritten, not added to
-    expand_to_coupled(space, scalar, out)
-    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), ref.laplace()))
+    expand_to_coupled(space, out, 3.0, scalar)
+    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), 3.0 * ref.laplace()))
+    mass = assemble_mass(space)
+    expand_to_coupled(space, out, 2.0, mass, -1.0, scalar)
+    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), 2.0 * ref.mass() - ref.laplace()))
 
 
 def test_assemble_divergence(case):

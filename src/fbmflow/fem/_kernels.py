@@ -196,10 +196,11 @@ def scatter_coupled(cells, conv, react, sym, scale, slots, cell_dofs, indptr, d,
 
 
 @njit(parallel=True)
-def init_coupled(scalar, indptr, d, out):
-    """Overwrite coupled data with the scalar operator on the diagonal blocks, zero elsewhere.
+def init_coupled(alpha, X, beta, Y, indptr, d, out):
+    """Overwrite coupled data with ``alpha X + beta Y`` on the diagonal blocks, zero elsewhere.
 
-    scalar (nnz,) float64 on the scalar pattern; indptr (n + 1,) int64; out (d * d * nnz,) float64.
+    alpha, beta float; X, Y (nnz,) float64 on the scalar pattern; indptr (n + 1,) int64;
+    out (d * d * nnz,) float64. Forming the combination here avoids two large temporaries.
     """
     n = indptr.shape[0] - 1
     nnz = indptr[-1]
@@ -209,8 +210,12 @@ def init_coupled(scalar, indptr, d, out):
         for i in range(d):
             base = i * d * nnz + d * start
             for k in range(d):
-                for off in range(ln):
-                    out[base + k * ln + off] = scalar[start + off] if k == i else 0.0
+                if k == i:
+                    for off in range(ln):
+                        out[base + k * ln + off] = alpha * X[start + off] + beta * Y[start + off]
+                else:
+                    for off in range(ln):
+                        out[base + k * ln + off] = 0.0
 
 
 @njit(parallel=True)
@@ -228,17 +233,21 @@ def divergence_local(dphi, detJw, Jinv, psi, rank, out):
     n_cells = detJw.shape[0]
     npl = d + 1
     for c in prange(n_cells):
+        local = np.zeros((npl, d, nl))
+        for q in range(nq):
+            for a in range(nl):
+                for i in range(d):
+                    g = 0.0
+                    for l in range(d):
+                        g += dphi[q, a, l] * Jinv[c, q, l, i]
+                    g *= detJw[c, q]
+                    for m in range(npl):
+                        local[m, i, a] += psi[c, q, m] * g
         for m in range(npl):
             row = (c * npl + m) * d * nl
             for i in range(d):
                 for a in range(nl):
-                    s = 0.0
-                    for q in range(nq):
-                        g = 0.0
-                        for l in range(d):
-                            g += dphi[q, a, l] * Jinv[c, q, l, i]
-                        s += psi[c, q, m] * g * detJw[c, q]
-                    out[row + i * nl + rank[c, a]] = -s
+                    out[row + i * nl + rank[c, a]] = -local[m, i, a]
 
 
 @njit(parallel=True)

@@ -100,9 +100,11 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
                 _kernels.scatter_scalar(cells, local, space.slots, scalar_out)
 
 
-def expand_to_coupled(space: FlowSpace, scalar: np.ndarray, out: np.ndarray) -> None:
-    """Overwrite coupled data ``out`` with ``scalar`` on every diagonal block and zeros elsewhere."""
-    _kernels.init_coupled(scalar, space.indptr, space.dim, out)
+def expand_to_coupled(space: FlowSpace, out: np.ndarray, alpha: float, X: np.ndarray,
+                      beta: float = 0.0, Y: np.ndarray | None = None) -> None:
+    """Overwrite coupled data ``out`` (dim * dim * nnz,) with the scalar operator ``alpha X + beta Y``
+    (data on the scalar pattern) on every diagonal block and zeros elsewhere."""
+    _kernels.init_coupled(alpha, X, beta, X if Y is None else Y, space.indptr, space.dim, out)
 
 
 def assemble_divergence(space: FlowSpace) -> sp.csr_matrix:

@@ -145,7 +145,7 @@ class NavierStokesProblem:
         if self._jacobian_data is None:
             self._jacobian_data = np.empty(s.dim * s.dim * s.nnz)
         J = self._jacobian_data
-        expand_to_coupled(s, (m * self.rho) * self.M + (a * self.mu) * self.L, J)
+        expand_to_coupled(s, J, m * self.rho, self.M, a * self.mu, self.L)
         if self.convection and a != 0.0:
             assemble_convection(s, u, a * self.rho, newton_out=J)
         A = s.coupled_matrix(J)

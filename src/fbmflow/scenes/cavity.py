@@ -38,6 +38,7 @@ class Cavity2D(Scene):
     description = "lid-driven unit square, steady Navier-Stokes (Ghia et al. 1982 centrelines)"
     Params = CavityParams
     default_level = 3  # 64 x 64 cells: Q2 nodes coincide with the 129 sample points
+    max_level = 6
 
     @staticmethod
     def mesh(level: int) -> StructuredMesh:

@@ -73,6 +73,7 @@ class Channel2D(_Channel):
     name = "channel-2d"
     description = "Poiseuille flow in [0,4]x[0,1], parabolic inflow, do-nothing outflow (exact solution)"
     default_level = 2
+    max_level = 6
     dim = 2
 
     def run(self, params: ChannelParams, level: int, progress=None) -> SceneResult:
@@ -91,6 +92,7 @@ class Channel3D(_Channel):
     name = "channel-3d"
     description = "duct flow in [0,4]x[0,1]^2, inflow 16U y(1-y)z(1-z), do-nothing outflow"
     default_level = 2
+    max_level = 4
     dim = 3
 
     def run(self, params: ChannelParams, level: int, progress=None) -> SceneResult:

@@ -67,6 +67,7 @@ class TaylorGreen2D(Scene):
     description = "decaying Taylor-Green vortex on the periodic unit square, unsteady (exact solution)"
     Params = TaylorGreenParams
     default_level = 2
+    max_level = 6
 
     @staticmethod
     def mesh(level: int) -> StructuredMesh:
