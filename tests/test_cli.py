@@ -92,3 +92,20 @@ def _exit_code(argv) -> int:
         return main(argv)
     except SystemExit as exc:
         return exc.code
+
+
+def test_public_api_is_lazy_and_complete():
+    code = ("import sys, fbmflow; assert 'numba' not in sys.modules; "
+            "[getattr(fbmflow, n) for n in fbmflow.__all__]; print('ok')")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip() == "ok", proc.stderr
+
+
+def test_newton_failure_names_step_time_and_remedy(capsys, tmp_path):
+    """A run that cannot converge exits 1 with the step, the time and a remedy, no traceback."""
+    code = main(["run", "taylor-green-2d", "--level", "0", "--set", "solver.newton_max_iterations=1",
+                 "--set", "solver.newton_rtol=1e-14", "--set", "solver.newton_atol=1e-300",
+                 "--out", str(tmp_path), "--quiet", "--no-plot"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "step 1 (t = 0" in err and "Remedy" in err and "Traceback" not in err

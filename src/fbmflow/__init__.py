@@ -1,2 +1,39 @@
-"""fbmflow: particulate flows with the finite element fictitious boundary method."""
+"""fbmflow: particulate flows with the finite element fictitious boundary method.
+
+The public API is listed in ``__all__``; names are imported lazily so that ``import fbmflow``
+does no work (no Numba import, no compilation).
+"""
+import importlib
+
 __version__ = "0.1.0"
+
+_API = {
+    "StructuredMesh": "fbmflow.mesh",
+    "FlowSpace": "fbmflow.fem",
+    "NavierStokesProblem": "fbmflow.flow",
+    "Dirichlet": "fbmflow.flow",
+    "NoSlip": "fbmflow.flow",
+    "Slip": "fbmflow.flow",
+    "DoNothing": "fbmflow.flow",
+    "TIME_SCHEMES": "fbmflow.flow.time_schemes",
+    "advance": "fbmflow.flow.time_schemes",
+    "NewtonSettings": "fbmflow.solvers",
+    "ConvergenceError": "fbmflow.solvers",
+    "LINEAR_SOLVERS": "fbmflow.solvers",
+    "SCENES": "fbmflow.scenes",
+    "load_scene": "fbmflow.scenes",
+    "run_scene": "fbmflow.scenes",
+    "ParamError": "fbmflow.params",
+}
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name):
+    if name in _API:
+        return getattr(importlib.import_module(_API[name]), name)
+    raise AttributeError(f"module 'fbmflow' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

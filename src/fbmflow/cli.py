@@ -53,10 +53,11 @@ def _progress(quiet: bool):
         return None
     start = time.perf_counter()
 
-    def report(step: int, n: int, t: float) -> None:
+    def report(step: int, n: int, t: float | None) -> None:
         elapsed = time.perf_counter() - start
         eta = elapsed / step * (n - step)
-        sys.stderr.write(f"\r  step {step}/{n}  t = {t:.4g}  elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
+        where = f"t = {t:.4g}" if t is not None else "steady stage"
+        sys.stderr.write(f"\r  step {step}/{n}  {where}  elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
         if step == n:
             sys.stderr.write("\n")
         sys.stderr.flush()

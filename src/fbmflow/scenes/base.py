@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 log = logging.getLogger(__name__)
 
-Progress = Callable[[int, int, float], None]  # (step, n_steps, time) -> None
+Progress = Callable[[int, int, float | None], None]  # (step, n_steps, time or None if steady)
 
 
 @dataclass

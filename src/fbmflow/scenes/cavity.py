@@ -58,8 +58,8 @@ class Cavity2D(Scene):
             problem.mu = 1.0 / re
             x, report = problem.solve_steady(x)
             newton_its += report.iterations
-            if progress:
-                progress(k + 1, len(re_path), 0.0)
+            if progress and len(re_path) > 1:
+                progress(k + 1, len(re_path), None)
         s = np.linspace(0.0, 1.0, 129)
         space = problem.space
         u_vert = sample_velocity(space, x[:space.n_u], np.stack([np.full_like(s, 0.5), s], axis=1))[:, 0]

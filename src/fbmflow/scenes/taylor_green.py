@@ -12,6 +12,7 @@ import numpy as np
 from ..fem.functions import error_norms
 from ..flow import NavierStokesProblem
 from ..flow.time_schemes import advance
+from ..solvers import ConvergenceError
 from ..mesh import StructuredMesh
 from ..params import SolverParams, TimeParams, param, section
 from .base import Scene, SceneResult
@@ -98,7 +99,10 @@ class TaylorGreen2D(Scene):
 
         times, energies, newton_its, t = [0.0], [energy(x)], 0, 0.0
         for step in range(1, n_steps + 1):
-            x, reports = advance(problem, x, t, dt, params.time.scheme)
+            try:
+                x, reports = advance(problem, x, t, dt, params.time.scheme)
+            except ConvergenceError as err:
+                raise ConvergenceError(f"step {step} (t = {t:.6g} -> {t + dt:.6g}): {err}") from None
             t = step * dt
             newton_its += sum(r.iterations for r in reports)
             times.append(t)
