@@ -113,12 +113,9 @@ def assemble_divergence(space: FlowSpace) -> sp.csr_matrix:
     cd = space.V.cell_dofs
     nl = cd.shape[1]
     npl = d + 1
-    order = np.argsort(cd, axis=1)
-    rank = np.empty_like(order)
-    np.put_along_axis(rank, order, np.arange(nl)[None, :], axis=1)
     data = np.empty(space.mesh.n_cells * npl * d * nl)
-    _kernels.divergence_local(space.dphi, space.detJw, space.Jinv, space.psi, rank, data)
-    sorted_dofs = np.take_along_axis(cd, order, axis=1)  # (n_cells, nl)
+    _kernels.divergence_local(space.dphi, space.detJw, space.Jinv, space.psi, space.local_rank, data)
+    sorted_dofs = np.sort(cd, axis=1)  # (n_cells, nl)
     cols = (sorted_dofs[:, None, :] + space.n_v * np.arange(d)[None, :, None]).reshape(-1, d * nl)
     indices = np.repeat(cols, npl, axis=0).ravel().astype(np.int32)
     indptr = np.arange(space.n_p + 1, dtype=np.int64) * (d * nl)

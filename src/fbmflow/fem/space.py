@@ -88,6 +88,22 @@ class FlowSpace:
         return indptr, indices
 
     @cached_property
+    def local_rank(self) -> np.ndarray:
+        """Position of each local node among its cell's DOFs in ascending order (the column
+        order of a ``B^T`` row): (n_cells, nl) int64."""
+        order = np.argsort(self.V.cell_dofs, axis=1)
+        rank = np.empty_like(order)
+        np.put_along_axis(rank, order, np.arange(order.shape[1])[None, :], axis=1)
+        return rank
+
+    @cached_property
+    def vanka_classes(self) -> list[np.ndarray]:
+        """Cells in classes whose DOFs never meet in a matrix row (for cell-wise smoothers): a
+        parallel sweep over one class equals a sequential block Gauss–Seidel sweep. List of
+        (n,) int64."""
+        return self.mesh.cell_parity_classes(3)
+
+    @cached_property
     def batches(self) -> list[np.ndarray]:
         """Cell batches for assembly, each (n_groups, length) int64, padded with -1.
 

@@ -18,12 +18,12 @@ from typing import Callable
 
 import numpy as np
 
-from ..fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
-                   assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights)
+from ..fem import assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
+from .levels import FlowLevel, coarse_levels, inject_velocity
 
 log = logging.getLogger(__name__)
 
@@ -44,20 +44,29 @@ class NavierStokesProblem:
         Force per unit volume [N/m^3].
     convection : bool, default True
         False solves the (time-dependent) Stokes equations.
-    linear_solver : str, default "direct"
-        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`.
+    linear_solver : str or solver object, default "direct"
+        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS` or an instance (e.g. a configured
+        :class:`~fbmflow.solvers.MultigridSolver`).
     newton : NewtonSettings
+    coarse_cells : int, optional
+        Multigrid only: the coarsest level keeps at least this many cells (default 16 in 2D,
+        8 in 3D).
+    max_cell_reynolds : float, default 64
+        Multigrid only: no level coarser than cell Reynolds number ``rho U h / mu`` of this,
+        with ``U = max |u|`` at the first linearisation.
     """
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict,
                  density: float = 1.0, body_force: Callable | None = None,
-                 convection: bool = True, linear_solver: str = "direct",
-                 newton: NewtonSettings = NewtonSettings()):
+                 convection: bool = True, linear_solver="direct",
+                 newton: NewtonSettings = NewtonSettings(), coarse_cells: int | None = None,
+                 max_cell_reynolds: float = 64.0):
         if not viscosity > 0:
             raise ValueError(f"viscosity must be positive, got {viscosity}")
         if not density > 0:
             raise ValueError(f"density must be positive, got {density}")
         check_boundary(mesh.tags, boundary)
+        coarse_cells = coarse_cells or (16 if mesh.dim == 2 else 8)
         self.mesh = mesh
         self.mu = float(viscosity)
         self.rho = float(density)
@@ -65,15 +74,19 @@ class NavierStokesProblem:
         self.body_force = body_force
         self.convection = convection
         self.newton = newton
-        self.linear_solver = make_linear_solver(linear_solver)
-        self.space = space = FlowSpace(mesh)
-        self.M = assemble_mass(space)
-        self.L = assemble_laplace(space)
-        self.BT = assemble_divergence(space)
-        self.mean_weights = None if pressure_is_determined(boundary) else pressure_mean_weights(space)
+        self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
+                              else linear_solver)
+        pressure_fixed = not pressure_is_determined(boundary)
+        self.fine = FlowLevel(mesh, boundary, pressure_fixed)
+        self.space = self.fine.space
+        self.M, self.L, self.BT = self.fine.M, self.fine.L, self.fine.BT
+        self.mean_weights = self.fine.mean_weights
+        self._pressure_fixed = pressure_fixed
+        self.coarse_cells = coarse_cells
+        self.max_cell_reynolds = max_cell_reynolds
+        self.coarse: list[FlowLevel] | None = None  # built at the first linearisation
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
-        self._jacobian_data: np.ndarray | None = None
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -135,22 +148,37 @@ class NavierStokesProblem:
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints) -> SaddlePointSystem:
-        """Newton linearisation at ``x`` with constraints applied.
+        """Newton linearisation at ``x`` with constraints applied; with a multigrid solver the
+        system carries its re-discretisations on the coarser levels (``coarser`` chain).
 
-        The velocity block's data lives in a buffer owned by the problem and is overwritten by the
-        next call: use the returned system before linearising again.
+        The velocity blocks live in buffers of the levels and are overwritten by the next call.
         """
-        s = self.space
-        u = x[:s.n_u]
-        if self._jacobian_data is None:
-            self._jacobian_data = np.empty(s.dim * s.dim * s.nnz)
-        J = self._jacobian_data
-        expand_to_coupled(s, J, m * self.rho, self.M, a * self.mu, self.L)
-        if self.convection and a != 0.0:
-            assemble_convection(s, u, a * self.rho, newton_out=J)
-        A = s.coupled_matrix(J)
-        con.zero_rows(A)
-        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs)
+        u = x[:self.space.n_u]
+        if self.coarse is None:
+            self.coarse = self._build_coarse_levels(u)
+        args = (m, a, self.rho, self.mu, self.convection)
+        system = self.fine.system(u, *args, con=con)
+        finer_level, finer_system = self.fine, system
+        for level in self.coarse:
+            u = inject_velocity(u, level, finer_level.space.n_v)
+            coarse_system = level.system(u, *args)
+            finer_system.coarser = coarse_system
+            finer_system.prolongation = finer_level.prolongation
+            finer_level, finer_system = level, coarse_system
+        return system
+
+    def _build_coarse_levels(self, u: np.ndarray) -> list[FlowLevel]:
+        """Multigrid levels below the fine one, limited by the cell Reynolds number of the
+        velocity scale ``max |u|`` at the first linearisation (boundary values included)."""
+        if not getattr(self.linear_solver, "needs_hierarchy", False):
+            return []
+        limit = np.inf
+        scale = float(np.max(np.abs(u))) if u.size else 0.0
+        if self.convection and scale > 0:
+            limit = self.max_cell_reynolds * self.mu / (self.rho * scale)
+        levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells, limit)
+        log.info("multigrid levels: %s", [self.mesh.shape] + [lv.mesh.shape for lv in levels])
+        return levels
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float):

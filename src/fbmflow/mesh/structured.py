@@ -144,6 +144,27 @@ class StructuredMesh:
         return [[np.arange(s * per_slab, (s + 1) * per_slab) for s in np.flatnonzero(colour == c)]
                 for c in np.unique(colour)]
 
+    def cell_parity_classes(self, modulus: int = 2) -> list[np.ndarray]:
+        """Cells grouped by their index modulo ``modulus`` on every axis.
+
+        With ``modulus = 2`` cells of one class share no vertex; with ``modulus = 3`` they do not
+        even share a neighbour, so the matrix rows of one cell's DOFs never involve another cell's
+        DOFs of the same class. On a periodic axis whose cell count is not a multiple of
+        ``modulus`` the trailing layers get classes of their own. Returns a list of (n,) int64
+        arrays (at most ``(modulus + 1)**dim``), used by the cell-wise (Vanka) smoothers.
+        """
+        idx = self.cell_indices()
+        key = np.zeros(self.n_cells, dtype=np.int64)
+        base = modulus + 2
+        for d in range(self.dim):
+            c_d = idx[:, d] % modulus
+            n = self.shape[d]
+            if self.periodic[d] and n % modulus:
+                tail = idx[:, d] >= n - n % modulus
+                c_d[tail] = modulus + (idx[tail, d] - (n - n % modulus))
+            key += c_d * base**d
+        return [np.flatnonzero(key == k) for k in np.unique(key)]
+
     # -- geometry -----------------------------------------------------------------------------
     def map_to_physical(self, xi: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
         """Multilinear map of reference points ``xi in [-1, 1]^dim``.
@@ -184,6 +205,22 @@ class StructuredMesh:
         coords = self.vertices[self.cell_vertices[cell_id]]  # (n, 2**dim, dim)
         vertices = np.einsum("pv,pvd->pd", basis, coords)
         return StructuredMesh(fine_shape, self.lower, self.upper, self.periodic, vertices)
+
+    def coarsen(self) -> "StructuredMesh":
+        """The mesh whose :meth:`refine` is this one: half the cells per axis, every other vertex.
+
+        Raises ValueError when an axis has an odd number of cells (or a periodic axis would keep
+        fewer than 2).
+        """
+        if any(n % 2 for n in self.shape):
+            raise ValueError(f"cannot coarsen shape {self.shape}: every axis needs an even cell count")
+        coarse_shape = tuple(n // 2 for n in self.shape)
+        if any(p and n < 2 for n, p in zip(coarse_shape, self.periodic)):
+            raise ValueError("cannot coarsen: a periodic axis needs at least 2 cells")
+        idx = np.indices(tuple(n + 1 for n in coarse_shape)).reshape(self.dim, -1, order="F").T
+        strides = np.cumprod((1,) + self.vertex_shape[:-1])
+        vertices = self.vertices[(2 * idx * strides).sum(axis=1)]
+        return StructuredMesh(coarse_shape, self.lower, self.upper, self.periodic, vertices)
 
     def hierarchy(self, levels: int) -> list["StructuredMesh"]:
         """``[self, self.refine(), ...]`` with ``levels + 1`` nested meshes."""

@@ -1,7 +1,22 @@
-"""Linear solvers (direct; multigrid plugs into the same interface) and Newton's method."""
-from .linear import LINEAR_SOLVERS, DirectSolver, LinearReport, SaddlePointSystem, make_linear_solver
+"""Linear solvers (sparse direct, geometric multigrid with Vanka smoothing, FGMRES) and Newton."""
+from .krylov import fgmres
+from .linear import DirectSolver, LinearReport, SaddlePointSystem, factorize
+from .multigrid import MultigridSettings, MultigridSolver
 from .newton import ConvergenceError, NewtonReport, NewtonSettings, solve_newton
+from .vanka import VANKA_VARIANTS, VankaSmoother
 
-__all__ = ["SaddlePointSystem", "LinearReport", "DirectSolver", "LINEAR_SOLVERS",
-           "make_linear_solver", "NewtonSettings", "NewtonReport", "solve_newton",
-           "ConvergenceError"]
+LINEAR_SOLVERS = {"direct": DirectSolver, "multigrid": MultigridSolver}
+
+
+def make_linear_solver(name: str, **settings):
+    """Instantiate a registered linear solver by name (settings go to its constructor)."""
+    try:
+        cls = LINEAR_SOLVERS[name]
+    except KeyError:
+        raise ValueError(f"unknown linear solver {name!r}; choose one of {sorted(LINEAR_SOLVERS)}") from None
+    return cls(**settings)
+
+
+__all__ = ["SaddlePointSystem", "LinearReport", "DirectSolver", "factorize", "MultigridSolver",
+           "MultigridSettings", "VankaSmoother", "VANKA_VARIANTS", "fgmres", "LINEAR_SOLVERS",
+           "make_linear_solver", "NewtonSettings", "NewtonReport", "solve_newton", "ConvergenceError"]

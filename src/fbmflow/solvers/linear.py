@@ -27,12 +27,19 @@ class SaddlePointSystem:
     mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
     fixed : (n_c,) int64 or None, the constrained velocity DOFs (unit rows of ``A``); solvers
         may eliminate them (their solution is the right-hand side there)
+    space : FlowSpace or None, the discretisation (cell structure for cell-wise smoothers)
+    coarser : SaddlePointSystem or None, the same operator re-discretised on the next coarser mesh
+    prolongation : (P_v, P_p) or None, scalar Q2 (n_v x n_v_coarse) and P1disc (n_p x n_p_coarse)
+        prolongations from ``coarser`` to this level
     """
 
     A: sp.csr_matrix
     BT: sp.csr_matrix
     mean_weights: np.ndarray | None = None
     fixed: np.ndarray | None = None
+    space: object = None
+    coarser: "SaddlePointSystem | None" = None
+    prolongation: tuple | None = None
 
     @property
     def n_u(self) -> int:
@@ -41,6 +48,21 @@ class SaddlePointSystem:
     @property
     def n_p(self) -> int:
         return self.BT.shape[0]
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
+        u, p = x[:self.n_u], x[self.n_u:]
+        return np.concatenate([self.A @ u + self.BT.T @ p, self.BT @ u])
+
+    def remove_pressure_mean(self, x: np.ndarray) -> None:
+        """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
+        the pressure is determined)."""
+        if self.mean_weights is None:
+            return
+        p = x[self.n_u:]
+        const = np.zeros(self.n_p)
+        const[::self.space.dim + 1] = 1.0  # the constant pressure: mean DOFs of P1disc
+        p -= const * (self.mean_weights @ p) / (self.mean_weights @ const)
 
     def matrix(self) -> sp.csc_matrix:
         """The assembled (bordered) system matrix, CSC."""
@@ -59,6 +81,31 @@ class LinearReport:
     wall_time_s: float
     iterations: int = 0
     residuals: list[float] = field(default_factory=list)
+    smoothing_sweeps: int = 0
+    setup_time_s: float = 0.0
+
+
+def factorize(system: SaddlePointSystem):
+    """Sparse LU of the (bordered) saddle-point matrix with the constrained velocity DOFs
+    eliminated; returns ``solve(f, g) -> (u, p)``."""
+    K = system.matrix().tocsr()
+    n = K.shape[0]
+    free = np.ones(n, dtype=bool)
+    if system.fixed is not None:
+        free[system.fixed] = False
+    K_free = K[free]
+    coupling = K_free[:, ~free]
+    lu = spla.splu(K_free[:, free].tocsc(), permc_spec="COLAMD")
+
+    def solve(f, g):
+        rhs = np.concatenate([f, g] + ([np.zeros(1)] if system.mean_weights is not None else []))
+        x = rhs.copy()
+        x[free] = lu.solve(rhs[free] - coupling @ rhs[~free])
+        if not np.all(np.isfinite(x)):
+            raise np.linalg.LinAlgError("direct solve produced non-finite values (singular system?)")
+        return x[:system.n_u], x[system.n_u:system.n_u + system.n_p]
+
+    return solve
 
 
 class DirectSolver:
@@ -66,32 +113,9 @@ class DirectSolver:
     velocity DOFs eliminated; for small and medium problems (3D: up to a few 10^4 unknowns)."""
 
     name = "direct"
+    needs_hierarchy = False
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
         t0 = time.perf_counter()
-        K = system.matrix().tocsr()
-        rhs = np.concatenate([f, g] + ([np.zeros(1)] if system.mean_weights is not None else []))
-        x = rhs.copy()
-        if system.fixed is not None and system.fixed.size:
-            free = np.ones(K.shape[0], dtype=bool)
-            free[system.fixed] = False
-            K_free = K[free]
-            b = rhs[free] - K_free[:, system.fixed] @ rhs[system.fixed]
-            x[free] = spla.splu(K_free[:, free].tocsc(), permc_spec="COLAMD").solve(b)
-        else:
-            x = spla.splu(K.tocsc(), permc_spec="COLAMD").solve(rhs)
-        if not np.all(np.isfinite(x)):
-            raise np.linalg.LinAlgError("direct solve produced non-finite values (singular system?)")
-        report = LinearReport(self.name, time.perf_counter() - t0, iterations=1)
-        return x[:system.n_u], x[system.n_u:system.n_u + system.n_p], report
-
-
-LINEAR_SOLVERS = {"direct": DirectSolver}
-
-
-def make_linear_solver(name: str):
-    """Instantiate a registered linear solver by name."""
-    try:
-        return LINEAR_SOLVERS[name]()
-    except KeyError:
-        raise ValueError(f"unknown linear solver {name!r}; choose one of {sorted(LINEAR_SOLVERS)}") from None
+        u, p = factorize(system)(f, g)
+        return u, p, LinearReport(self.name, time.perf_counter() - t0, iterations=1)

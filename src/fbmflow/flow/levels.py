@@ -1,0 +1,91 @@
+"""The Navier–Stokes operators on one mesh level, and the hierarchy of coarser levels that the
+multigrid solver works on (re-discretisation on nested meshes)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
+                   assemble_mass, expand_to_coupled, pressure_mean_weights)
+from ..fem.constraints import DirichletConstraints
+from ..mesh import StructuredMesh
+from ..solvers import SaddlePointSystem
+from ..solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
+from .boundary import build_constraints
+
+
+class FlowLevel:
+    """Mesh-dependent operators of one level: space, mass ``M``, Laplacian ``L``, ``B^T``.
+
+    Parameters
+    ----------
+    mesh : StructuredMesh
+    boundary : dict of boundary conditions (only which DOFs are constrained matters here)
+    pressure_fixed : bool, whether ``int p = 0`` closes the system
+    """
+
+    def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool):
+        self.mesh = mesh
+        self.space = space = FlowSpace(mesh)
+        self.M = assemble_mass(space)
+        self.L = assemble_laplace(space)
+        self.BT = assemble_divergence(space)
+        self.mean_weights = pressure_mean_weights(space) if pressure_fixed else None
+        self.fixed = build_constraints(space.V, boundary, 0.0).dofs
+        self._homogeneous = DirichletConstraints(self.fixed, np.zeros(self.fixed.size))
+        self._jacobian_data: np.ndarray | None = None
+        self.prolongation: tuple | None = None  # from the next coarser level
+        self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
+
+    def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
+               con: DirichletConstraints | None = None, newton: bool = True) -> SaddlePointSystem:
+        """Newton linearisation ``m rho M + a (mu L + rho (N(u) + R(u)))`` at velocity ``u``.
+
+        The velocity block's data lives in a buffer of this level and is overwritten by the next
+        call: use the returned system before linearising again.
+        """
+        s = self.space
+        con = con or self._homogeneous
+        if self._jacobian_data is None:
+            self._jacobian_data = np.empty(s.dim * s.dim * s.nnz)
+        J = self._jacobian_data
+        expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
+        if convection and a != 0.0:
+            assemble_convection(s, u, a * rho, newton_out=J)
+        A = s.coupled_matrix(J)
+        con.zero_rows(A)
+        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s)
+
+
+def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cells: int,
+                  max_spacing: float = np.inf) -> list[FlowLevel]:
+    """Coarser levels below ``fine`` (finest first); sets the transfer operators.
+
+    Coarsening goes on while every axis has an even cell count, the coarser mesh keeps at least
+    ``min_cells`` cells and its cell size stays at most ``max_spacing`` (the flow problem passes
+    the size at which the cell Reynolds number reaches its limit; ``inf`` for Stokes). The
+    unstabilised Galerkin
+    operator on a mesh that does not resolve the convection is a poor coarse-grid correction
+    (at Re = 1000 the 4 x 4 cavity level makes the cycle diverge), so the coarsest level must
+    still see the flow.
+    """
+    levels = [fine]
+    mesh = fine.mesh
+    while (all(n % 2 == 0 for n in mesh.shape) and mesh.n_cells // 2**mesh.dim >= min_cells
+           and 2.0 * float(np.max(mesh.spacing)) <= max_spacing):
+        try:
+            mesh = mesh.coarsen()
+        except ValueError:
+            break
+        coarse = FlowLevel(mesh, boundary, pressure_fixed)
+        finer = levels[-1]
+        finer.prolongation = (prolongation_q2(coarse.space.V, finer.space.V),
+                              prolongation_p1disc(coarse.space.Q, finer.space.Q))
+        coarse.injection = injection_q2(coarse.space.V, finer.space.V)
+        levels.append(coarse)
+    return levels[1:]
+
+
+def inject_velocity(u: np.ndarray, level: FlowLevel, n_v_fine: int) -> np.ndarray:
+    """Velocity (dim * n_v_fine,) restricted by injection to ``level``'s nodes."""
+    d = level.space.dim
+    return u.reshape(d, n_v_fine)[:, level.injection].ravel()

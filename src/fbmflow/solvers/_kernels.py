@@ -1,0 +1,196 @@
+"""Numba kernels of the Vanka smoothers: cell-wise local saddle-point corrections.
+
+Layout (see :mod:`fbmflow.fem.space`): ``n_v`` scalar Q2 DOFs, velocity unknown ``(i, r)`` at
+``i n_v + r``, pressure DOF ``(c, m)`` at ``n_u + c (d + 1) + m``. The velocity block ``A`` is
+the coupled CSR whose row ``(i, r)`` holds component ``k``'s columns at
+``i d nnz + d indptr[r] + k len_r + off`` (``off`` the position in the scalar row). ``B`` rows
+come from a CSR copy ``(b_indptr, b_indices, b_data)`` (n_u x n_p); the cell-local rows of ``B^T``
+from ``bt`` with entry ``B^T[(c, m), (i, a)]`` at ``(c (d+1) + m) d nl + i nl + rank[c, a]``.
+Every kernel is checked against a NumPy reference in ``tests/solvers/test_vanka.py``.
+"""
+import numpy as np
+
+from .._jit import njit, prange
+
+
+@njit
+def _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices, b_data,
+                    bt, rank, cell_dofs, r):
+    """Residual ``b - K x`` restricted to the DOFs of cell ``c`` into ``r (d nl + d + 1,)``."""
+    nl = cell_dofs.shape[1]
+    npl = d + 1
+    nnz = indptr[-1]
+    for i in range(d):
+        for a in range(nl):
+            dof = cell_dofs[c, a]
+            row = i * n_v + dof
+            start = indptr[dof]
+            ln = indptr[dof + 1] - start
+            s = b[row]
+            for k in range(d):
+                base = i * d * nnz + d * start + k * ln
+                for off in range(ln):
+                    s -= a_data[base + off] * x[k * n_v + indices[start + off]]
+            for j in range(b_indptr[row], b_indptr[row + 1]):
+                s -= b_data[j] * x[n_u + b_indices[j]]
+            r[i * nl + a] = s
+    for m in range(npl):
+        s = b[n_u + c * npl + m]
+        base = (c * npl + m) * d * nl
+        for i in range(d):
+            for a in range(nl):
+                s -= bt[base + i * nl + rank[c, a]] * x[i * n_v + cell_dofs[c, a]]
+        r[d * nl + m] = s
+
+
+@njit(parallel=True)
+def vanka_diagonal(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
+                   bt, rank, cell_dofs, diag_inv, schur_inv):
+    """Corrections of the diagonal Vanka smoother for the cells of one class.
+
+    The local system ``[[D_c, B_c], [B_c^T, 0]]`` with ``D_c`` the diagonal of ``A`` is solved
+    through its Schur complement ``S_c = B_c^T D_c^-1 B_c`` (``schur_inv (n_cells, d+1, d+1)``, a
+    pseudo-inverse where ``S_c`` is singular): ``dp = S^-1 (B^T D^-1 r_u - r_p)``,
+    ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``. Returns (n_sel, d nl + d + 1) float64.
+    """
+    nl = cell_dofs.shape[1]
+    npl = d + 1
+    n_u = d * n_v
+    nloc = d * nl + npl
+    out = np.zeros((cells.shape[0], nloc))
+    for e in prange(cells.shape[0]):
+        c = cells[e]
+        r = np.empty(nloc)
+        _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
+                        b_data, bt, rank, cell_dofs, r)
+        rhs = np.zeros(npl)
+        for m in range(npl):
+            s = -r[d * nl + m]
+            base = (c * npl + m) * d * nl
+            for i in range(d):
+                for a in range(nl):
+                    s += bt[base + i * nl + rank[c, a]] * diag_inv[i * n_v + cell_dofs[c, a]] * r[i * nl + a]
+            rhs[m] = s
+        for m in range(npl):
+            s = 0.0
+            for q in range(npl):
+                s += schur_inv[c, m, q] * rhs[q]
+            out[e, d * nl + m] = s
+        for i in range(d):
+            for a in range(nl):
+                s = r[i * nl + a]
+                for m in range(npl):
+                    s -= bt[(c * npl + m) * d * nl + i * nl + rank[c, a]] * out[e, d * nl + m]
+                out[e, i * nl + a] = diag_inv[i * n_v + cell_dofs[c, a]] * s
+    return out
+
+
+@njit
+def _solve_dense(K, r, out):
+    """Solve ``K y = r`` in place by LU with partial pivoting; a pivot below ``1e-13 max|K|`` (a
+    locally singular pressure mode) gives that unknown zero."""
+    n = K.shape[0]
+    scale = 0.0
+    for i in range(n):
+        for j in range(n):
+            scale = max(scale, abs(K[i, j]))
+    tol = 1e-13 * scale
+    perm = np.arange(n)
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(K[i, k]) > abs(K[p, k]):
+                p = i
+        if p != k:
+            for j in range(n):
+                K[k, j], K[p, j] = K[p, j], K[k, j]
+            r[k], r[p] = r[p], r[k]
+            perm[k], perm[p] = perm[p], perm[k]
+        if abs(K[k, k]) <= tol:
+            K[k, k] = 0.0
+            continue
+        for i in range(k + 1, n):
+            f = K[i, k] / K[k, k]
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    K[i, j] -= f * K[k, j]
+                r[i] -= f * r[k]
+    for k in range(n - 1, -1, -1):
+        if K[k, k] == 0.0:
+            out[k] = 0.0
+            continue
+        s = r[k]
+        for j in range(k + 1, n):
+            s -= K[k, j] * out[j]
+        out[k] = s / K[k, k]
+
+
+@njit(parallel=True)
+def vanka_full(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
+               bt, rank, cell_dofs, slots):
+    """Corrections of the full Vanka smoother: the cell's whole local saddle-point block
+    ``[[A_cc, B_c], [B_c^T, 0]]`` (velocity block read through the slot map ``slots (n_cells, nl,
+    nl)``) solved by LU. Returns (n_sel, d nl + d + 1) float64."""
+    nl = cell_dofs.shape[1]
+    npl = d + 1
+    n_u = d * n_v
+    nloc = d * nl + npl
+    nnz = indptr[-1]
+    out = np.zeros((cells.shape[0], nloc))
+    for e in prange(cells.shape[0]):
+        c = cells[e]
+        r = np.empty(nloc)
+        _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
+                        b_data, bt, rank, cell_dofs, r)
+        K = np.zeros((nloc, nloc))
+        for a in range(nl):
+            dof = cell_dofs[c, a]
+            start = indptr[dof]
+            ln = indptr[dof + 1] - start
+            for i in range(d):
+                base = i * d * nnz + d * start - start
+                for k in range(d):
+                    for bb in range(nl):
+                        K[i * nl + a, k * nl + bb] = a_data[base + k * ln + slots[c, a, bb]]
+                for m in range(npl):
+                    v = bt[(c * npl + m) * d * nl + i * nl + rank[c, a]]
+                    K[i * nl + a, d * nl + m] = v
+                    K[d * nl + m, i * nl + a] = v
+        y = np.empty(nloc)
+        _solve_dense(K, r, y)
+        out[e, :] = y
+    return out
+
+
+@njit(parallel=True)
+def apply_corrections(cells, delta, omega, d, n_v, cell_dofs, x):
+    """``x += omega * delta`` on the DOFs of the given cells (which must not share DOFs)."""
+    nl = cell_dofs.shape[1]
+    npl = d + 1
+    n_u = d * n_v
+    for e in prange(cells.shape[0]):
+        c = cells[e]
+        for i in range(d):
+            for a in range(nl):
+                x[i * n_v + cell_dofs[c, a]] += omega * delta[e, i * nl + a]
+        for m in range(npl):
+            x[n_u + c * npl + m] += omega * delta[e, d * nl + m]
+
+
+@njit(parallel=True)
+def schur_diagonal(bt, rank, cell_dofs, diag_inv, d, n_v):
+    """``S_c = B_c^T D_c^-1 B_c`` for every cell: (n_cells, d + 1, d + 1) float64."""
+    n_cells, nl = cell_dofs.shape
+    npl = d + 1
+    S = np.zeros((n_cells, npl, npl))
+    for c in prange(n_cells):
+        for m in range(npl):
+            for q in range(npl):
+                s = 0.0
+                for i in range(d):
+                    for a in range(nl):
+                        pos = i * nl + rank[c, a]
+                        s += (bt[(c * npl + m) * d * nl + pos] * diag_inv[i * n_v + cell_dofs[c, a]]
+                              * bt[(c * npl + q) * d * nl + pos])
+                S[c, m, q] = s
+    return S

@@ -1,0 +1,67 @@
+"""Grid transfer between nested Q2/P1disc levels.
+
+* Q2 prolongation: exact interpolation of the coarse Q2 field at the fine Q2 nodes (on each
+  coarse cell the fine nodes sit at reference coordinates ``{-1, -1/2, 0, 1/2, 1}^dim``).
+* P1disc prolongation: exact, because P1disc is linear in physical coordinates. With coarse frame
+  ``(C, S)`` and fine frame ``(c, s)``, ``(x - C)/S = (c - C)/S + (s/S) (x - c)/s``.
+* Restrictions are the transposes. Injection (fine values at the coarse nodes) carries the
+  convecting velocity to coarse levels for re-discretisation.
+
+Periodic identification comes with the DOF maps.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..fem.dofmap import DofMap, PressureDofMap
+from ..fem.elements import ElementQ2
+
+
+def _fine_lattice_in_coarse_cells(coarse: DofMap) -> tuple[np.ndarray, np.ndarray]:
+    """Fine lattice indices (n_cells_c, 5**dim, dim) and reference points (5**dim, dim)."""
+    dim = coarse.mesh.dim
+    local = np.indices((5,) * dim).reshape(dim, -1, order="F").T  # (5**dim, dim)
+    lat = 4 * coarse.mesh.cell_indices()[:, None, :] + local[None, :, :]
+    return lat, local * 0.5 - 1.0
+
+
+def prolongation_q2(coarse: DofMap, fine: DofMap) -> sp.csr_matrix:
+    """Scalar Q2 interpolation, (fine.n_dofs, coarse.n_dofs) CSR."""
+    if tuple(2 * n for n in coarse.mesh.shape) != fine.mesh.shape:
+        raise ValueError("fine mesh is not the refinement of the coarse mesh")
+    lat, xi = _fine_lattice_in_coarse_cells(coarse)
+    phi, _ = ElementQ2(coarse.mesh.dim).tabulate(xi)  # (5**dim, 27)
+    rows = np.broadcast_to(fine._lattice_to_dof(lat)[:, :, None], lat.shape[:2] + (phi.shape[1],))
+    cols = np.broadcast_to(coarse.cell_dofs[:, None, :], rows.shape)
+    vals = np.broadcast_to(phi[None, :, :], rows.shape)
+    keep = np.abs(vals) > 1e-14
+    rows, cols, vals = rows[keep], cols[keep], vals[keep]
+    key = rows * coarse.n_dofs + cols
+    _, first = np.unique(key, return_index=True)  # shared fine nodes: take each entry once
+    return sp.csr_matrix((vals[first], (rows[first], cols[first])), shape=(fine.n_dofs, coarse.n_dofs))
+
+
+def prolongation_p1disc(coarse: PressureDofMap, fine: PressureDofMap) -> sp.csr_matrix:
+    """P1disc prolongation, (fine.n_dofs, coarse.n_dofs) CSR (exact for P1disc functions)."""
+    dim = fine.mesh.dim
+    npl = dim + 1
+    fidx = fine.mesh.cell_indices()
+    parent_idx = fidx // 2
+    strides = np.cumprod((1,) + coarse.mesh.shape[:-1])
+    parent = (parent_idx * strides).sum(axis=1)
+    n_f = fine.mesh.n_cells
+    C, S = coarse.centre[parent], coarse.scale[parent]
+    c, s = fine.centre, fine.scale
+    rows, cols, vals = [np.arange(n_f) * npl], [parent * npl], [np.ones(n_f)]
+    for l in range(dim):
+        rows += [np.arange(n_f) * npl, np.arange(n_f) * npl + 1 + l]
+        cols += [parent * npl + 1 + l, parent * npl + 1 + l]
+        vals += [(c[:, l] - C[:, l]) / S[:, l], s[:, l] / S[:, l]]
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(fine.n_dofs, coarse.n_dofs))
+
+
+def injection_q2(coarse: DofMap, fine: DofMap) -> np.ndarray:
+    """Fine DOF at every coarse node (coarse nodes are fine nodes): (coarse.n_dofs,) int64."""
+    return fine._lattice_to_dof(2 * coarse.lattice)
