@@ -163,9 +163,23 @@ class FlowSpace:
         """CSR matrix on the scalar Q2 pattern with the given data (no copy)."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_v, self.n_v))
 
+    @cached_property
+    def block_diagonal_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR ``(indptr, indices)`` of a velocity block with ``dim`` equal diagonal blocks only
+        (Stokes, Picard/Oseen): row ``(i, r)`` holds component ``i``'s columns, entry at
+        ``i nnz + indptr[r] + off``. A third of the coupled pattern in 3D."""
+        d, n = self.dim, self.n_v
+        indptr = np.concatenate([[0]] + [i * self.nnz + self.indptr[1:] for i in range(d)])
+        indices = np.concatenate([self.indices + i * n for i in range(d)]).astype(np.int32)
+        return indptr, indices
+
     def coupled_matrix(self, data: np.ndarray) -> sp.csr_matrix:
-        """CSR matrix on the coupled velocity pattern with the given data (no copy)."""
-        indptr, indices = self.coupled_pattern
+        """CSR velocity block with the given data (no copy): the coupled pattern when
+        ``data.size == dim**2 nnz``, the block-diagonal one when ``data.size == dim nnz``."""
+        if data.size == self.dim * self.nnz and self.dim > 1:
+            indptr, indices = self.block_diagonal_pattern
+        else:
+            indptr, indices = self.coupled_pattern
         return sp.csr_matrix((data, indices, indptr), shape=(self.n_u, self.n_u))
 
     def __repr__(self) -> str:

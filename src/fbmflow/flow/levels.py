@@ -45,12 +45,22 @@ class FlowLevel:
         """
         s = self.space
         con = con or self._homogeneous
-        if self._jacobian_data is None:
-            self._jacobian_data = np.empty(s.dim * s.dim * s.nnz)
+        newton = convection and a != 0.0 and newton
+        size = s.dim * s.nnz * (s.dim if newton else 1)
+        if self._jacobian_data is None or self._jacobian_data.size != size:
+            self._jacobian_data = np.empty(size)
         J = self._jacobian_data
-        expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
-        if convection and a != 0.0:
+        if newton:
+            expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
             assemble_convection(s, u, a * rho, newton_out=J)
+        else:  # block diagonal: the same scalar operator for every component
+            S = J[:s.nnz]
+            np.multiply(self.M, m * rho, out=S)
+            S += (a * mu) * self.L
+            if convection and a != 0.0:
+                assemble_convection(s, u, a * rho, scalar_out=S)
+            for i in range(1, s.dim):
+                J[i * s.nnz:(i + 1) * s.nnz] = S
         A = s.coupled_matrix(J)
         con.zero_rows(A)
         return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s)

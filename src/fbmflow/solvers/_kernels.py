@@ -2,8 +2,10 @@
 
 Layout (see :mod:`fbmflow.fem.space`): ``n_v`` scalar Q2 DOFs, velocity unknown ``(i, r)`` at
 ``i n_v + r``, pressure DOF ``(c, m)`` at ``n_u + c (d + 1) + m``. The velocity block ``A`` is
-the coupled CSR whose row ``(i, r)`` holds component ``k``'s columns at
-``i d nnz + d indptr[r] + k len_r + off`` (``off`` the position in the scalar row). ``B`` rows
+a CSR whose row ``(i, r)`` holds component ``k``'s columns at
+``i nb nnz + nb indptr[r] + k len_r + off`` (``off`` the position in the scalar row), with
+``nb = d`` blocks per row for the coupled (Newton) block and ``nb = 1`` for the block-diagonal
+(Stokes, Oseen) one, which only has ``k = i`` (stored at ``k -> 0``). ``B`` rows
 come from a CSR copy ``(b_indptr, b_indices, b_data)`` (n_u x n_p); the cell-local rows of ``B^T``
 from ``bt`` with entry ``B^T[(c, m), (i, a)]`` at ``(c (d+1) + m) d nl + i nl + rank[c, a]``.
 Every kernel is checked against a NumPy reference in ``tests/solvers/test_vanka.py``.
@@ -14,8 +16,8 @@ from .._jit import njit, prange
 
 
 @njit
-def _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices, b_data,
-                    bt, rank, cell_dofs, r):
+def _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
+                    b_data, bt, rank, cell_dofs, r):
     """Residual ``b - K x`` restricted to the DOFs of cell ``c`` into ``r (d nl + d + 1,)``."""
     nl = cell_dofs.shape[1]
     npl = d + 1
@@ -28,7 +30,9 @@ def _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_i
             ln = indptr[dof + 1] - start
             s = b[row]
             for k in range(d):
-                base = i * d * nnz + d * start + k * ln
+                if nb == 1 and k != i:
+                    continue
+                base = i * nb * nnz + nb * start + (k if nb > 1 else 0) * ln
                 for off in range(ln):
                     s -= a_data[base + off] * x[k * n_v + indices[start + off]]
             for j in range(b_indptr[row], b_indptr[row + 1]):
@@ -44,7 +48,7 @@ def _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_i
 
 
 @njit(parallel=True)
-def vanka_diagonal(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
+def vanka_diagonal(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
                    bt, rank, cell_dofs, diag_inv, schur_inv):
     """Corrections of the diagonal Vanka smoother for the cells of one class.
 
@@ -61,7 +65,7 @@ def vanka_diagonal(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_ind
     for e in prange(cells.shape[0]):
         c = cells[e]
         r = np.empty(nloc)
-        _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
+        _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
                         b_data, bt, rank, cell_dofs, r)
         rhs = np.zeros(npl)
         for m in range(npl):
@@ -126,7 +130,7 @@ def _solve_dense(K, r, out):
 
 
 @njit(parallel=True)
-def vanka_full(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
+def vanka_full(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
                bt, rank, cell_dofs, slots):
     """Corrections of the full Vanka smoother: the cell's whole local saddle-point block
     ``[[A_cc, B_c], [B_c^T, 0]]`` (velocity block read through the slot map ``slots (n_cells, nl,
@@ -140,7 +144,7 @@ def vanka_full(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices
     for e in prange(cells.shape[0]):
         c = cells[e]
         r = np.empty(nloc)
-        _local_residual(c, b, x, d, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
+        _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
                         b_data, bt, rank, cell_dofs, r)
         K = np.zeros((nloc, nloc))
         for a in range(nl):
@@ -148,10 +152,13 @@ def vanka_full(cells, b, x, d, n_v, indptr, indices, a_data, b_indptr, b_indices
             start = indptr[dof]
             ln = indptr[dof + 1] - start
             for i in range(d):
-                base = i * d * nnz + d * start - start
+                base = i * nb * nnz + nb * start - start
                 for k in range(d):
+                    if nb == 1 and k != i:
+                        continue
+                    kk = k if nb > 1 else 0
                     for bb in range(nl):
-                        K[i * nl + a, k * nl + bb] = a_data[base + k * ln + slots[c, a, bb]]
+                        K[i * nl + a, k * nl + bb] = a_data[base + kk * ln + slots[c, a, bb]]
                 for m in range(npl):
                     v = bt[(c * npl + m) * d * nl + i * nl + rank[c, a]]
                     K[i * nl + a, d * nl + m] = v

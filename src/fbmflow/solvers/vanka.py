@@ -42,7 +42,8 @@ class VankaSmoother:
         self.space = space
         B = system.BT.T.tocsr()
         self._b = (B.indptr.astype(np.int64), B.indices.astype(np.int64), B.data)
-        self._common = (space.dim, space.n_v, space.indptr, space.indices, system.A.data,
+        nb = system.A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
+        self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, system.A.data,
                         *self._b, system.BT.data, space.local_rank, space.V.cell_dofs)
         if variant == "vanka-diagonal":
             diag = system.A.diagonal()
