@@ -14,6 +14,7 @@ import tomllib
 import typing
 from typing import Any
 
+from .solvers.multigrid import MultigridSettings, MultigridSolver
 from .solvers.newton import NewtonSettings
 
 
@@ -140,10 +141,26 @@ def describe(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
 class SolverParams:
     """Nonlinear and linear solver settings."""
 
-    linear: str = param("direct", "linear solver for the Newton systems", choices=("direct",))
+    linear: str = param("auto", "linear solver for the Newton systems ('auto': multigrid above "
+                        "20 000 unknowns in 2D / 15 000 in 3D, else direct)",
+                        choices=("auto", "direct", "multigrid"))
+    linear_rtol: float = param(1e-8, "multigrid: relative residual reduction per linear solve",
+                               positive=True, maximum=0.1)
+    mg_cycle: str = param("V", "multigrid cycle", choices=("V", "W", "F"))
+    mg_smoother: str = param("vanka-full", "multigrid smoother", choices=("vanka-full", "vanka-diagonal"))
+    mg_smoothing_steps: int = param(2, "multigrid pre- and post-smoothing sweeps", minimum=1)
+    mg_krylov: str = param("fgmres", "Krylov acceleration of multigrid", choices=("fgmres", "none"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
+
+    def linear_solver(self):
+        """The configured linear solver: a name for ``direct``/``auto``, else a solver object."""
+        if self.linear != "multigrid":
+            return self.linear
+        return MultigridSolver(MultigridSettings(
+            cycle=self.mg_cycle, smoother=self.mg_smoother, pre_smooth=self.mg_smoothing_steps,
+            post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov))
 
     def newton_settings(self) -> NewtonSettings:
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,

@@ -57,6 +57,12 @@ class FlowSpace:
         self.batch_size = batch_size or (4096 if d == 2 else 512)
         self._build_pattern()
 
+    @staticmethod
+    def estimate_dofs(mesh: StructuredMesh) -> int:
+        """Number of unknowns (velocity + pressure) a FlowSpace on ``mesh`` would have."""
+        nodes = int(np.prod([2 * n if p else 2 * n + 1 for n, p in zip(mesh.shape, mesh.periodic)]))
+        return mesh.dim * nodes + (mesh.dim + 1) * mesh.n_cells
+
     # -- sparsity -----------------------------------------------------------------------------
     def _build_pattern(self):
         cd = self.V.cell_dofs

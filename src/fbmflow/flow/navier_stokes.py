@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..fem import assemble_convection, assemble_load
+from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
@@ -26,6 +26,10 @@ from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
 log = logging.getLogger(__name__)
+
+#: unknowns above which ``linear_solver="auto"`` picks multigrid (measured crossover, see
+#: benchmarks/bench_solvers.py)
+AUTO_MULTIGRID_DOFS = {2: 20_000, 3: 15_000}
 
 
 class NavierStokesProblem:
@@ -44,8 +48,9 @@ class NavierStokesProblem:
         Force per unit volume [N/m^3].
     convection : bool, default True
         False solves the (time-dependent) Stokes equations.
-    linear_solver : str or solver object, default "direct"
-        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS` or an instance (e.g. a configured
+    linear_solver : str or solver object, default "auto"
+        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`, ``"auto"`` (multigrid above
+        :data:`AUTO_MULTIGRID_DOFS` unknowns, else direct) or an instance (e.g. a configured
         :class:`~fbmflow.solvers.MultigridSolver`).
     newton : NewtonSettings
     coarse_cells : int, optional
@@ -58,7 +63,7 @@ class NavierStokesProblem:
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict,
                  density: float = 1.0, body_force: Callable | None = None,
-                 convection: bool = True, linear_solver="direct",
+                 convection: bool = True, linear_solver="auto",
                  newton: NewtonSettings = NewtonSettings(), coarse_cells: int | None = None,
                  max_cell_reynolds: float = 64.0):
         if not viscosity > 0:
@@ -74,6 +79,9 @@ class NavierStokesProblem:
         self.body_force = body_force
         self.convection = convection
         self.newton = newton
+        if linear_solver == "auto":
+            n_unknowns = FlowSpace.estimate_dofs(mesh)
+            linear_solver = "multigrid" if n_unknowns > AUTO_MULTIGRID_DOFS[mesh.dim] else "direct"
         self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
                               else linear_solver)
         pressure_fixed = not pressure_is_determined(boundary)
@@ -156,6 +164,9 @@ class NavierStokesProblem:
         u = x[:self.space.n_u]
         if self.coarse is None:
             self.coarse = self._build_coarse_levels(u)
+        else:  # the flow got faster or the viscosity smaller: drop levels that no longer resolve it
+            limit = self._coarse_spacing_limit(u)
+            self.coarse = [lv for lv in self.coarse if float(np.max(lv.mesh.spacing)) <= limit]
         args = (m, a, self.rho, self.mu, self.convection)
         system = self.fine.system(u, *args, con=con)
         finer_level, finer_system = self.fine, system
@@ -167,16 +178,20 @@ class NavierStokesProblem:
             finer_level, finer_system = level, coarse_system
         return system
 
+    def _coarse_spacing_limit(self, u: np.ndarray) -> float:
+        """Largest cell size with cell Reynolds number ``rho max|u| h / mu <= max_cell_reynolds``."""
+        scale = float(np.max(np.abs(u))) if u.size else 0.0
+        if not self.convection or scale == 0.0:
+            return np.inf
+        return self.max_cell_reynolds * self.mu / (self.rho * scale)
+
     def _build_coarse_levels(self, u: np.ndarray) -> list[FlowLevel]:
         """Multigrid levels below the fine one, limited by the cell Reynolds number of the
         velocity scale ``max |u|`` at the first linearisation (boundary values included)."""
         if not getattr(self.linear_solver, "needs_hierarchy", False):
             return []
-        limit = np.inf
-        scale = float(np.max(np.abs(u))) if u.size else 0.0
-        if self.convection and scale > 0:
-            limit = self.max_cell_reynolds * self.mu / (self.rho * scale)
-        levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells, limit)
+        levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells,
+                               self._coarse_spacing_limit(u))
         log.info("multigrid levels: %s", [self.mesh.shape] + [lv.mesh.shape for lv in levels])
         return levels
 

@@ -51,7 +51,7 @@ class Cavity2D(Scene):
         re_path = [params.fluid.re]
         while re_path[0] > 100.0:
             re_path.insert(0, max(100.0, re_path[0] / 2))
-        problem = NavierStokesProblem(mesh, 1.0 / re_path[0], bcs, linear_solver=params.solver.linear,
+        problem = NavierStokesProblem(mesh, 1.0 / re_path[0], bcs, linear_solver=params.solver.linear_solver(),
                                       newton=params.solver.newton_settings())
         x, newton_its = None, 0
         for k, re in enumerate(re_path):

@@ -63,7 +63,7 @@ class _Channel(Scene):
         bcs["xmin"] = Dirichlet(self.profile(params.inflow.max_velocity))
         bcs["xmax"] = DoNothing()
         problem = NavierStokesProblem(mesh, params.fluid.viscosity, bcs, density=params.fluid.density,
-                                      linear_solver=params.solver.linear,
+                                      linear_solver=params.solver.linear_solver(),
                                       newton=params.solver.newton_settings())
         x, report = problem.solve_steady()
         return mesh, problem, x, report

@@ -85,7 +85,7 @@ class TaylorGreen2D(Scene):
     def run(self, params: TaylorGreenParams, level: int, progress=None) -> SceneResult:
         nu = params.fluid.viscosity
         mesh = self.mesh(level)
-        problem = NavierStokesProblem(mesh, nu, {}, linear_solver=params.solver.linear,
+        problem = NavierStokesProblem(mesh, nu, {}, linear_solver=params.solver.linear_solver(),
                                       newton=params.solver.newton_settings())
         x = self.initial_state(problem, nu)
         n_steps = params.time.n_steps

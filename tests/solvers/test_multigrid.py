@@ -1,0 +1,192 @@
+"""Geometric multigrid (issue 3): grid transfer, Vanka kernels, convergence factors and
+level-independent cycle counts for Stokes and Oseen/Newton systems, periodic directions."""
+import numpy as np
+import pytest
+
+from fbmflow.fem import FlowSpace
+from fbmflow.fem.functions import sample_pressure, sample_velocity
+from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
+from fbmflow.mesh import StructuredMesh
+from fbmflow.solvers import MultigridSettings, MultigridSolver
+from fbmflow.solvers import _kernels as vk
+from fbmflow.solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
+
+
+# -- grid transfer -----------------------------------------------------------------------------
+@pytest.mark.parametrize("shape, periodic", [((2, 3), (False, False)), ((2, 2), (True, False)),
+                                             ((2, 1, 2), (False, False, True))])
+def test_prolongation_is_exact_interpolation(shape, periodic):
+    coarse = StructuredMesh.box(shape, upper=(2.0,) * len(shape), periodic=periodic)
+    fine = coarse.refine()
+    sc, sf = FlowSpace(coarse), FlowSpace(fine)
+    P = prolongation_q2(sc.V, sf.V)
+    Pp = prolongation_p1disc(sc.Q, sf.Q)
+    rng = np.random.default_rng(1)
+    uc, pc = rng.standard_normal(sc.n_u), rng.standard_normal(sc.n_p)
+    uf = np.concatenate([P @ part for part in uc.reshape(sc.dim, -1)])
+    pts = rng.random((40, sc.dim)) * 1.999
+    assert np.allclose(sample_velocity(sc, uc, pts), sample_velocity(sf, uf, pts), atol=1e-13)
+    assert np.allclose(sample_pressure(sc, pc, pts), sample_pressure(sf, Pp @ pc, pts), atol=1e-13)
+    assert np.allclose(P.sum(axis=1), 1.0)  # partition of unity
+    inj = injection_q2(sc.V, sf.V)
+    assert np.allclose(sf.V.coordinates[inj], sc.V.coordinates)
+
+
+def test_coarsen_inverts_refine():
+    mesh = StructuredMesh.box((2, 4), periodic=(True, False))
+    assert np.array_equal(mesh.refine().coarsen().vertices, mesh.vertices)
+    with pytest.raises(ValueError, match="even cell count"):
+        StructuredMesh.box((3, 4)).coarsen()
+
+
+# -- Vanka kernels against a dense NumPy reference ---------------------------------------------
+def _tiny_system(dim, newton):
+    mesh = StructuredMesh.box((3,) * dim)
+    bcs = {t: NoSlip() for t in mesh.tags}
+    bcs["ymax"] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
+    prob = NavierStokesProblem(mesh, 0.05, bcs, linear_solver="direct")
+    x = prob.zero_state()
+    x[:prob.space.n_u] += 0.3 * np.random.default_rng(3).standard_normal(prob.space.n_u)
+    con = prob.constraints()
+    con.apply_to_vector(x)
+    system = prob.fine.system(x[:prob.space.n_u], 2.0, 1.0, 1.0, prob.mu, True, con, newton=newton)
+    return prob.space, system
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("variant", ["vanka-full", "vanka-diagonal"])
+@pytest.mark.parametrize("newton", [True, False], ids=["coupled", "block-diagonal"])
+def test_vanka_corrections_match_numpy(dim, variant, newton):
+    from fbmflow.solvers import VankaSmoother
+    space, system = _tiny_system(dim, newton)
+    K = system.matrix().toarray()[:system.n_u + system.n_p, :system.n_u + system.n_p]
+    rng = np.random.default_rng(4)
+    b, x = rng.standard_normal(K.shape[0]), rng.standard_normal(K.shape[0])
+    smoother = VankaSmoother(system, variant)
+    cells = space.vanka_classes[0]
+    delta = smoother.corrections(cells, b, x)
+    r = b - K @ x
+    diag = np.diag(K)[:system.n_u]
+    for e, c in enumerate(cells):
+        dofs = space.V.cell_dofs[c]
+        idx = np.concatenate([i * space.n_v + dofs for i in range(dim)]
+                             + [system.n_u + c * (dim + 1) + np.arange(dim + 1)])
+        Kc = K[np.ix_(idx, idx)].copy()
+        nu_loc = dim * dofs.size
+        if variant == "vanka-diagonal":
+            Kc[:nu_loc, :nu_loc] = np.diag(diag[idx[:nu_loc]])
+        ref = np.linalg.lstsq(Kc, r[idx], rcond=1e-12)[0]
+        assert np.allclose(delta[e], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max()), (c, variant)
+
+
+# -- convergence -------------------------------------------------------------------------------
+def _cavity_system(n, dim=2, re=None, cycle="V", smoother="vanka-full", krylov="none"):
+    """The Stokes (re None) or Newton/Oseen system of the lid-driven cavity at the lid flow."""
+    mesh = StructuredMesh.box((n,) * dim)
+    bcs = {t: NoSlip() for t in mesh.tags}
+    bcs["ymax"] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
+    mg = MultigridSolver(MultigridSettings(cycle=cycle, smoother=smoother, krylov=krylov, rtol=1e-8,
+                                           max_iterations=80))
+    prob = NavierStokesProblem(mesh, 1.0 if re is None else 1.0 / re, bcs, convection=re is not None,
+                               linear_solver=mg)
+    x = prob.zero_state()
+    if re is not None:  # a recirculating velocity field with the lid's values on the boundary
+        X = prob.space.V.coordinates
+        u, _ = prob.split(x)
+        u[0] = np.sin(np.pi * X[:, 0]) ** 2 * np.sin(2 * np.pi * X[:, 1])
+        u[1] = -np.sin(2 * np.pi * X[:, 0]) * np.sin(np.pi * X[:, 1]) ** 2
+    con = prob.constraints()
+    con.apply_to_vector(x)
+    F = prob.residual(x, 0.0, 1.0, prob.load(), con)
+    return prob, mg, x, con, F
+
+
+def _solve(prob, mg, x, con, F, m=0.0):
+    system = prob.linear_system(x, m, 1.0, con)
+    du, dp, rep = mg.solve(system, -F[:system.n_u], -F[system.n_u:])
+    true = np.linalg.norm(np.concatenate([-F[:system.n_u], -F[system.n_u:]])
+                          - system.apply(np.concatenate([du, dp])))
+    return rep, true / np.linalg.norm(F)
+
+
+@pytest.mark.parametrize("dim, n, bound", [(2, 32, 0.2), (3, 8, 0.3)])
+@pytest.mark.parametrize("smoother", ["vanka-full", "vanka-diagonal"])
+def test_stokes_convergence_factor(dim, n, bound, smoother):
+    rep, rel = _solve(*_cavity_system(n, dim, smoother=smoother))
+    res = np.array(rep.residuals)
+    factors = res[1:] / res[:-1]
+    assert rel < 1e-8
+    assert factors.max() <= bound, factors
+    assert rep.smoothing_sweeps >= 4 * rep.iterations  # pre + post on the finest level at least
+
+
+@pytest.mark.parametrize("case", ["stokes-2d", "oseen-re100", "stokes-3d"])
+def test_cycles_are_level_independent(case):
+    if case == "stokes-2d":
+        counts = [_solve(*_cavity_system(n))[0].iterations for n in (16, 32, 64)]
+    elif case == "oseen-re100":
+        counts = [_solve(*_cavity_system(n, re=100, krylov="fgmres"))[0].iterations for n in (16, 32, 64)]
+    else:
+        counts = [_solve(*_cavity_system(n, dim=3, smoother="vanka-diagonal"))[0].iterations for n in (4, 8, 16)]
+    assert max(counts) - min(counts) <= 2, counts
+    assert max(counts) <= 20, counts
+
+
+@pytest.mark.slow
+def test_newton_re1000_cycles_on_fine_levels():
+    counts = [_solve(*_cavity_system(n, re=1000, krylov="fgmres"))[0].iterations for n in (64, 128)]
+    assert max(counts) - min(counts) <= 2, counts
+    assert max(counts) <= 40, counts
+
+
+def test_periodic_taylor_green_oseen_system():
+    """Periodic in both directions (pressure fixed by its mean): level-independent cycles."""
+    from fbmflow.scenes.taylor_green import TaylorGreen2D
+    counts = []
+    for level in (1, 2, 3):
+        mg = MultigridSolver(MultigridSettings(krylov="fgmres", rtol=1e-8))
+        prob = NavierStokesProblem(TaylorGreen2D.mesh(level), 0.01, {}, linear_solver=mg)
+        x = TaylorGreen2D.initial_state(prob, 0.01)
+        con = prob.constraints()
+        rhs = (1.0 / 0.05) * prob._apply_scalar(prob.M, x[:prob.space.n_u])
+        F = prob.residual(x, 1.0 / 0.05, 1.0, rhs, con)
+        rep, rel = _solve(prob, mg, x, con, F, m=1.0 / 0.05)
+        assert rel < 1e-8
+        counts.append(rep.iterations)
+    assert max(counts) - min(counts) <= 2, counts
+
+
+def test_channel_3d_newton_system():
+    counts = []
+    for n in (2, 4):
+        mesh = StructuredMesh.box((4 * n, n, n), upper=(4.0, 1.0, 1.0))
+        bcs = {t: NoSlip() for t in mesh.tags}
+        bcs["xmin"] = Dirichlet(lambda x, t: np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]),
+                                                       0 * x[:, 0], 0 * x[:, 0]], axis=1))
+        bcs["xmax"] = DoNothing()
+        mg = MultigridSolver(MultigridSettings(krylov="fgmres", smoother="vanka-diagonal", rtol=1e-8))
+        prob = NavierStokesProblem(mesh, 0.02, bcs, linear_solver=mg, coarse_cells=4)
+        x = prob.zero_state()
+        con = prob.constraints()
+        F = prob.residual(x, 0.0, 1.0, prob.load(), con)
+        rep, rel = _solve(prob, mg, x, con, F)
+        assert rel < 1e-8
+        counts.append(rep.iterations)
+    assert max(counts) - min(counts) <= 2, counts
+
+
+@pytest.mark.parametrize("scene, level", [("cavity-2d", 1), ("channel-2d", 1), ("channel-3d", 1),
+                                          ("taylor-green-2d", 1)])
+def test_scenes_agree_with_the_direct_solver(scene, level):
+    from fbmflow.params import from_dict
+    from fbmflow.scenes import get_scene
+    sc = get_scene(scene)
+    out = {}
+    for linear in ("direct", "multigrid"):
+        data = {"solver": {"linear": linear}}
+        if scene == "taylor-green-2d":
+            data["time"] = {"t_end": 0.1}
+        out[linear] = sc.run(from_dict(sc.Params, data), level).quantities
+    for key, value in out["direct"].items():
+        a, b = np.asarray(value, dtype=float), np.asarray(out["multigrid"][key], dtype=float)
+        assert np.allclose(a, b, rtol=1e-6, atol=1e-8), key
