@@ -48,14 +48,17 @@ def _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr,
 
 
 @njit(parallel=True)
-def vanka_diagonal(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
-                   bt, rank, cell_dofs, diag_inv, schur_inv):
+def vanka_diagonal(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices,
+                   b_data, bt, rank, cell_dofs, diag_inv, schur_inv):
     """Corrections of the diagonal Vanka smoother for the cells of one class.
 
     The local system ``[[D_c, B_c], [B_c^T, 0]]`` with ``D_c`` the diagonal of ``A`` is solved
     through its Schur complement ``S_c = B_c^T D_c^-1 B_c`` (``schur_inv (n_cells, d+1, d+1)``, a
     pseudo-inverse where ``S_c`` is singular): ``dp = S^-1 (B^T D^-1 r_u - r_p)``,
-    ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``. Returns (n_sel, d nl + d + 1) float64.
+    ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``. Adds ``omega`` times the corrections to
+    ``x`` in place; the cells must come from one class of
+    :attr:`~fbmflow.fem.FlowSpace.vanka_classes` (no cell's residual involves another's DOFs),
+    which makes the parallel loop race-free and equal to a sequential Gauss–Seidel sweep.
     """
     nl = cell_dofs.shape[1]
     npl = d + 1
@@ -86,7 +89,7 @@ def vanka_diagonal(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b
                 for m in range(npl):
                     s -= bt[(c * npl + m) * d * nl + i * nl + rank[c, a]] * out[e, d * nl + m]
                 out[e, i * nl + a] = diag_inv[i * n_v + cell_dofs[c, a]] * s
-    return out
+        _apply(c, out[e], omega, d, n_v, n_u, cell_dofs, x)
 
 
 @njit
@@ -130,11 +133,12 @@ def _solve_dense(K, r, out):
 
 
 @njit(parallel=True)
-def vanka_full(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
+def vanka_full(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
                bt, rank, cell_dofs, slots):
-    """Corrections of the full Vanka smoother: the cell's whole local saddle-point block
-    ``[[A_cc, B_c], [B_c^T, 0]]`` (velocity block read through the slot map ``slots (n_cells, nl,
-    nl)``) solved by LU. Returns (n_sel, d nl + d + 1) float64."""
+    """Full Vanka: the cell's whole local saddle-point block ``[[A_cc, B_c], [B_c^T, 0]]``
+    (velocity block read through the slot map ``slots (n_cells, nl, nl)``) solved by LU; adds
+    ``omega`` times the corrections to ``x`` in place (cells of one class, see
+    :func:`vanka_diagonal`)."""
     nl = cell_dofs.shape[1]
     npl = d + 1
     n_u = d * n_v
@@ -163,25 +167,20 @@ def vanka_full(cells, b, x, d, nb, n_v, indptr, indices, a_data, b_indptr, b_ind
                     v = bt[(c * npl + m) * d * nl + i * nl + rank[c, a]]
                     K[i * nl + a, d * nl + m] = v
                     K[d * nl + m, i * nl + a] = v
-        y = np.empty(nloc)
-        _solve_dense(K, r, y)
-        out[e, :] = y
-    return out
+        _solve_dense(K, r, out[e])
+        _apply(c, out[e], omega, d, n_v, n_u, cell_dofs, x)
 
 
-@njit(parallel=True)
-def apply_corrections(cells, delta, omega, d, n_v, cell_dofs, x):
-    """``x += omega * delta`` on the DOFs of the given cells (which must not share DOFs)."""
+@njit
+def _apply(c, delta, omega, d, n_v, n_u, cell_dofs, x):
+    """``x += omega * delta`` on the DOFs of cell ``c``."""
     nl = cell_dofs.shape[1]
     npl = d + 1
-    n_u = d * n_v
-    for e in prange(cells.shape[0]):
-        c = cells[e]
-        for i in range(d):
-            for a in range(nl):
-                x[i * n_v + cell_dofs[c, a]] += omega * delta[e, i * nl + a]
-        for m in range(npl):
-            x[n_u + c * npl + m] += omega * delta[e, d * nl + m]
+    for i in range(d):
+        for a in range(nl):
+            x[i * n_v + cell_dofs[c, a]] += omega * delta[i * nl + a]
+    for m in range(npl):
+        x[n_u + c * npl + m] += omega * delta[d * nl + m]
 
 
 @njit(parallel=True)

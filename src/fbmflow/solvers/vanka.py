@@ -2,10 +2,9 @@
 
 Each cell's DOFs (its ``dim * nl`` velocity and ``dim + 1`` pressure unknowns) get a correction
 from the local saddle-point problem driven by the current residual. Cells are visited class by
-class (:attr:`FlowSpace.vanka_classes`, cells of one class share no DOF): within a class the
-corrections are computed in parallel from the same iterate and then applied (block Jacobi),
-between classes the residual is updated (block Gauss–Seidel). The result does not depend on the
-number of threads.
+class (:attr:`FlowSpace.vanka_classes`: cell indices modulo 3, so no cell's residual involves the
+DOFs of another cell of its class): the cells of a class are updated in parallel, and the sweep
+equals a sequential block Gauss–Seidel sweep in class order, whatever the number of threads.
 
 Variants (a registry):
 
@@ -54,18 +53,16 @@ class VankaSmoother:
         else:
             self._extra = (space.slots,)
 
-    def corrections(self, cells: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Local corrections of ``cells`` from the residual at ``x``: (n, d nl + d + 1)."""
+    def update(self, cells: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
+        """Add ``omega`` times the local corrections of ``cells`` (one class) to ``x``."""
         kernel = _kernels.vanka_full if self.variant == "vanka-full" else _kernels.vanka_diagonal
-        return kernel(cells, b, x, *self._common, *self._extra)
+        kernel(cells, b, x, self.omega if omega is None else omega, *self._common, *self._extra)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
-        s = self.space
         for _ in range(sweeps):
-            for cells in s.vanka_classes:
-                delta = self.corrections(cells, b, x)
-                _kernels.apply_corrections(cells, delta, self.omega, s.dim, s.n_v, s.V.cell_dofs, x)
+            for cells in self.space.vanka_classes:
+                self.update(cells, b, x)
 
 
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7}  # name -> default damping
