@@ -29,7 +29,8 @@ def convergence(sol, cells, convection, deformed=False, mu=1.0, rho=1.0):
             mesh = deform(mesh)
         bc = {t: Dirichlet(lambda x, t: sol.u(x)) for t in mesh.tags}
         prob = NavierStokesProblem(mesh, mu, bc, density=rho,
-                                   body_force=body_force(sol, mu, rho, convection), convection=convection)
+                                   body_force=body_force(sol, mu, rho, convection), convection=convection,
+                                   linear_solver="direct")
         x, report = prob.solve_steady()
         u, p = prob.split(x)
         e = error_norms(prob.space, u.ravel(), p, sol.u, sol.grad, sol.p)

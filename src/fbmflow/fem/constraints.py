@@ -27,6 +27,16 @@ class DirichletConstraints:
     dofs: np.ndarray
     values: np.ndarray
 
+    def merged(self, other: "DirichletConstraints | None") -> "DirichletConstraints":
+        """Union with ``other``; where both constrain a DOF, ``self``'s value wins."""
+        if other is None or other.dofs.size == 0:
+            return self
+        dofs = np.concatenate([other.dofs, self.dofs])
+        values = np.concatenate([other.values, self.values])
+        # keep the last occurrence (self) of every DOF
+        rev_unique, rev_index = np.unique(dofs[::-1], return_index=True)
+        return DirichletConstraints(rev_unique, values[::-1][rev_index])
+
     def apply_to_vector(self, u: np.ndarray) -> None:
         """Set the constrained entries of ``u (dim * n_v,)`` in place."""
         u[self.dofs] = self.values

@@ -46,9 +46,15 @@ def sample_velocity(space: FlowSpace, u: np.ndarray, points: np.ndarray) -> np.n
     return np.einsum("ina,na->ni", uu[:, space.V.cell_dofs[cells]], phi)
 
 
-def sample_pressure(space: FlowSpace, p: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Pressure at physical points: p (n_p,), points (n, dim) -> (n,) float64."""
-    cells, _ = locate(space, points)
+def sample_pressure(space: FlowSpace, p: np.ndarray, points: np.ndarray,
+                    cells_at: np.ndarray | None = None) -> np.ndarray:
+    """Pressure at physical points: p (n_p,), points (n, dim) -> (n,) float64.
+
+    With ``cells_at (n, dim)`` the linear pressure of the cell containing ``cells_at[k]`` is
+    evaluated at ``points[k]`` (extrapolation from a neighbouring cell, e.g. from the fluid side of
+    a fictitious boundary).
+    """
+    cells, _ = locate(space, points if cells_at is None else cells_at)
     points = np.atleast_2d(points)
     psi = space.Q.element.tabulate(points, space.Q.centre[cells], space.Q.scale[cells])
     return np.einsum("nm,nm->n", p.reshape(-1, space.dim + 1)[cells], psi)

@@ -23,18 +23,27 @@ class FlowLevel:
     pressure_fixed : bool, whether ``int p = 0`` closes the system
     """
 
-    def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool):
+    def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool,
+                 extra_constraints=None):
         self.mesh = mesh
         self.space = space = FlowSpace(mesh)
         self.M = assemble_mass(space)
         self.L = assemble_laplace(space)
         self.BT = assemble_divergence(space)
         self.mean_weights = pressure_mean_weights(space) if pressure_fixed else None
-        self.fixed = build_constraints(space.V, boundary, 0.0).dofs
-        self._homogeneous = DirichletConstraints(self.fixed, np.zeros(self.fixed.size))
+        self.boundary_constraints = build_constraints(space.V, boundary, 0.0)
+        self.extra_constraints = extra_constraints
         self._jacobian_data: np.ndarray | None = None
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
+
+    def homogeneous_constraints(self, t: float = 0.0) -> DirichletConstraints:
+        """Which DOFs are constrained on this level (values zero): the box faces plus the extra
+        constraints (e.g. fictitious boundaries) at time ``t``."""
+        con = self.boundary_constraints
+        if self.extra_constraints is not None:
+            con = con.merged(self.extra_constraints(self.space.V, t))
+        return DirichletConstraints(con.dofs, np.zeros(con.dofs.size))
 
     def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
                con: DirichletConstraints | None = None, newton: bool = True) -> SaddlePointSystem:
@@ -44,7 +53,7 @@ class FlowLevel:
         call: use the returned system before linearising again.
         """
         s = self.space
-        con = con or self._homogeneous
+        con = con or self.homogeneous_constraints()
         newton = convection and a != 0.0 and newton
         size = s.dim * s.nnz * (s.dim if newton else 1)
         if self._jacobian_data is None or self._jacobian_data.size != size:
@@ -67,7 +76,7 @@ class FlowLevel:
 
 
 def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cells: int,
-                  max_spacing: float = np.inf) -> list[FlowLevel]:
+                  max_spacing: float = np.inf, extra_constraints=None) -> list[FlowLevel]:
     """Coarser levels below ``fine`` (finest first); sets the transfer operators.
 
     Coarsening goes on while every axis has an even cell count, the coarser mesh keeps at least
@@ -86,7 +95,7 @@ def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cel
             mesh = mesh.coarsen()
         except ValueError:
             break
-        coarse = FlowLevel(mesh, boundary, pressure_fixed)
+        coarse = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
         finer = levels[-1]
         finer.prolongation = (prolongation_q2(coarse.space.V, finer.space.V),
                               prolongation_p1disc(coarse.space.Q, finer.space.Q))

@@ -56,6 +56,9 @@ class NavierStokesProblem:
     coarse_cells : int, optional
         Multigrid only: the coarsest level keeps at least this many cells (default 16 in 2D,
         8 in 3D).
+    extra_constraints : callable ``(DofMap, t) -> DirichletConstraints``, optional
+        Further velocity constraints evaluated on every level (the fictitious boundaries of
+        particles and obstacles); the box faces win where both constrain a DOF.
     max_cell_reynolds : float, default 64
         Multigrid only: no level coarser than cell Reynolds number ``rho U h / mu`` of this,
         with ``U = max |u|`` at the first linearisation.
@@ -65,7 +68,7 @@ class NavierStokesProblem:
                  density: float = 1.0, body_force: Callable | None = None,
                  convection: bool = True, linear_solver="auto",
                  newton: NewtonSettings = NewtonSettings(), coarse_cells: int | None = None,
-                 max_cell_reynolds: float = 64.0):
+                 max_cell_reynolds: float = 64.0, extra_constraints=None):
         if not viscosity > 0:
             raise ValueError(f"viscosity must be positive, got {viscosity}")
         if not density > 0:
@@ -85,7 +88,8 @@ class NavierStokesProblem:
         self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
                               else linear_solver)
         pressure_fixed = not pressure_is_determined(boundary)
-        self.fine = FlowLevel(mesh, boundary, pressure_fixed)
+        self.extra_constraints = extra_constraints
+        self.fine = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
         self.space = self.fine.space
         self.M, self.L, self.BT = self.fine.M, self.fine.L, self.fine.BT
         self.mean_weights = self.fine.mean_weights
@@ -108,11 +112,14 @@ class NavierStokesProblem:
 
     def constraints(self, t: float = 0.0) -> DirichletConstraints:
         """Dirichlet constraints at time ``t`` (cached when they do not depend on time)."""
-        if self._steady_bc:
+        if self._steady_bc and self.extra_constraints is None:
             if self._constraints is None:
                 self._constraints = build_constraints(self.space.V, self.boundary, t)
             return self._constraints
-        return build_constraints(self.space.V, self.boundary, t)
+        con = build_constraints(self.space.V, self.boundary, t)
+        if self.extra_constraints is not None:
+            con = con.merged(self.extra_constraints(self.space.V, t))
+        return con
 
     def load(self, t: float = 0.0) -> np.ndarray:
         """``int f . v`` for every velocity DOF, (dim * n_v,) float64."""
@@ -155,7 +162,7 @@ class NavierStokesProblem:
         return np.concatenate([Fu, self.BT @ u])
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
-                      con: DirichletConstraints) -> SaddlePointSystem:
+                      con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
         """Newton linearisation at ``x`` with constraints applied; with a multigrid solver the
         system carries its re-discretisations on the coarser levels (``coarser`` chain).
 
@@ -172,7 +179,7 @@ class NavierStokesProblem:
         finer_level, finer_system = self.fine, system
         for level in self.coarse:
             u = inject_velocity(u, level, finer_level.space.n_v)
-            coarse_system = level.system(u, *args)
+            coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t))
             finer_system.coarser = coarse_system
             finer_system.prolongation = finer_level.prolongation
             finer_level, finer_system = level, coarse_system
@@ -191,7 +198,7 @@ class NavierStokesProblem:
         if not getattr(self.linear_solver, "needs_hierarchy", False):
             return []
         levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells,
-                               self._coarse_spacing_limit(u))
+                               self._coarse_spacing_limit(u), self.extra_constraints)
         log.info("multigrid levels: %s", [self.mesh.shape] + [lv.mesh.shape for lv in levels])
         return levels
 
@@ -206,7 +213,7 @@ class NavierStokesProblem:
         con.apply_to_vector(x0)
 
         def linear_step(x, F):
-            system = self.linear_system(x, m, a, con)
+            system = self.linear_system(x, m, a, con, t)
             du, dp, report = self.linear_solver.solve(system, -F[:system.n_u], -F[system.n_u:])
             return np.concatenate([du, dp]), report
 

@@ -17,7 +17,7 @@ from .._jit import njit, prange
 
 @njit
 def _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
-                    b_data, bt, rank, cell_dofs, r):
+                    b_data, bt, rank, cell_dofs, pblock, r):
     """Residual ``b - K x`` restricted to the DOFs of cell ``c`` into ``r (d nl + d + 1,)``."""
     nl = cell_dofs.shape[1]
     npl = d + 1
@@ -44,17 +44,19 @@ def _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr,
         for i in range(d):
             for a in range(nl):
                 s -= bt[base + i * nl + rank[c, a]] * x[i * n_v + cell_dofs[c, a]]
+        for q in range(npl):
+            s -= pblock[c, m, q] * x[n_u + c * npl + q]
         r[d * nl + m] = s
 
 
 @njit(parallel=True)
 def vanka_diagonal(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices,
-                   b_data, bt, rank, cell_dofs, diag_inv, schur_inv):
+                   b_data, bt, rank, cell_dofs, pblock, diag_inv, schur_inv):
     """Corrections of the diagonal Vanka smoother for the cells of one class.
 
-    The local system ``[[D_c, B_c], [B_c^T, 0]]`` with ``D_c`` the diagonal of ``A`` is solved
-    through its Schur complement ``S_c = B_c^T D_c^-1 B_c`` (``schur_inv (n_cells, d+1, d+1)``, a
-    pseudo-inverse where ``S_c`` is singular): ``dp = S^-1 (B^T D^-1 r_u - r_p)``,
+    The local system ``[[D_c, B_c], [B_c^T, C_c]]`` with ``D_c`` the diagonal of ``A`` and
+    ``C_c = pblock[c]`` is solved through its Schur complement ``S_c = B_c^T D_c^-1 B_c + C_c``
+    (``schur_inv (n_cells, d+1, d+1)``, a pseudo-inverse where ``S_c`` is singular): ``dp = S^-1 (B^T D^-1 r_u - r_p)``,
     ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``. Adds ``omega`` times the corrections to
     ``x`` in place; the cells must come from one class of
     :attr:`~fbmflow.fem.FlowSpace.vanka_classes` (no cell's residual involves another's DOFs),
@@ -69,7 +71,7 @@ def vanka_diagonal(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_in
         c = cells[e]
         r = np.empty(nloc)
         _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
-                        b_data, bt, rank, cell_dofs, r)
+                        b_data, bt, rank, cell_dofs, pblock, r)
         rhs = np.zeros(npl)
         for m in range(npl):
             s = -r[d * nl + m]
@@ -134,7 +136,7 @@ def _solve_dense(K, r, out):
 
 @njit(parallel=True)
 def vanka_full(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
-               bt, rank, cell_dofs, slots):
+               bt, rank, cell_dofs, pblock, slots):
     """Full Vanka: the cell's whole local saddle-point block ``[[A_cc, B_c], [B_c^T, 0]]``
     (velocity block read through the slot map ``slots (n_cells, nl, nl)``) solved by LU; adds
     ``omega`` times the corrections to ``x`` in place (cells of one class, see
@@ -149,7 +151,7 @@ def vanka_full(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr
         c = cells[e]
         r = np.empty(nloc)
         _local_residual(c, b, x, d, nb, n_v, n_u, indptr, indices, a_data, b_indptr, b_indices,
-                        b_data, bt, rank, cell_dofs, r)
+                        b_data, bt, rank, cell_dofs, pblock, r)
         K = np.zeros((nloc, nloc))
         for a in range(nl):
             dof = cell_dofs[c, a]
@@ -167,6 +169,9 @@ def vanka_full(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr
                     v = bt[(c * npl + m) * d * nl + i * nl + rank[c, a]]
                     K[i * nl + a, d * nl + m] = v
                     K[d * nl + m, i * nl + a] = v
+        for m in range(npl):
+            for q in range(npl):
+                K[d * nl + m, d * nl + q] = pblock[c, m, q]
         _solve_dense(K, r, out[e])
         _apply(c, out[e], omega, d, n_v, n_u, cell_dofs, x)
 

@@ -31,6 +31,11 @@ class SaddlePointSystem:
     coarser : SaddlePointSystem or None, the same operator re-discretised on the next coarser mesh
     prolongation : (P_v, P_p) or None, scalar Q2 (n_v x n_v_coarse) and P1disc (n_p x n_p_coarse)
         prolongations from ``coarser`` to this level
+    pressure_block : (n_cells, dim+1, dim+1) float64 or None, cell-wise pressure-pressure block
+        ``C``: the projector onto the pressure modes of a cell that no free velocity DOF sees any
+        more (cells inside or almost inside a fictitious boundary). Those modes would make the
+        system singular; ``C`` sets them to ``g`` (zero for Newton updates) and leaves every
+        other unknown unchanged. Computed from ``B^T`` when ``space`` is given.
     """
 
     A: sp.csr_matrix
@@ -40,6 +45,11 @@ class SaddlePointSystem:
     space: object = None
     coarser: "SaddlePointSystem | None" = None
     prolongation: tuple | None = None
+    pressure_block: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.pressure_block is None and self.space is not None:
+            self.pressure_block = orphan_pressure_block(self.BT, self.space.dim + 1)
 
     @property
     def n_u(self) -> int:
@@ -52,7 +62,11 @@ class SaddlePointSystem:
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
         u, p = x[:self.n_u], x[self.n_u:]
-        return np.concatenate([self.A @ u + self.BT.T @ p, self.BT @ u])
+        q = self.BT @ u
+        if self.pressure_block is not None:
+            npl = self.pressure_block.shape[1]
+            q += np.einsum("cmn,cn->cm", self.pressure_block, p.reshape(-1, npl)).ravel()
+        return np.concatenate([self.A @ u + self.BT.T @ p, q])
 
     def remove_pressure_mean(self, x: np.ndarray) -> None:
         """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
@@ -66,11 +80,35 @@ class SaddlePointSystem:
 
     def matrix(self) -> sp.csc_matrix:
         """The assembled (bordered) system matrix, CSC."""
-        blocks = [[self.A, self.BT.T], [self.BT, None]]
+        C = None
+        if self.pressure_block is not None and np.any(self.pressure_block):
+            C = sp.block_diag(list(self.pressure_block), format="csr")
+        blocks = [[self.A, self.BT.T], [self.BT, C]]
         if self.mean_weights is not None:
             w = sp.csr_matrix(self.mean_weights[None, :])
-            blocks = [[self.A, self.BT.T, None], [self.BT, None, w.T], [None, w, None]]
+            blocks = [[self.A, self.BT.T, None], [self.BT, C, w.T], [None, w, None]]
         return sp.bmat(blocks, format="csc")
+
+
+def orphan_pressure_block(BT: sp.csr_matrix, npl: int, tol: float = 1e-10) -> np.ndarray | None:
+    """Projectors onto the pressure modes of each cell that ``B^T`` (constrained columns zeroed)
+    no longer couples to any velocity: (n_cells, npl, npl) float64, or None when there are none.
+
+    The rows of ``B^T`` are cell-local with ``dim nl`` entries each, so the local blocks are a
+    reshape; only cells with zeroed entries are examined (batched SVD)."""
+    n_cells = BT.shape[0] // npl
+    Bc = BT.data.reshape(n_cells, npl, -1)
+    suspect = np.flatnonzero((Bc == 0.0).all(axis=1).any(axis=1))  # cells with a zeroed column
+    if suspect.size == 0:
+        return None
+    U, sv, _ = np.linalg.svd(Bc[suspect], full_matrices=False)  # U (n, npl, npl), sv (n, npl)
+    scale = np.abs(Bc).max()
+    null = sv <= tol * scale
+    if not null.any():
+        return None
+    C = np.zeros((n_cells, npl, npl))
+    C[suspect] = np.einsum("cmk,ck,cnk->cmn", U, null.astype(float), U)
+    return C
 
 
 @dataclass

@@ -42,14 +42,17 @@ class VankaSmoother:
         B = system.BT.T.tocsr()
         self._b = (B.indptr.astype(np.int64), B.indices.astype(np.int64), B.data)
         nb = system.A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
+        npl = space.dim + 1
+        pblock = (system.pressure_block if system.pressure_block is not None
+                  else np.zeros((space.mesh.n_cells, npl, npl)))
         self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, system.A.data,
-                        *self._b, system.BT.data, space.local_rank, space.V.cell_dofs)
+                        *self._b, system.BT.data, space.local_rank, space.V.cell_dofs, pblock)
         if variant == "vanka-diagonal":
             diag = system.A.diagonal()
             diag_inv = np.where(diag != 0.0, 1.0 / np.where(diag != 0.0, diag, 1.0), 0.0)
             S = _kernels.schur_diagonal(system.BT.data, space.local_rank, space.V.cell_dofs,
                                         diag_inv, space.dim, space.n_v)
-            self._extra = (diag_inv, np.linalg.pinv(S, rcond=1e-12, hermitian=True))
+            self._extra = (diag_inv, np.linalg.pinv(S + pblock, rcond=1e-12, hermitian=True))
         else:
             self._extra = (space.slots,)
 
