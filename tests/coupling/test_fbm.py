@@ -1,0 +1,111 @@
+"""Fictitious boundaries: ownership, rigid-body constraints, force kernel against NumPy, exact
+identities of the volume-integral force, and the DFG 2D-1 drag converging in the mesh level."""
+import numpy as np
+import pytest
+
+from fbmflow.coupling import cut_cells, hydrodynamic_forces, node_owner, rigid_body_constraints
+from fbmflow.coupling import _kernels as ck
+from fbmflow.fem import FlowSpace
+from fbmflow.mesh import StructuredMesh
+from fbmflow.particles import Ball
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_owner_matches_brute_force(dim):
+    mesh = StructuredMesh.box((6,) * dim, periodic=(True,) + (False,) * (dim - 1))
+    space = FlowSpace(mesh)
+    centres = np.array([[0.05] + [0.5] * (dim - 1), [0.6] + [0.45] * (dim - 1)])  # first wraps in x
+    shapes = [Ball(0.2, dim), Ball(0.15, dim)]
+    owner = node_owner(space.V, centres, shapes)
+    X = space.V.coordinates
+    ref = np.full(space.n_v, -1)
+    for i in (1, 0):
+        rel = X - centres[i]
+        rel[:, 0] -= np.round(rel[:, 0])  # periodic minimum image, period 1
+        ref[np.einsum("ij,ij->i", rel, rel) <= shapes[i].radius ** 2] = i
+    assert np.array_equal(owner, ref)
+    assert (owner == 0).sum() > 0 and (owner == 1).sum() > 0
+
+
+def test_rigid_body_constraint_values():
+    space = FlowSpace(StructuredMesh.box((8, 8)))
+    centres = np.array([[0.5, 0.5]])
+    owner = node_owner(space.V, centres, [Ball(0.3, 2)])
+    con = rigid_body_constraints(space.V, owner, centres, np.array([[1.0, -2.0]]), np.array([3.0]))
+    n = space.n_v
+    nodes = np.flatnonzero(owner == 0)
+    vals = np.zeros(2 * n)
+    vals[con.dofs] = con.values
+    rel = space.V.coordinates[nodes] - centres[0]
+    assert np.allclose(vals[nodes], 1.0 - 3.0 * rel[:, 1])
+    assert np.allclose(vals[n + nodes], -2.0 + 3.0 * rel[:, 0])
+    assert con.dofs.size == 2 * nodes.size
+
+
+def _numpy_force(space, owner, centres, u, p, mu):
+    d, npl = space.dim, space.dim + 1
+    F = np.zeros((len(centres), d))
+    T = np.zeros((len(centres), 3))
+    uu = u.reshape(d, space.n_v)
+    for c in cut_cells(space, owner):
+        dofs = space.V.cell_dofs[c]
+        for i in range(len(centres)):
+            alpha = (owner[dofs] == i).astype(float)
+            if alpha.sum() in (0, len(dofs)):
+                continue
+            for q in range(len(space.weights)):
+                grad_phi = space.dphi[q] @ space.Jinv[c, q]  # (nl, d)
+                ga = alpha @ grad_phi
+                gu = uu[:, dofs] @ grad_phi  # (d, d) du_j/dx_k
+                pq = p[c * npl:(c + 1) * npl] @ space.psi[c, q]
+                sigma = -pq * np.eye(d) + mu * (gu + gu.T)
+                t = -(sigma @ ga) * space.detJw[c, q]
+                F[i] += t
+                r = np.zeros(3)
+                r[:d] = space.xq[c, q] - centres[i]
+                tt = np.zeros(3)
+                tt[:d] = t
+                T[i] += np.cross(r, tt)
+    return F, T
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_force_kernel_matches_numpy(dim):
+    space = FlowSpace(StructuredMesh.box((4,) * dim))
+    centres = np.array([[0.5] * dim, [0.2] * dim])
+    owner = node_owner(space.V, centres, [Ball(0.3, dim), Ball(0.12, dim)])
+    rng = np.random.default_rng(5)
+    u, p = rng.standard_normal(space.n_u), rng.standard_normal(space.n_p)
+    F, T = hydrodynamic_forces(space, owner, centres, u, p, 0.7)
+    F_ref, T_ref = _numpy_force(space, owner, centres, u, p, 0.7)
+    assert np.allclose(F, F_ref, rtol=1e-12, atol=1e-12)
+    assert np.allclose(T, T_ref, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_force_of_a_pressure_gradient_is_buoyancy(dim):
+    """u = 0, p = g . x: F = -grad p * int alpha_h exactly (integration by parts), T = 0 by symmetry."""
+    space = FlowSpace(StructuredMesh.box((8,) * dim))
+    centre = np.array([[0.5] * dim])
+    owner = node_owner(space.V, centre, [Ball(0.25, dim)])
+    g = np.arange(1.0, dim + 1.0)
+    npl = dim + 1
+    p = np.zeros((space.mesh.n_cells, npl))  # P1disc interpolation of the linear g . x
+    p[:, 0] = space.Q.centre @ g
+    p[:, 1:] = space.Q.scale * g
+    F, T = hydrodynamic_forces(space, owner, centre, np.zeros(space.n_u), p.ravel(), 1.0)
+    alpha = (owner == 0).astype(float)
+    volume_h = np.einsum("cq,qa,ca->", space.detJw, space.phi, alpha[space.V.cell_dofs])
+    assert np.allclose(F[0], -g * volume_h, rtol=1e-12)
+    assert abs(volume_h - Ball(0.25, dim).volume) < 0.1 * Ball(0.25, dim).volume
+    assert np.allclose(T, 0.0, atol=1e-12)
+
+
+def test_dfg_2d1_drag_converges_in_the_level():
+    from fbmflow.params import from_dict
+    from fbmflow.scenes import get_scene
+    scene = get_scene("dfg-2d-1")
+    params = from_dict(scene.Params, {"solver": {"linear": "direct"}})
+    errors = [scene.run(params, level).quantities["drag_coefficient_error"] for level in (1, 2, 3)]
+    assert errors[0] > errors[1] > errors[2], errors
+    assert errors[2] < 0.02, errors
