@@ -31,6 +31,7 @@ import scipy.sparse as sp
 
 from fbmflow.flow import Dirichlet, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
+from fbmflow.scenes.cavity import recirculating_state
 from fbmflow.solvers import MultigridSettings, MultigridSolver, fgmres
 from fbmflow.solvers.linear import factorize
 
@@ -69,14 +70,8 @@ def cavity_system(n: int, dim: int, oseen: bool, mg: MultigridSolver):
     bcs = {t: NoSlip() for t in mesh.tags}
     bcs["ymax"] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
     prob = NavierStokesProblem(mesh, 0.01 if oseen else 1.0, bcs, convection=oseen, linear_solver=mg)
-    x = prob.zero_state()
-    if oseen:
-        X = prob.space.V.coordinates
-        u, _ = prob.split(x)
-        u[0] = np.sin(np.pi * X[:, 0]) ** 2 * np.sin(2 * np.pi * X[:, 1])
-        u[1] = -np.sin(2 * np.pi * X[:, 0]) * np.sin(np.pi * X[:, 1]) ** 2
+    x = recirculating_state(prob) if oseen else prob.zero_state()
     con = prob.constraints()
-    con.apply_to_vector(x)
     F = prob.residual(x, 0.0, 1.0, prob.load(), con)
     system = prob.linear_system(x, 0.0, 1.0, con)
     return prob, system, -F[:system.n_u], -F[system.n_u:]

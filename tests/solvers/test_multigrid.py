@@ -7,6 +7,7 @@ from fbmflow.fem import FlowSpace
 from fbmflow.fem.functions import sample_pressure, sample_velocity
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
+from fbmflow.scenes.cavity import recirculating_state
 from fbmflow.solvers import MultigridSettings, MultigridSolver
 from fbmflow.solvers import _kernels as vk
 from fbmflow.solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
@@ -90,14 +91,8 @@ def _cavity_system(n, dim=2, re=None, cycle="V", smoother="vanka-full", krylov="
                                            max_iterations=80))
     prob = NavierStokesProblem(mesh, 1.0 if re is None else 1.0 / re, bcs, convection=re is not None,
                                linear_solver=mg)
-    x = prob.zero_state()
-    if re is not None:  # a recirculating velocity field with the lid's values on the boundary
-        X = prob.space.V.coordinates
-        u, _ = prob.split(x)
-        u[0] = np.sin(np.pi * X[:, 0]) ** 2 * np.sin(2 * np.pi * X[:, 1])
-        u[1] = -np.sin(2 * np.pi * X[:, 0]) * np.sin(np.pi * X[:, 1]) ** 2
+    x = prob.zero_state() if re is None else recirculating_state(prob)
     con = prob.constraints()
-    con.apply_to_vector(x)
     F = prob.residual(x, 0.0, 1.0, prob.load(), con)
     return prob, mg, x, con, F
 
