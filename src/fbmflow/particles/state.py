@@ -1,0 +1,90 @@
+"""State of a set of rigid particles (2D: angle about z; 3D: unit quaternion)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Particles:
+    """Rigid particles, arrays indexed by particle id.
+
+    Attributes
+    ----------
+    shapes : list of shapes (``inside``, ``volume``, ``inertia``, ``bounding_radius``)
+    density : (n,) float64 [kg/m^3]
+    position : (n, dim) float64, centres of mass [m]
+    velocity : (n, dim) float64 [m/s]
+    orientation : (n,) float64 angle [rad] in 2D, (n, 4) unit quaternion (w, x, y, z) in 3D
+    angular_velocity : (n,) float64 in 2D, (n, 3) in 3D [rad/s], world frame
+    fixed : (n,) bool, particles held still (obstacles)
+    """
+
+    shapes: list
+    density: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    orientation: np.ndarray
+    angular_velocity: np.ndarray
+    fixed: np.ndarray = field(default=None)
+
+    @classmethod
+    def at_rest(cls, shapes: list, density, position) -> "Particles":
+        """Particles released from rest with identity orientation."""
+        position = np.atleast_2d(np.asarray(position, dtype=float))
+        n, dim = position.shape
+        if len(shapes) != n:
+            raise ValueError(f"{len(shapes)} shapes for {n} positions")
+        density = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+        if np.any(density <= 0):
+            raise ValueError("particle densities must be positive")
+        orientation = np.zeros(n) if dim == 2 else np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        angular = np.zeros(n) if dim == 2 else np.zeros((n, 3))
+        return cls(list(shapes), density, position, np.zeros((n, dim)), orientation, angular,
+                   np.zeros(n, dtype=bool))
+
+    def __post_init__(self):
+        if self.fixed is None:
+            self.fixed = np.zeros(len(self.shapes), dtype=bool)
+
+    @property
+    def n(self) -> int:
+        return len(self.shapes)
+
+    @property
+    def dim(self) -> int:
+        return self.position.shape[1]
+
+    @property
+    def volume(self) -> np.ndarray:
+        """(n,) float64 [m^3] (area in 2D)."""
+        return np.array([s.volume for s in self.shapes])
+
+    @property
+    def mass(self) -> np.ndarray:
+        """(n,) float64 [kg]."""
+        return self.density * self.volume
+
+    def inertia_world(self) -> np.ndarray:
+        """Inertia tensors in world axes: (n, 1, 1) in 2D, (n, 3, 3) in 3D [kg m^2]."""
+        body = np.stack([s.inertia for s in self.shapes]) * self.density[:, None, None]
+        if self.dim == 2:
+            return body
+        R = self.rotations()
+        return np.einsum("nij,njk,nlk->nil", R, body, R)
+
+    def rotations(self) -> np.ndarray:
+        """Body-to-world rotation matrices, (n, dim, dim) float64."""
+        if self.dim == 2:
+            c, s = np.cos(self.orientation), np.sin(self.orientation)
+            return np.stack([np.stack([c, -s], axis=1), np.stack([s, c], axis=1)], axis=1)
+        w, x, y, z = self.orientation.T
+        return np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+
+    def copy(self) -> "Particles":
+        return Particles(list(self.shapes), self.density.copy(), self.position.copy(), self.velocity.copy(),
+                         self.orientation.copy(), self.angular_velocity.copy(), self.fixed.copy())
