@@ -1,0 +1,102 @@
+"""Glowinski et al.'s 2D free fall of a disk in a closed channel (CGS units).
+
+Disk of diameter 0.25 cm, rho_s = 1.25 g/cm^3, in a closed 2 x 6 cm box of fluid with rho_f = 1,
+mu = 0.1 g/(cm s), g = 980 cm/s^2, released at rest at (1, 4) cm. Level ``L`` has
+``8 2^L x 24 2^L`` cells, ``2^L`` cells across the diameter. Explicit fluid–particle coupling.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..flow import NoSlip
+from ..mesh import StructuredMesh
+from ..params import ParamError, SolverParams, TimeParams, param, section
+from ..particles import Ball, Particles
+from ..simulation import Simulation
+from .base import Scene, SceneResult
+
+
+@dataclass(frozen=True)
+class GlowinskiFluid:
+    """Fluid (CGS units)."""
+
+    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
+    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
+    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
+
+
+@dataclass(frozen=True)
+class GlowinskiParticle:
+    """The disk."""
+
+    diameter: float = param(0.25, "disk diameter", "cm", positive=True)
+    density: float = param(1.25, "disk density", "g/cm^3", positive=True)
+    x: float = param(1.0, "initial centre x", "cm")
+    y: float = param(4.0, "initial centre y", "cm")
+
+
+@dataclass(frozen=True)
+class GlowinskiTime(TimeParams):
+    """Time stepping."""
+
+    dt: float = param(0.002, "time step", "s", positive=True)
+    t_end: float = param(0.3, "final time", "s", positive=True)
+    scheme: str = param("backward-euler", "implicit time scheme",
+                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+
+
+@dataclass(frozen=True)
+class GlowinskiParams:
+    """Parameters of ``glowinski-free-fall``."""
+
+    fluid: GlowinskiFluid = section(GlowinskiFluid)
+    particle: GlowinskiParticle = section(GlowinskiParticle)
+    time: GlowinskiTime = section(GlowinskiTime)
+    solver: SolverParams = section(SolverParams)
+
+    def validate(self):
+        r = self.particle.diameter / 2
+        if not (r < self.particle.x < 2.0 - r and r < self.particle.y < 6.0 - r):
+            raise ParamError(f"particle at ({self.particle.x}, {self.particle.y}) with radius {r} is not "
+                             "inside the 2 x 6 cm box; move it inside")
+
+
+class GlowinskiFreeFall(Scene):
+    name = "glowinski-free-fall"
+    description = "2D disk settling in a closed 2 x 6 cm channel (Glowinski et al.), explicit coupling"
+    Params = GlowinskiParams
+    default_level = 2
+    max_level = 5
+
+    @staticmethod
+    def mesh(level: int) -> StructuredMesh:
+        n = 2**level
+        return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
+
+    def run(self, params: GlowinskiParams, level: int, progress=None) -> SceneResult:
+        f, pp = params.fluid, params.particle
+        mesh = self.mesh(level)
+        particles = Particles.at_rest([Ball(pp.diameter / 2, 2)], pp.density, [[pp.x, pp.y]])
+        linear = params.solver.linear_solver()
+        sim = Simulation(mesh, f.viscosity, {t: NoSlip() for t in mesh.tags}, particles,
+                         [0.0, -f.gravity], density=f.density, scheme=params.time.scheme,
+                         linear_solver="direct" if linear == "auto" else linear,
+                         newton=params.solver.newton_settings())
+        n_steps = params.time.n_steps
+        dt = params.time.t_end / n_steps
+        t, y, v, newton_its = [0.0], [pp.y], [0.0], 0
+        for k in range(1, n_steps + 1):
+            rep = sim.step(dt)
+            newton_its += rep.newton_iterations
+            t.append(rep.t)
+            y.append(float(rep.position[0, 1]))
+            v.append(float(rep.velocity[0, 1]))
+            if progress:
+                progress(k, n_steps, rep.t)
+        speed = np.abs(np.array(v))
+        q = {"max_settling_velocity": float(speed.max()),
+             "max_reynolds_number": float(f.density * speed.max() * pp.diameter / f.viscosity),
+             "final_position": sim.particles.position[0].tolist(), "t": t, "y": y, "v": v}
+        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=n_steps, newton_iterations=newton_its)
