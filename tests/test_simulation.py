@@ -48,3 +48,20 @@ def test_particle_outside_the_box_is_rejected():
     scene = get_scene("glowinski-free-fall")
     with pytest.raises(ParamError, match="not inside the 2 x 6 cm box"):
         from_dict(scene.Params, {"particle": {"y": 5.95}})
+
+
+@pytest.mark.parametrize("ratio", [1.01, 1.1, 2.0, 10.0])
+def test_free_fall_is_stable_across_density_ratios(ratio):
+    """Implicit coupling, 4 steps: finite, accelerating downwards, never faster than reduced-gravity
+    free fall."""
+    q = _run(t_end=0.02, coupling="implicit", particle__density=ratio)
+    v = np.array(q["v"])
+    assert np.all(np.isfinite(v))
+    assert np.all(np.diff(v) < 0), v
+    assert -v[-1] < (1 - 1 / ratio) * 980.0 * 0.02
+
+
+def test_disk_touching_the_wall_does_not_crash_the_step():
+    """Released with its surface on the bottom wall: the step completes, the state stays finite."""
+    q = _run(t_end=0.01, coupling="explicit", particle__y=0.1251)
+    assert np.all(np.isfinite(q["v"])) and np.all(np.isfinite(q["final_position"]))
