@@ -7,7 +7,7 @@ from fbmflow.coupling import cut_cells, hydrodynamic_forces, node_owner, rigid_b
 from fbmflow.coupling import _kernels as ck
 from fbmflow.fem import FlowSpace
 from fbmflow.mesh import StructuredMesh
-from fbmflow.particles import Ball
+from fbmflow.particles import Ball, Box, Ellipsoid, Particles, TriangulatedSurface
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -25,6 +25,37 @@ def test_owner_matches_brute_force(dim):
         ref[np.einsum("ij,ij->i", rel, rel) <= shapes[i].radius ** 2] = i
     assert np.array_equal(owner, ref)
     assert (owner == 0).sum() > 0 and (owner == 1).sum() > 0
+
+
+@pytest.mark.parametrize("shape", [Ellipsoid((0.3, 0.1)), Box((0.25, 0.1)), Ellipsoid((0.3, 0.2, 0.1)),
+                                   Box((0.3, 0.1, 0.2))], ids=["ellipse", "rectangle", "ellipsoid", "box"])
+def test_owner_of_rotated_shapes(shape):
+    """A rotated particle owns exactly the nodes whose body-frame coordinates R^T (x - X) are inside."""
+    dim = shape.dim
+    space = FlowSpace(StructuredMesh.box((10,) * dim))
+    particles = Particles.at_rest([shape], 2.0, [[0.5] * dim])
+    if dim == 2:
+        particles.orientation[:] = 0.6
+    else:
+        q = np.array([1.0, 0.3, -0.5, 0.2])
+        particles.orientation[:] = q / np.linalg.norm(q)
+    R = particles.rotations()[0]
+    owner = node_owner(space.V, particles.position, particles.shapes, particles.rotations())
+    body = (space.V.coordinates - 0.5) @ R  # rows: R^T (x - X)
+    assert np.array_equal(owner == 0, shape.inside(body))
+    unrotated = node_owner(space.V, particles.position, particles.shapes)
+    assert (owner == 0).sum() > 0 and not np.array_equal(owner, unrotated)
+
+
+def test_owner_of_a_triangulated_box_equals_the_box():
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = np.array([(a, b, c) for a, b, c, d in quads] + [(a, c, d) for a, b, c, d in quads])
+    h = np.array([0.31, 0.17, 0.23])
+    surface = TriangulatedSurface(corners * h, tris)
+    space = FlowSpace(StructuredMesh.box((8, 8, 8)))
+    centre = np.array([[0.52, 0.47, 0.5]])
+    assert np.array_equal(node_owner(space.V, centre, [surface]), node_owner(space.V, centre, [Box(tuple(h))]))
 
 
 def test_rigid_body_constraint_values():

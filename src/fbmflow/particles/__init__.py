@@ -1,6 +1,6 @@
 """Rigid particles: shapes (inside tests, volume, inertia), state and Newton–Euler dynamics."""
 from .dynamics import INTEGRATORS, accelerations, integrate
-from .shapes import Ball
+from .shapes import Ball, Box, Ellipsoid, ImplicitShape, TriangulatedSurface
 from .state import Particles
 
-__all__ = ["Ball", "Particles", "INTEGRATORS", "accelerations", "integrate"]
+__all__ = ["Ball", "Box", "Ellipsoid", "ImplicitShape", "TriangulatedSurface", "Particles", "INTEGRATORS", "accelerations", "integrate"]
