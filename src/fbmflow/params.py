@@ -153,6 +153,8 @@ class SolverParams:
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
+    newton_reuse_jacobian: bool = param(True, "keep a factorised Jacobian while it contracts the "
+                                        "residual 10x per iteration (same solution, less work)")
 
     def linear_solver(self):
         """The configured linear solver: a name for ``direct``/``auto``, else a solver object."""
@@ -164,7 +166,8 @@ class SolverParams:
 
     def newton_settings(self) -> NewtonSettings:
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,
-                              max_iterations=self.newton_max_iterations)
+                              max_iterations=self.newton_max_iterations,
+                              reuse_jacobian=self.newton_reuse_jacobian)
 
 
 @dataclasses.dataclass(frozen=True)

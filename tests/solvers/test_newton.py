@@ -8,9 +8,27 @@ from fbmflow.solvers import ConvergenceError, LinearReport, NewtonSettings, solv
 
 
 def _scalar_problem(f, df):
-    def step(x, F):
+    def step(x, F, fresh=True):
         return -F / df(x), LinearReport("scalar", 0.0, 1)
     return (lambda x: f(x)), step
+
+
+def test_reused_jacobian_converges_to_the_same_root_and_refreshes_when_slow():
+    """Chord steps with the first derivative contract linearly; when they contract less than
+    10x per step a fresh derivative is asked for, so the iteration count stays bounded."""
+    calls = {"fresh": 0}
+    slope = {}
+
+    def step(x, F, fresh=True):
+        if fresh or "d" not in slope:
+            slope["d"] = 3 * x**2
+            calls["fresh"] += 1
+        return -F / slope["d"], LinearReport("scalar", 0.0, 1)
+    res = lambda x: x**3 - 2.0  # noqa: E731
+    x, report = solve_newton(res, step, np.array([1.2]), NewtonSettings(reuse_jacobian=True))
+    assert abs(x[0] - 2 ** (1 / 3)) < 1e-10
+    assert calls["fresh"] < report.iterations  # some steps reused the derivative
+    assert report.iterations <= 12
 
 
 def test_quadratic_convergence_on_a_scalar_equation():

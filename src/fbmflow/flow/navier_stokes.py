@@ -99,6 +99,7 @@ class NavierStokesProblem:
         self.coarse: list[FlowLevel] | None = None  # built at the first linearisation
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
+        self._linearisation = None  # (m, a, constraints, solve) of the last Newton step
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -212,12 +213,45 @@ class NavierStokesProblem:
         x0 = x0.copy()
         con.apply_to_vector(x0)
 
-        def linear_step(x, F):
-            system = self.linear_system(x, m, a, con, t)
-            du, dp, report = self.linear_solver.solve(system, -F[:system.n_u], -F[system.n_u:])
+        def linear_step(x, F, fresh=True):
+            solve = self._linearise(x, m, a, con, t, fresh)
+            du, dp, report = solve(-F[:self.space.n_u], -F[self.space.n_u:])
             return np.concatenate([du, dp]), report
 
-        return solve_newton(lambda x: self.residual(x, m, a, rhs, con), linear_step, x0, self.newton)
+        x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con), linear_step, x0, self.newton)
+        self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
+        return x, report
+
+    def _linearise(self, x, m, a, con, t, fresh: bool):
+        """The factorised Newton linearisation at ``x`` (a new one when ``fresh`` or when the
+        stored one belongs to other time-step weights or another constrained set)."""
+        last = self._linearisation
+        if fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs):
+            self._linearisation = (m, a, con, self.linear_solver.factor(self.linear_system(x, m, a, con, t)))
+        else:
+            self._linearisation = (m, a, con, last[3])
+        return self._linearisation[3]
+
+    def lifting_response(self, x: np.ndarray, liftings: np.ndarray) -> np.ndarray:
+        """How the solution of the last :meth:`solve` responds to changed constraint values.
+
+        ``liftings (k, dim * n_v)`` are velocity fields that are non-zero only on constrained DOFs
+        (e.g. a unit rigid-body motion on a particle's nodes). Each response ``dx = w + z`` solves
+        the last Newton linearisation ``J dx = 0`` with ``dx = w`` on the constrained DOFs: ``z``
+        vanishes there and solves ``J z = -J w``. ``J w`` is the central difference of the residual
+        at ``x``, exact because the residual is at most quadratic in ``x``. The factorisation of
+        the last Newton step is reused (a Jacobian one iteration old, good enough for the
+        coupling iteration it serves). Returns (k, n_dofs) float64.
+        """
+        m, a, con, solve = self._linearisation
+        zero = np.zeros(self.space.n_u)
+        out = np.zeros((len(liftings), self.n_dofs))
+        for k, w in enumerate(liftings):
+            wx = np.concatenate([w, np.zeros(self.n_dofs - w.size)])
+            Jw = 0.5 * (self.residual(x + wx, m, a, zero, con) - self.residual(x - wx, m, a, zero, con))
+            du, dp, _ = solve(-Jw[:self.space.n_u], -Jw[self.space.n_u:])
+            out[k] = wx + np.concatenate([du, dp])
+        return out
 
     def solve_steady(self, x0: np.ndarray | None = None, t: float = 0.0):
         """Steady solution (Newton from ``x0``, default the zero flow). Returns x, NewtonReport."""

@@ -1,6 +1,7 @@
 """Rigid particles: shapes (inside tests, volume, inertia), state and Newton–Euler dynamics."""
-from .dynamics import INTEGRATORS, accelerations, integrate
+from .dynamics import INTEGRATORS, accelerations, integrate, pack_velocities, unpack_velocities, velocity_gain
 from .shapes import Ball, Box, Ellipsoid, ImplicitShape, TriangulatedSurface
 from .state import Particles
 
-__all__ = ["Ball", "Box", "Ellipsoid", "ImplicitShape", "TriangulatedSurface", "Particles", "INTEGRATORS", "accelerations", "integrate"]
+__all__ = ["Ball", "Box", "Ellipsoid", "ImplicitShape", "TriangulatedSurface", "Particles", "INTEGRATORS", "accelerations", "integrate",
+           "pack_velocities", "unpack_velocities", "velocity_gain"]

@@ -47,6 +47,31 @@ def accelerations(p: Particles, force: np.ndarray, torque: np.ndarray, gravity: 
     return lin, ang
 
 
+def pack_velocities(p: Particles) -> np.ndarray:
+    """Generalised velocities ``[U_i, omega_i]`` of every particle, (n, r) with ``r = 3`` in 2D
+    (``U_x, U_y, omega_z``) and 6 in 3D."""
+    return np.column_stack([p.velocity, np.reshape(p.angular_velocity, (p.n, -1))])
+
+
+def unpack_velocities(p: Particles, v: np.ndarray) -> None:
+    """Set ``p``'s velocities from generalised velocities ``v (n, r)`` in place."""
+    p.velocity = v[:, :p.dim].copy()
+    p.angular_velocity = v[:, p.dim:].reshape(np.shape(p.angular_velocity)).copy()
+
+
+def velocity_gain(p: Particles, dt: float) -> np.ndarray:
+    """``d v_new / d f``: how the new generalised velocities of :func:`integrate` respond to the
+    generalised force ``f = [F, T_z]`` (2D) or ``[F, T]`` (3D); (n, r, r), zero for fixed
+    particles: ``dt / M_i`` for the translation, ``dt I_i^{-1}`` (world axes) for the rotation."""
+    r = 3 if p.dim == 2 else 6
+    gain = np.zeros((p.n, r, r))
+    idx = np.arange(p.dim)
+    gain[:, idx, idx] = dt / p.mass[:, None]
+    gain[:, p.dim:, p.dim:] = dt * np.linalg.inv(p.inertia_world())
+    gain[p.fixed] = 0.0
+    return gain
+
+
 def integrate(p: Particles, force: np.ndarray, torque: np.ndarray, gravity, fluid_density: float,
               dt: float, scheme: str = "semi-implicit-euler") -> Particles:
     """Advance the particles over ``dt`` under hydrodynamic ``force (n, dim)``, ``torque (n, 3)``,

@@ -131,11 +131,20 @@ class MultigridSolver:
         self._sweeps += s.post_smooth
         return x
 
-    def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
-        """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
+    def factor(self, system: SaddlePointSystem):
+        """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
+        returns ``solve(f, g) -> (u, p, LinearReport)``."""
         t0 = time.perf_counter()
         levels = self.setup(system)
         setup = time.perf_counter() - t0
+        return lambda f, g: self._solve(system, levels, setup, f, g)
+
+    def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
+        """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
+        return self.factor(system)(f, g)
+
+    def _solve(self, system, levels, setup, f, g):
+        t0 = time.perf_counter() - setup
         self._sweeps = 0
         s = self.settings
         b = np.concatenate([f, g])

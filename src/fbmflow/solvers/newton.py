@@ -16,13 +16,22 @@ class ConvergenceError(RuntimeError):
 
 @dataclass(frozen=True)
 class NewtonSettings:
-    """Stopping rule: ``|F| <= max(atol, rtol |F_0|)`` or ``|dx| <= step_tol |x|`` (2-norms)."""
+    """Stopping rule: ``|F| <= max(atol, rtol |F_0|)`` or ``|dx| <= step_tol |x|`` (2-norms).
+
+    ``reuse_jacobian``: let the linear step keep an earlier factorised Jacobian (chord / modified
+    Newton) while it contracts the residual at least ``1 / reuse_contraction`` times per
+    iteration; a fresh one is built otherwise, and always after a failed line search. The solution
+    and the stopping rule are the same; only the work changes. Pays off in time stepping, where
+    the mass term dominates and the Jacobian changes little from step to step.
+    """
 
     rtol: float = 1e-10
     atol: float = 1e-12
     step_tol: float = 1e-12
     max_iterations: int = 30
     max_backtracks: int = 8
+    reuse_jacobian: bool = False
+    reuse_contraction: float = 10.0
 
 
 @dataclass
@@ -38,14 +47,15 @@ class NewtonReport:
 
 
 def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
-                 linear_step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, object]],
+                 linear_step: Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, object]],
                  x0: np.ndarray, settings: NewtonSettings = NewtonSettings()):
     """Solve ``F(x) = 0``.
 
     Parameters
     ----------
     residual : x -> F(x), both (n,) float64
-    linear_step : (x, F) -> (dx, LinearReport) solving ``J(x) dx = -F``
+    linear_step : (x, F, fresh) -> (dx, LinearReport) solving ``J dx = -F``; with ``fresh`` False
+        it may use an earlier Jacobian (``settings.reuse_jacobian``)
     x0 : (n,) float64, first iterate (constraints already applied)
 
     Returns
@@ -64,12 +74,13 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     norm = float(np.linalg.norm(F))
     report.residuals.append(norm)
     target = max(settings.atol, settings.rtol * norm)
+    fresh = not settings.reuse_jacobian
     while norm > target:
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
             raise ConvergenceError(
                 f"Newton did not converge: residual {norm:.3e} after {report.iterations} iterations "
                 f"(started at {report.residuals[0]:.3e}, target {target:.3e})")
-        dx, lin = linear_step(x, F)
+        dx, lin = linear_step(x, F, fresh)
         report.linear_iterations += lin.iterations
         report.linear_time_s += lin.wall_time_s
         if np.linalg.norm(dx) <= settings.step_tol * max(np.linalg.norm(x), 1.0):
@@ -85,9 +96,13 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
             step *= 0.5
             report.line_search_steps += 1
         else:
+            if not fresh:  # an old Jacobian misled the search: retry with a fresh one
+                fresh = True
+                continue
             raise ConvergenceError(
                 f"Newton line search failed at iteration {report.iterations + 1}: residual "
                 f"{norm:.3e} did not decrease (target {target:.3e})")
+        fresh = not settings.reuse_jacobian or norm_new * settings.reuse_contraction > norm
         x, F, norm = x_new, F_new, norm_new
         report.iterations += 1
         report.residuals.append(norm)
