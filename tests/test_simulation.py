@@ -65,3 +65,40 @@ def test_disk_touching_the_wall_does_not_crash_the_step():
     """Released with its surface on the bottom wall: the step completes, the state stays finite."""
     q = _run(t_end=0.01, coupling="explicit", particle__y=0.1251)
     assert np.all(np.isfinite(q["v"])) and np.all(np.isfinite(q["final_position"]))
+
+
+@pytest.mark.parametrize("coupling", ["explicit", "implicit"])
+def test_half_domain_with_a_symmetry_plane_equals_the_full_domain(coupling):
+    """A disk falling on the centre line: the right half (slip on x = 1, forces of the whole disk by
+    mirroring) gives the full domain's trajectory to solver accuracy."""
+    from fbmflow.flow import NoSlip, Slip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    def fall(lower_x, shape, symmetry):
+        mesh = StructuredMesh.box(shape, lower=(lower_x, 0.0), upper=(2.0, 3.0))
+        bc = {t: NoSlip() for t in mesh.tags}
+        if symmetry:
+            bc["xmin"] = Slip()
+        sim = Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.0, 2.0]]), [0.0, -980.0],
+                         coupling=coupling, symmetry=symmetry)
+        return [sim.step(0.002).velocity[0].copy() for _ in range(4)]
+
+    full = np.array(fall(0.0, (16, 24), ()))
+    half = np.array(fall(1.0, (8, 24), (0,)))
+    assert np.all(np.diff(full[:, 1]) < 0) and full[-1, 1] < -1.0  # it falls, faster and faster
+    np.testing.assert_allclose(half, full, rtol=1e-6, atol=1e-8 * np.abs(full).max())
+
+
+def test_symmetry_plane_must_pass_through_the_particle():
+    from fbmflow.flow import NoSlip, Slip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+    mesh = StructuredMesh.box((4, 8), lower=(1.0, 0.0), upper=(2.0, 3.0))
+    bc = {**{t: NoSlip() for t in mesh.tags}, "xmin": Slip()}
+    with pytest.raises(ValueError, match="not centred on it"):
+        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.2, 2.0]]), [0.0, -9.8], symmetry=(0,))
+    with pytest.raises(ValueError, match="gravity"):
+        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .coupling import hydrodynamic_forces, node_owner, rigid_body_constraints
+from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
 from .particles import Particles, integrate, pack_velocities, unpack_velocities, velocity_gain
@@ -54,14 +54,22 @@ class Simulation:
     gravity : (dim,) float64 [m/s^2]
     scheme : time scheme name; integrator : particle integrator name
     linear_solver, newton : passed to the flow problem
+    coupling : ``explicit`` or ``implicit`` (see the module docstring)
+    symmetry : normal axes of mirror planes that cut the domain through every particle centre
+        (the domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
+        of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
+        stays on the planes. Gravity must lie in the planes.
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
                  density: float = 1.0, scheme: str = "backward-euler",
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
-                 coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20):
+                 coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
+                 symmetry: tuple = ()):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
+        self.symmetry = tuple(symmetry)
+        _check_symmetry(mesh, particles, np.asarray(gravity, dtype=float), self.symmetry)
         self.coupling = coupling
         self.coupling_tol = coupling_tol
         self.max_subiterations = max_subiterations
@@ -88,11 +96,16 @@ class Simulation:
         v = self._constraint_state or p
         return rigid_body_constraints(V, self._owner(V), p.position, v.velocity, v.angular_velocity)
 
+    def _forces(self, owner: np.ndarray, x: np.ndarray):
+        """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for flow ``x``."""
+        space = self.flow.space
+        force, torque = hydrodynamic_forces(space, owner, self.particles.position, x[:space.n_u],
+                                            x[space.n_u:], self.flow.mu)
+        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
     def _flow_and_forces(self, dt: float):
         x, reports = advance(self.flow, self.x, self.t, dt, self.scheme)
-        space = self.flow.space
-        force, torque = hydrodynamic_forces(space, self._owner(space.V), self.particles.position,
-                                            x[:space.n_u], x[space.n_u:], self.flow.mu)
+        force, torque = self._forces(self._owner(self.flow.space.V), x)
         return x, reports, force, torque
 
     def step(self, dt: float) -> StepReport:
@@ -147,8 +160,7 @@ class Simulation:
         dX = self.flow.lifting_response(x, np.array(liftings))
         sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every movable rigid dof k
         for k, dx in enumerate(dX):
-            dF, dT = hydrodynamic_forces(space, owner, p.position, dx[:space.n_u], dx[space.n_u:],
-                                         self.flow.mu)
+            dF, dT = self._forces(owner, dx)
             sens[:, :, k] = np.column_stack([dF, dT[:, 2:] if p.dim == 2 else dT])
         J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[movable].reshape(len(dX), -1)
         guess = p.copy()
@@ -167,6 +179,22 @@ class Simulation:
             new = integrate(p, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
                                f"sub-iterations (last change {np.linalg.norm(res) / scale:.1e})")
+
+
+def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple):
+    """Mirror planes must be domain faces through every particle centre, parallel to gravity."""
+    for a in axes:
+        if not 0 <= a < mesh.dim:
+            raise ValueError(f"symmetry axis {a} is not an axis of a {mesh.dim}D mesh")
+        tol = 1e-9 * (mesh.upper[a] - mesh.lower[a])
+        on = np.isclose(particles.position[:, a], mesh.lower[a], atol=tol) | \
+            np.isclose(particles.position[:, a], mesh.upper[a], atol=tol)
+        if not on.all():
+            raise ValueError(f"symmetry plane with normal axis {a}: particles {np.flatnonzero(~on).tolist()} "
+                             "are not centred on it; put their centres on the domain face or drop the symmetry")
+        if gravity[a] != 0.0:
+            raise ValueError(f"symmetry plane with normal axis {a}: gravity has a component {gravity[a]} "
+                             "across it; the motion would not be symmetric")
 
 
 COUPLINGS = ("explicit", "implicit")

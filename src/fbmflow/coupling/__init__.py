@@ -1,6 +1,6 @@
 """The only place where fluid meets particles: node ownership, fictitious-boundary constraints,
 hydrodynamic forces."""
-from .forces import cut_cells, hydrodynamic_forces
+from .forces import cut_cells, hydrodynamic_forces, mirror_images
 from .indicator import node_owner, rigid_body_constraints
 
-__all__ = ["node_owner", "rigid_body_constraints", "cut_cells", "hydrodynamic_forces"]
+__all__ = ["node_owner", "rigid_body_constraints", "cut_cells", "hydrodynamic_forces", "mirror_images"]

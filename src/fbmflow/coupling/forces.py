@@ -26,3 +26,22 @@ def hydrodynamic_forces(space: FlowSpace, owner: np.ndarray, centres: np.ndarray
                                      np.ascontiguousarray(u.reshape(d, space.n_v)), p, mu,
                                      space.V.cell_dofs, space.phi, space.dphi, space.detJw,
                                      space.Jinv, space.psi, space.xq)
+
+
+def mirror_images(force: np.ndarray, torque: np.ndarray, axes) -> tuple[np.ndarray, np.ndarray]:
+    """Force and torque of whole particles cut by symmetry planes through their centres.
+
+    ``axes``: the normal axis of every mirror plane (e.g. ``(0, 1)`` for a quarter domain cut by
+    the planes x = X and y = Y). The mirror image across the plane with normal ``a`` flips the
+    ``a`` component of the force and, the torque being a pseudo-vector, every other component of
+    the torque; the whole particle gets the sum of all images. ``force (n, dim)``,
+    ``torque (n, 3)``; returns new arrays.
+    """
+    F, T = np.array(force, dtype=float), np.array(torque, dtype=float)
+    for a in axes:
+        flip_f = np.ones(F.shape[1])
+        flip_f[a] = -1.0
+        flip_t = -np.ones(3)
+        flip_t[a] = 1.0
+        F, T = F + F * flip_f, T + T * flip_t
+    return F, T

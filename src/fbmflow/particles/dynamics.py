@@ -59,6 +59,20 @@ def unpack_velocities(p: Particles, v: np.ndarray) -> None:
     p.angular_velocity = v[:, p.dim:].reshape(np.shape(p.angular_velocity)).copy()
 
 
+def symmetric_motion(dim: int, axes) -> np.ndarray:
+    """Generalised velocity components ``[U, omega]`` a particle centred on mirror planes with
+    normals ``axes`` may have: (r,) bool. Across the plane with normal ``a`` the velocity's ``a``
+    component and the angular velocity's other components change sign, so they must vanish."""
+    free = np.ones(3 if dim == 2 else 6, dtype=bool)
+    for a in axes:
+        free[a] = False
+        if dim == 2:
+            free[2] = False  # omega_z is normal to neither x nor y
+        else:
+            free[dim + np.array([b for b in range(3) if b != a])] = False
+    return free
+
+
 def velocity_gain(p: Particles, dt: float) -> np.ndarray:
     """``d v_new / d f``: how the new generalised velocities of :func:`integrate` respond to the
     generalised force ``f = [F, T_z]`` (2D) or ``[F, T]`` (3D); (n, r, r), zero for fixed
