@@ -23,7 +23,8 @@ import numpy as np
 from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
-from .particles import Particles, integrate, pack_velocities, unpack_velocities, velocity_gain
+from .particles import (Particles, integrate, pack_velocities, symmetric_motion, unpack_velocities,
+                        velocity_gain)
 from .solvers import ConvergenceError
 
 log = logging.getLogger(__name__)
@@ -143,35 +144,35 @@ class Simulation:
         converges in two to three of them even for density ratios near 1.
         """
         p, space = self.particles, self.flow.space
-        movable = np.flatnonzero(~p.fixed)
         gain = velocity_gain(p, dt)
         r = gain.shape[1]
+        free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
+        free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)
         owner = self._owner(space.V)
         liftings = []
-        for i in movable:
-            for b in range(r):
-                unit = np.zeros((p.n, r))
-                unit[i, b] = 1.0
-                con = rigid_body_constraints(space.V, owner, p.position, unit[:, :p.dim],
-                                             unit[:, p.dim:].reshape(np.shape(p.angular_velocity)))
-                w = np.zeros(space.n_u)
-                w[con.dofs] = con.values
-                liftings.append(w)
+        for i, b in zip(*np.nonzero(free)):
+            unit = np.zeros((p.n, r))
+            unit[i, b] = 1.0
+            con = rigid_body_constraints(space.V, owner, p.position, unit[:, :p.dim],
+                                         unit[:, p.dim:].reshape(np.shape(p.angular_velocity)))
+            w = np.zeros(space.n_u)
+            w[con.dofs] = con.values
+            liftings.append(w)
         dX = self.flow.lifting_response(x, np.array(liftings))
-        sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every movable rigid dof k
+        sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every iterated component k
         for k, dx in enumerate(dX):
             dF, dT = self._forces(owner, dx)
             sens[:, :, k] = np.column_stack([dF, dT[:, 2:] if p.dim == 2 else dT])
-        J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[movable].reshape(len(dX), -1)
+        J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
         guess = p.copy()
         v_guess = pack_velocities(p)
         all_reports = list(reports)
         for k in range(self.max_subiterations):
-            res = (pack_velocities(new) - v_guess)[movable].ravel()
+            res = (pack_velocities(new) - v_guess)[free]
             scale = max(float(np.linalg.norm(pack_velocities(new))), 1e-30)
             if np.linalg.norm(res) <= self.coupling_tol * scale:
                 return x, all_reports, force, torque, new, k + 1
-            v_guess[movable] += np.linalg.solve(J, res).reshape(len(movable), r)
+            v_guess[free] += np.linalg.solve(J, res)
             unpack_velocities(guess, v_guess)
             self._constraint_state = guess
             x, reports, force, torque = self._flow_and_forces(dt)
