@@ -102,3 +102,43 @@ def test_symmetry_plane_must_pass_through_the_particle():
         Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.2, 2.0]]), [0.0, -9.8], symmetry=(0,))
     with pytest.raises(ValueError, match="gravity"):
         Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))
+
+
+def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d():
+    """A sphere falling on the axis of a small box: the quarter with slip planes x = y = 0.5 and
+    mirrored forces reproduces the whole box (implicit coupling, 6 -> 1 iterated component)."""
+    from fbmflow.flow import NoSlip, Slip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    def fall(quarter):
+        lower = (0.5, 0.5, 0.0) if quarter else (0.0, 0.0, 0.0)
+        mesh = StructuredMesh.box((3, 3, 5) if quarter else (6, 6, 5), lower=lower, upper=(1.0, 1.0, 1.0))
+        bc = {t: NoSlip() for t in mesh.tags}
+        if quarter:
+            bc["xmin"] = bc["ymin"] = Slip()
+        sim = Simulation(mesh, 0.5, bc, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]),
+                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else ())
+        reps = [sim.step(0.01) for _ in range(2)]
+        return np.array([r.velocity[0] for r in reps]), reps[-1].flow_solves
+
+    full, _ = fall(False)
+    quarter, solves = fall(True)
+    assert full[-1, 2] < full[0, 2] < 0  # falls and accelerates
+    np.testing.assert_allclose(quarter, full, rtol=1e-6, atol=1e-9)
+    assert solves <= 4  # Newton coupling: a few flow solves per step
+
+
+def test_ten_cate_scene_validation_and_gap_deviation():
+    from fbmflow.scenes.tencate import gap_deviation
+    from fbmflow.scenes.data import tencate2002
+    scene = get_scene("ten-cate")
+    with pytest.raises(ParamError, match="outside"):
+        from_dict(scene.Params, {"particle": {"height": 0.2}}).validate()
+    with pytest.raises(ParamError, match="E1"):
+        from_dict(scene.Params, {"fluid": {"case": "E5"}})
+    ref = tencate2002.GAP["E3"]
+    assert gap_deviation(ref[:, 0], ref[:, 1], "E3") == 0.0
+    assert gap_deviation(ref[:, 0], 1.02 * ref[:, 1], "E3") == pytest.approx(0.02)
+    assert scene.mesh(1, "quarter").shape == (20, 20, 64)  # 6 cells per diameter

@@ -171,6 +171,17 @@ class SolverParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class CouplingParams:
+    """Fluid–particle coupling."""
+
+    scheme: str = param("implicit", "coupling: explicit (staggered) or implicit (sub-iterated)",
+                        choices=("explicit", "implicit"))
+    tol: float = param(1e-6, "implicit coupling: relative change of the particle velocities",
+                       positive=True, maximum=0.1)
+    max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
+
+
+@dataclasses.dataclass(frozen=True)
 class TimeParams:
     """Time stepping."""
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..flow import NoSlip
 from ..mesh import StructuredMesh
-from ..params import ParamError, SolverParams, TimeParams, param, section
+from ..params import CouplingParams, ParamError, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Scene, SceneResult
@@ -46,17 +46,6 @@ class GlowinskiTime(TimeParams):
     t_end: float = param(0.3, "final time", "s", positive=True)
     scheme: str = param("backward-euler", "implicit time scheme",
                         choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
-
-
-@dataclass(frozen=True)
-class CouplingParams:
-    """Fluid–particle coupling."""
-
-    scheme: str = param("implicit", "coupling: explicit (staggered) or implicit (sub-iterated)",
-                        choices=("explicit", "implicit"))
-    tol: float = param(1e-6, "implicit coupling: relative change of the particle velocities",
-                       positive=True, maximum=0.1)
-    max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,12 @@ from .channel import Channel2D, Channel3D
 from .dfg import DFG2D1
 from .glowinski import GlowinskiFreeFall
 from .taylor_green import TaylorGreen2D
+from .tencate import TenCate
 
 log = logging.getLogger(__name__)
 
 SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(),
-                                              GlowinskiFreeFall())}
+                                              GlowinskiFreeFall(), TenCate())}
 
 
 def get_scene(name: str) -> Scene:

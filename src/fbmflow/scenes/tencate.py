@@ -1,0 +1,174 @@
+"""ten Cate et al. (2002): a sphere settling in a closed box, cases E1-E4 (SI units).
+
+Box 100 x 100 x 160 mm, sphere d = 15 mm, rho_s = 1120 kg/m^3, centre released from rest
+127.5 mm above the bottom, g = 9.81 m/s^2; the case sets the silicone oil (rho_f, mu):
+E1 (970, 0.373), E2 (965, 0.212), E3 (962, 0.113), E4 (960, 0.058). By default the quarter box
+``[50, 100] x [50, 100] x [0, 160] mm`` with slip (mirror) planes x = y = 50 mm through the
+sphere's centre; forces are those of the whole sphere. Level ``L`` has cells of
+``5 / 2^L`` mm, ``3 2^L`` across the diameter.
+
+The run stops at ``time.t_end`` (by default the time the experiment reached the bottom) or when
+the gap between sphere and bottom falls below ``stop_gap`` diameters (no contact model here).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..flow import NoSlip, Slip
+from ..mesh import StructuredMesh
+from ..params import CouplingParams, ParamError, SolverParams, TimeParams, param, section
+from ..particles import Ball, Particles
+from ..simulation import Simulation
+from .base import Scene, SceneResult
+from .data import tencate2002
+
+CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
+T_END = {"E1": 4.0, "E2": 2.5, "E3": 1.7, "E4": 1.3}  # the experiment's sphere reached the bottom
+BOX = np.array([0.1, 0.1, 0.16])
+
+
+@dataclass(frozen=True)
+class TenCateFluid:
+    """Fluid (silicone oil) and gravity."""
+
+    case: str = param("E4", "experiment: E1 | E2 | E3 | E4 sets (density, viscosity)",
+                      choices=tuple(CASES))
+    gravity: float = param(9.81, "gravitational acceleration (downwards)", "m/s^2", positive=True)
+
+
+@dataclass(frozen=True)
+class TenCateParticle:
+    """The sphere."""
+
+    diameter: float = param(0.015, "sphere diameter", "m", positive=True)
+    density: float = param(1120.0, "sphere density", "kg/m^3", positive=True)
+    height: float = param(0.1275, "initial centre height above the bottom", "m", positive=True)
+    stop_gap: float = param(0.05, "stop when the gap to the bottom is below this many diameters",
+                            nonnegative=True)
+
+
+@dataclass(frozen=True)
+class TenCateDomain:
+    """Domain."""
+
+    symmetry: str = param("quarter", "quarter box with two mirror planes, or the whole box",
+                          choices=("quarter", "none"))
+
+
+@dataclass(frozen=True)
+class TenCateTime(TimeParams):
+    """Time stepping (``t_end = 0``: the time the experiment's sphere reached the bottom)."""
+
+    dt: float = param(0.01, "time step", "s", positive=True)
+    t_end: float = param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True)
+    scheme: str = param("backward-euler", "implicit time scheme",
+                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+
+
+@dataclass(frozen=True)
+class TenCateParams:
+    """Parameters of ``ten-cate``."""
+
+    fluid: TenCateFluid = section(TenCateFluid)
+    particle: TenCateParticle = section(TenCateParticle)
+    domain: TenCateDomain = section(TenCateDomain)
+    time: TenCateTime = section(TenCateTime)
+    coupling: CouplingParams = section(CouplingParams)
+    solver: SolverParams = section(SolverParams)
+
+    def validate(self):
+        r = self.particle.diameter / 2
+        if not r < self.particle.height < BOX[2] - r:
+            raise ParamError(f"particle.height = {self.particle.height} m puts the sphere (radius {r} m) "
+                             f"outside the {BOX[2]} m high box; choose a height in ({r}, {BOX[2] - r})")
+        if not self.particle.diameter < BOX[0]:
+            raise ParamError(f"particle.diameter = {self.particle.diameter} m does not fit the {BOX[0]} m box")
+
+
+def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0) -> float:
+    """Largest relative deviation ``|gap(t_k) - gap_exp(t_k)| / gap_exp(t_k)`` over the
+    experiment's samples with ``gap_exp >= up_to`` inside the simulated time span."""
+    ref = tencate2002.GAP[case]
+    sel = (ref[:, 1] >= up_to) & (ref[:, 0] >= t[0]) & (ref[:, 0] <= t[-1])
+    sim = np.interp(ref[sel, 0], t, gap)
+    return float(np.max(np.abs(sim - ref[sel, 1]) / ref[sel, 1])) if sel.any() else float("nan")
+
+
+class TenCate(Scene):
+    name = "ten-cate"
+    description = "3D sphere settling in a closed box, ten Cate et al. (2002) E1-E4"
+    Params = TenCateParams
+    default_level = 1
+    max_level = 3
+
+    @staticmethod
+    def mesh(level: int, symmetry: str) -> StructuredMesh:
+        n = 2**level
+        if symmetry == "quarter":
+            return StructuredMesh.box((10 * n, 10 * n, 32 * n), lower=(0.05, 0.05, 0.0), upper=tuple(BOX))
+        return StructuredMesh.box((20 * n, 20 * n, 32 * n), upper=tuple(BOX))
+
+    def run(self, params: TenCateParams, level: int, progress=None) -> SceneResult:
+        pp, case = params.particle, params.fluid.case
+        rho_f, mu = CASES[case]
+        quarter = params.domain.symmetry == "quarter"
+        mesh = self.mesh(level, params.domain.symmetry)
+        bc = {t: NoSlip() for t in mesh.tags}
+        if quarter:
+            bc["xmin"] = bc["ymin"] = Slip()
+        d = pp.diameter
+        particles = Particles.at_rest([Ball(d / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
+        sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
+                         scheme=params.time.scheme, linear_solver=params.solver.linear_solver(),
+                         newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
+                         coupling_tol=params.coupling.tol,
+                         max_subiterations=params.coupling.max_subiterations,
+                         symmetry=(0, 1) if quarter else ())
+        t_end = params.time.t_end or T_END[case]
+        n_steps = max(1, int(round(t_end / params.time.dt)))
+        dt = t_end / n_steps
+        t, gap, v, newton_its = [0.0], [(pp.height - d / 2) / d], [0.0], 0
+        for k in range(1, n_steps + 1):
+            rep = sim.step(dt)
+            newton_its += rep.newton_iterations
+            t.append(rep.t)
+            gap.append(float((rep.position[0, 2] - d / 2) / d))
+            v.append(float(-rep.velocity[0, 2]))
+            if progress:
+                progress(k, n_steps, rep.t)
+            if gap[-1] < pp.stop_gap:
+                break
+        u_max = max(v)
+        q = {"max_settling_velocity": u_max,
+             "max_settling_velocity_error": u_max / tencate2002.U_MAX[case] - 1.0,
+             "gap_max_deviation": gap_deviation(np.array(t), np.array(gap), case),
+             "cells_per_diameter": float(d / mesh.spacing.max()),
+             "t": t, "gap_over_d": gap, "settling_velocity": v}
+        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=len(t) - 1, newton_iterations=newton_its)
+
+    def plot(self, summary: dict, path) -> bool:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        q, case = summary["quantities"], summary["params"]["fluid"]["case"]
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
+        ax[0].plot(q["t"], q["gap_over_d"], label="fbmflow")
+        ax[0].plot(*tencate2002.GAP[case].T, "o", mfc="none", label="ten Cate et al. 2002 (PIV)")
+        ax[0].set_ylabel("gap / d")
+        ax[1].plot(q["t"], q["settling_velocity"], label="fbmflow")
+        ax[1].plot(*tencate2002.VELOCITY[case].T, "o", mfc="none", label="ten Cate et al. 2002 (PIV)")
+        ax[1].axhline(tencate2002.U_MAX[case], ls=":", c="k", label="u_max, Table II")
+        ax[1].set_ylabel("settling velocity [m/s]")
+        for a in ax:
+            a.set_xlabel("t [s]")
+            a.grid(alpha=0.3)
+            a.legend()
+        fig.suptitle(f"ten-cate {case}, level {summary['level']} "
+                     f"({q['cells_per_diameter']:.0f} cells/d, {summary['n_cells']} cells)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return True
