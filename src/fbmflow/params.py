@@ -182,6 +182,25 @@ class CouplingParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class RepulsionParams:
+    """Short-range repulsion from walls and other particles (Glowinski et al.)."""
+
+    enabled: bool = param(True, "repulsive forces on (the flow cannot resolve the last gap)")
+    range_cells: float = param(1.0, "force range in mesh cells", positive=True)
+    strength: float = param(10.0, "force at contact over the particle's weight in the fluid", positive=True)
+
+    def make(self, mesh, walls=None):
+        """The :class:`~fbmflow.contact.Repulsion` for the walls of ``mesh`` (all faces, or the
+        ``(axis, side)`` pairs in ``walls``); None when off."""
+        if not self.enabled:
+            return None
+        from .contact import Repulsion
+
+        return Repulsion(self.range_cells * float(max(mesh.spacing)), tuple(mesh.lower), tuple(mesh.upper),
+                         self.strength, None if walls is None else tuple(walls))
+
+
+@dataclasses.dataclass(frozen=True)
 class TimeParams:
     """Time stepping."""
 

@@ -60,16 +60,19 @@ class Simulation:
         (the domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
         of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
         stays on the planes. Gravity must lie in the planes.
+    repulsion : :class:`~fbmflow.contact.Repulsion` or None, short-range repulsive forces that
+        keep particles off the walls and each other (the flow cannot resolve the last gap).
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
                  density: float = 1.0, scheme: str = "backward-euler",
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
                  coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
-                 symmetry: tuple = ()):
+                 symmetry: tuple = (), repulsion=None):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
         self.symmetry = tuple(symmetry)
+        self.repulsion = repulsion
         _check_symmetry(mesh, particles, np.asarray(gravity, dtype=float), self.symmetry)
         self.coupling = coupling
         self.coupling_tol = coupling_tol
@@ -109,13 +112,20 @@ class Simulation:
         force, torque = self._forces(self._owner(self.flow.space.V), x)
         return x, reports, force, torque
 
+    def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float) -> Particles:
+        """New particle state under the hydrodynamic and the repulsive forces (the latter at the
+        positions of the start of the step)."""
+        if self.repulsion is not None:
+            force = force + self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
+        return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+
     def step(self, dt: float) -> StepReport:
         """Advance flow and particles over ``dt``; ConvergenceError names the step and time."""
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
         flow_solves = 1
         try:
             x, reports, force, torque = self._flow_and_forces(dt)
-            new = integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+            new = self._integrate(force, torque, dt)
             if self.coupling == "implicit":
                 x, reports, force, torque, new, flow_solves = self._subiterate(dt, x, reports, force,
                                                                               torque, new)
@@ -177,7 +187,7 @@ class Simulation:
             self._constraint_state = guess
             x, reports, force, torque = self._flow_and_forces(dt)
             all_reports += reports
-            new = integrate(p, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+            new = self._integrate(force, torque, dt)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
                                f"sub-iterations (last change {np.linalg.norm(res) / scale:.1e})")
 

@@ -96,3 +96,27 @@ def test_wrong_dirichlet_shape_is_reported():
     bcs = {"xmin": Dirichlet((1.0, 0.0, 0.0)), "xmax": NoSlip(), "ymin": NoSlip(), "ymax": NoSlip()}
     with pytest.raises(ValueError, match="needs 2 components"):
         NavierStokesProblem(StructuredMesh.box((2, 2)), 1.0, bcs).zero_state()
+
+
+def test_fluid_pocket_enclosed_by_constrained_nodes_is_closed():
+    """Constrained nodes around one free node push fluid out of it: no divergence-free field
+    exists unless the pocket is held still. The constraints close it; the solve converges."""
+    from fbmflow.fem.constraints import DirichletConstraints
+
+    mesh = StructuredMesh.box((6, 6))
+
+    def ring(V, t):
+        lat = np.array([(i, j) for i in range(4, 9) for j in range(4, 9) if (i, j) != (6, 6)])  # its 4 cells
+        nodes = V._lattice_to_dof(lat)
+        out = V.coordinates[nodes] - 0.5  # radially outwards: net flux out of the pocket
+        dofs = np.concatenate([nodes, V.n_dofs + nodes])
+        order = np.argsort(dofs)
+        return DirichletConstraints(dofs[order], out.T.ravel()[order])
+
+    flow = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
+                               extra_constraints=ring)
+    con = flow.constraints()
+    centre = flow.space.V._lattice_to_dof(np.array([[6, 6]]))[0]
+    assert centre in con.dofs and centre + flow.space.n_v in con.dofs
+    x, report = flow.solve_steady()
+    assert report.converged and np.all(np.isfinite(x))

@@ -17,11 +17,14 @@ import logging
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
+from ..solvers.linear import orphan_pressure_block
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -119,8 +122,28 @@ class NavierStokesProblem:
             return self._constraints
         con = build_constraints(self.space.V, self.boundary, t)
         if self.extra_constraints is not None:
-            con = con.merged(self.extra_constraints(self.space.V, t))
+            con = self._close_pockets(con.merged(self.extra_constraints(self.space.V, t)))
         return con
+
+    def _close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
+        """Hold still the fluid nodes cut off from the main fluid by constrained nodes.
+
+        A particle within a node layer of a wall or of another particle can enclose a few free
+        nodes; the prescribed velocities around them generally carry a net flux into the pocket,
+        and no divergence-free field exists (Newton stagnates). The pocket's nodes (every
+        connected component of nodes with a free component, except the largest) get zero
+        velocity; the pressure modes of the cells they leave orphaned drop out
+        (:meth:`orphans`)."""
+        s = self.space
+        free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
+        graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr), shape=(s.n_v, s.n_v))
+        n_parts, labels = connected_components(graph[free][:, free], directed=False)
+        if n_parts <= 1:
+            return con
+        pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
+        log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
+        dofs = np.concatenate([k * s.n_v + pocket for k in range(s.dim)])
+        return con.merged(DirichletConstraints(np.sort(dofs), np.zeros(dofs.size)))
 
     def load(self, t: float = 0.0) -> np.ndarray:
         """``int f . v`` for every velocity DOF, (dim * n_v,) float64."""
@@ -154,13 +177,29 @@ class NavierStokesProblem:
         return self._apply_scalar(self._scalar_operator(u, 0.0, 1.0), u)
 
     def residual(self, x: np.ndarray, m: float, a: float, rhs: np.ndarray,
-                 con: DirichletConstraints) -> np.ndarray:
-        """``[F_u, F_p]`` (n_dofs,) with the constrained rows of ``F_u`` zero."""
+                 con: DirichletConstraints, orphans: np.ndarray | None = None) -> np.ndarray:
+        """``[F_u, F_p]`` (n_dofs,) with the constrained rows of ``F_u`` zero.
+
+        ``orphans (n_cells, dim+1, dim+1)``: projectors onto the pressure modes of cells whose
+        velocities are all constrained (see :func:`~fbmflow.solvers.linear.orphan_pressure_block`);
+        their continuity equations are removed from ``F_p``: a cell covered by a particle and a
+        wall has prescribed velocities whose divergence no unknown can change.
+        """
         n_u = self.space.n_u
         u, p = x[:n_u], x[n_u:]
         Fu = self._apply_scalar(self._scalar_operator(u, m, a), u) + self.BT.T @ p - rhs
         Fu[con.dofs] = 0.0
-        return np.concatenate([Fu, self.BT @ u])
+        Fp = self.BT @ u
+        if orphans is not None:
+            npl = orphans.shape[1]
+            Fp -= np.einsum("cmn,cn->cm", orphans, Fp.reshape(-1, npl)).ravel()
+        return np.concatenate([Fu, Fp])
+
+    def orphans(self, con: DirichletConstraints) -> np.ndarray | None:
+        """Pressure modes that no free velocity sees under the constraints ``con``."""
+        if self.extra_constraints is None:
+            return None
+        return orphan_pressure_block(con.constrain_divergence(self.BT), self.space.dim + 1)
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
@@ -218,7 +257,9 @@ class NavierStokesProblem:
             du, dp, report = solve(-F[:self.space.n_u], -F[self.space.n_u:])
             return np.concatenate([du, dp]), report
 
-        x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con), linear_step, x0, self.newton)
+        orphans = self.orphans(con)
+        x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
+                                 self.newton)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
         return x, report
 
@@ -245,10 +286,12 @@ class NavierStokesProblem:
         """
         m, a, con, solve = self._linearisation
         zero = np.zeros(self.space.n_u)
+        orphans = self.orphans(con)
         out = np.zeros((len(liftings), self.n_dofs))
         for k, w in enumerate(liftings):
             wx = np.concatenate([w, np.zeros(self.n_dofs - w.size)])
-            Jw = 0.5 * (self.residual(x + wx, m, a, zero, con) - self.residual(x - wx, m, a, zero, con))
+            Jw = 0.5 * (self.residual(x + wx, m, a, zero, con, orphans)
+                        - self.residual(x - wx, m, a, zero, con, orphans))
             du, dp, _ = solve(-Jw[:self.space.n_u], -Jw[self.space.n_u:])
             out[k] = wx + np.concatenate([du, dp])
         return out

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..flow import NoSlip
 from ..mesh import StructuredMesh
-from ..params import CouplingParams, ParamError, SolverParams, TimeParams, param, section
+from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Scene, SceneResult
@@ -43,7 +43,7 @@ class GlowinskiTime(TimeParams):
     """Time stepping."""
 
     dt: float = param(0.002, "time step", "s", positive=True)
-    t_end: float = param(0.3, "final time", "s", positive=True)
+    t_end: float = param(0.5, "final time (the peak velocity comes at about 0.4 s)", "s", positive=True)
     scheme: str = param("backward-euler", "implicit time scheme",
                         choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
 
@@ -56,6 +56,7 @@ class GlowinskiParams:
     particle: GlowinskiParticle = section(GlowinskiParticle)
     time: GlowinskiTime = section(GlowinskiTime)
     coupling: CouplingParams = section(CouplingParams)
+    repulsion: RepulsionParams = section(RepulsionParams)
     solver: SolverParams = section(SolverParams)
 
     def validate(self):
@@ -87,7 +88,8 @@ class GlowinskiFreeFall(Scene):
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations)
+                         max_subiterations=params.coupling.max_subiterations,
+                         repulsion=params.repulsion.make(mesh))
         n_steps = params.time.n_steps
         dt = params.time.t_end / n_steps
         t, y, v, newton_its = [0.0], [pp.y], [0.0], 0

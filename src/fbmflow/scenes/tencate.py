@@ -18,7 +18,7 @@ import numpy as np
 
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh
-from ..params import CouplingParams, ParamError, SolverParams, TimeParams, param, section
+from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Scene, SceneResult
@@ -76,6 +76,7 @@ class TenCateParams:
     domain: TenCateDomain = section(TenCateDomain)
     time: TenCateTime = section(TenCateTime)
     coupling: CouplingParams = section(CouplingParams)
+    repulsion: RepulsionParams = section(RepulsionParams)
     solver: SolverParams = section(SolverParams)
 
     def validate(self):
@@ -125,7 +126,9 @@ class TenCate(Scene):
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol,
                          max_subiterations=params.coupling.max_subiterations,
-                         symmetry=(0, 1) if quarter else ())
+                         symmetry=(0, 1) if quarter else (),
+                         repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
+                                                         else None))
         t_end = params.time.t_end or T_END[case]
         n_steps = max(1, int(round(t_end / params.time.dt)))
         dt = t_end / n_steps
