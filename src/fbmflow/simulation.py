@@ -78,6 +78,8 @@ class Simulation:
         self.coupling_tol = coupling_tol
         self.max_subiterations = max_subiterations
         self._constraint_state: Particles | None = None
+        self._owner_of: np.ndarray | None = None  # positions and orientations of _owner_cache
+        self._owner_cache: np.ndarray | None = None
         self.particles = particles
         self.gravity = np.asarray(gravity, dtype=float)
         self.scheme = scheme
@@ -91,7 +93,14 @@ class Simulation:
         self.step_count = 0
 
     def _owner(self, V):
-        return node_owner(V, self.particles.position, self.particles.shapes, self.particles.rotations())
+        """Owner of every node for the current particle state; computed once per state (the
+        positions do not change during a step's flow solves and coupling iterations)."""
+        p = self.particles
+        key = np.concatenate([p.position.ravel(), np.ravel(p.orientation)])
+        if self._owner_of is None or not np.array_equal(self._owner_of, key):
+            self._owner_cache = node_owner(V, p.position, p.shapes, p.rotations())
+            self._owner_of = key
+        return self._owner_cache
 
     def _constraints(self, V, t):
         """Rigid-body constraints at the current positions with the velocities of the particle

@@ -43,3 +43,10 @@ def test_fixed_particles_get_no_force_and_bad_parameters_are_refused():
     assert np.all(rep.forces(p, G, 1.0) == 0.0)
     with pytest.raises(ValueError, match="positive"):
         Repulsion(0.0, (0.0, 0.0), (1.0, 1.0))
+
+
+def test_neutrally_buoyant_particle_is_still_repelled():
+    rep = Repulsion(0.1, (0.0, 0.0), (1.0, 1.0))
+    p = Particles.at_rest([Ball(0.2)], 1.0, [[0.5, 0.2]])  # same density as the fluid, touching
+    F = rep.forces(p, G, 1.0)
+    assert F[0, 1] == pytest.approx(10.0 * p.mass[0] * 10.0)

@@ -103,6 +103,7 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve) of the last Newton step
+        self._node_graph: sp.csr_matrix | None = None  # Q2 nodes sharing a cell (pocket search)
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -136,8 +137,10 @@ class NavierStokesProblem:
         (:meth:`orphans`)."""
         s = self.space
         free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
-        graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr), shape=(s.n_v, s.n_v))
-        n_parts, labels = connected_components(graph[free][:, free], directed=False)
+        if self._node_graph is None:
+            self._node_graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr),
+                                             shape=(s.n_v, s.n_v))
+        n_parts, labels = connected_components(self._node_graph[free][:, free], directed=False)
         if n_parts <= 1:
             return con
         pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
