@@ -1,4 +1,13 @@
-"""Particle–particle and particle–wall contact (imports ``particles`` only)."""
+"""Particle–particle and particle–wall contact (imports ``particles`` only).
+
+Broadphase (:mod:`.broadphase`) -> narrowphase (:mod:`.narrowphase`) -> projected Gauss–Seidel
+contact solver (:class:`ContactSet`); short-range repulsion (:class:`Repulsion`) is the soft
+alternative.
+"""
+from .broadphase import BROADPHASES, candidate_pairs, plane_candidates
+from .contact_set import ContactReport, ContactSet
+from .narrowphase import Contacts, Planes
 from .repulsion import Repulsion
 
-__all__ = ["Repulsion"]
+__all__ = ["BROADPHASES", "candidate_pairs", "plane_candidates", "ContactReport", "ContactSet",
+           "Contacts", "Planes", "Repulsion"]

@@ -43,7 +43,7 @@ class Repulsion:
         """Repulsive forces (n, dim) [N] on the particles at their current positions."""
         X = p.position
         n, dim = X.shape
-        R = np.array([s.bounding_radius for s in p.shapes])
+        R = p.bounding_radius
         weight = np.abs(p.mass - fluid_density * p.volume) * float(np.linalg.norm(gravity))
         weight = np.where(weight > 0, weight, p.mass * max(float(np.linalg.norm(gravity)), 1.0))
         F = np.zeros((n, dim))

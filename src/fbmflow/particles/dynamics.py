@@ -18,7 +18,7 @@ import numpy as np
 from .state import Particles
 
 
-def _quaternion_step(q: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
+def quaternion_step(q: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
     """Rotate unit quaternions ``q (n, 4)`` by world angular velocity ``omega (n, 3)`` over dt."""
     angle = np.linalg.norm(omega, axis=1) * dt
     axis = np.divide(omega, np.linalg.norm(omega, axis=1)[:, None], out=np.zeros_like(omega),
@@ -103,7 +103,7 @@ def integrate(p: Particles, force: np.ndarray, torque: np.ndarray, gravity, flui
     if p.dim == 2:
         new.orientation = p.orientation + dt * w
     else:
-        new.orientation = _quaternion_step(p.orientation, w, dt)
+        new.orientation = quaternion_step(p.orientation, w, dt)
     return new
 
 

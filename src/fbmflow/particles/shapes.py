@@ -7,6 +7,9 @@ Every shape is described relative to its **centre of mass** in body axes and giv
 * ``inertia``: inertia tensor per unit density in body axes, ``int (|x|^2 I - x x^T) dV``
   ((3, 3) in 3D; in 2D the polar moment ``int (x^2 + y^2) dA`` as a (1, 1) array);
 * ``bounding_radius``: radius of a ball about the centre of mass that contains the shape;
+* ``support(d)``: for directions ``d (n, dim)`` (body axes, any length) the points of the shape
+  farthest along them, ``(n, dim)``, for contact detection (exact for the convex analytic shapes
+  and for the vertices of a surface; the bounding ball for an implicit shape);
 * ``centre_of_mass``: where the centre of mass lies in the coordinates the user described the
   shape in (zero for the symmetric shapes; computed for implicit functions and surfaces, whose
   ``inside`` is then shifted so that it works relative to the centre of mass).
@@ -28,6 +31,11 @@ from . import _kernels
 def _check_dim(dim: int):
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, got {dim}")
+
+
+def _unit(d: np.ndarray) -> np.ndarray:
+    d = np.asarray(d, dtype=float)
+    return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
 
 
 def _axes_inertia(volume: float, second_moments: np.ndarray) -> np.ndarray:
@@ -53,6 +61,9 @@ class Ball:
     def inside(self, x: np.ndarray) -> np.ndarray:
         """Points ``x (n, dim)`` (body frame) inside or on the surface -> (n,) bool."""
         return np.einsum("ij,ij->i", x, x) <= self.radius**2
+
+    def support(self, d: np.ndarray) -> np.ndarray:
+        return self.radius * _unit(d)
 
     @property
     def bounding_radius(self) -> float:
@@ -97,6 +108,11 @@ class Ellipsoid:
     def inside(self, x: np.ndarray) -> np.ndarray:
         return np.sum((x / np.array(self.semi_axes)) ** 2, axis=1) <= 1.0
 
+    def support(self, d: np.ndarray) -> np.ndarray:
+        """``A^2 d / |A d|`` with ``A = diag(a)``."""
+        a = np.array(self.semi_axes)
+        return a * _unit(a * d)
+
     @property
     def bounding_radius(self) -> float:
         return max(self.semi_axes)
@@ -136,6 +152,9 @@ class Box:
 
     def inside(self, x: np.ndarray) -> np.ndarray:
         return np.all(np.abs(x) <= np.array(self.half_extents), axis=1)
+
+    def support(self, d: np.ndarray) -> np.ndarray:
+        return np.where(d >= 0.0, 1.0, -1.0) * np.array(self.half_extents)
 
     @property
     def bounding_radius(self) -> float:
@@ -227,6 +246,10 @@ class ImplicitShape:
         # corners of the extent box relative to the centre of mass bound the shape
         setv(self, "bounding_radius", float(np.linalg.norm(np.abs(com) + self.extent)))
 
+    def support(self, d: np.ndarray) -> np.ndarray:
+        """The bounding ball's support point: contact acts as for that ball (an approximation)."""
+        return self.bounding_radius * _unit(d)
+
     def _raw_inside(self, x: np.ndarray) -> np.ndarray:
         v = np.asarray(self.function(x))
         if v.shape != (len(x),):
@@ -308,6 +331,9 @@ class TriangulatedSurface:
 
     def inside(self, x: np.ndarray) -> np.ndarray:
         return self.winding_number(x) > 0.5
+
+    def support(self, d: np.ndarray) -> np.ndarray:
+        return self.vertices[np.argmax(np.asarray(d) @ self.vertices.T, axis=1)]
 
 
 def _merge_duplicate_vertices(v: np.ndarray, t: np.ndarray):

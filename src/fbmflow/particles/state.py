@@ -19,6 +19,9 @@ class Particles:
     orientation : (n,) float64 angle [rad] in 2D, (n, 4) unit quaternion (w, x, y, z) in 3D
     angular_velocity : (n,) float64 in 2D, (n, 3) in 3D [rad/s], world frame
     fixed : (n,) bool, particles held still (obstacles)
+
+    The shapes' volumes, inertia tensors and bounding radii are tabulated once (one evaluation per
+    distinct shape object) and shared by copies, so nothing loops over particles in Python.
     """
 
     shapes: list
@@ -28,6 +31,7 @@ class Particles:
     orientation: np.ndarray
     angular_velocity: np.ndarray
     fixed: np.ndarray = field(default=None)
+    _table: dict = field(default=None, repr=False, compare=False)
 
     @classmethod
     def at_rest(cls, shapes: list, density, position) -> "Particles":
@@ -47,6 +51,8 @@ class Particles:
     def __post_init__(self):
         if self.fixed is None:
             self.fixed = np.zeros(len(self.shapes), dtype=bool)
+        if self._table is None:
+            self._table = _shape_table(self.shapes)
 
     @property
     def n(self) -> int:
@@ -59,7 +65,22 @@ class Particles:
     @property
     def volume(self) -> np.ndarray:
         """(n,) float64 [m^3] (area in 2D)."""
-        return np.array([s.volume for s in self.shapes])
+        return self._table["volume"]
+
+    @property
+    def bounding_radius(self) -> np.ndarray:
+        """(n,) float64 [m], radius of a ball about each centre of mass containing the shape."""
+        return self._table["bounding_radius"]
+
+    @property
+    def shape_groups(self) -> tuple[np.ndarray, list]:
+        """``(group (n,) int64, distinct shapes)``: particle k has shape ``distinct[group[k]]``."""
+        return self._table["group"], self._table["distinct"]
+
+    @property
+    def ball_radius(self) -> np.ndarray | None:
+        """(n,) float64 [m] when every shape is a :class:`~fbmflow.particles.Ball`, else None."""
+        return self._table["ball_radius"]
 
     @property
     def mass(self) -> np.ndarray:
@@ -68,7 +89,7 @@ class Particles:
 
     def inertia_world(self) -> np.ndarray:
         """Inertia tensors in world axes: (n, 1, 1) in 2D, (n, 3, 3) in 3D [kg m^2]."""
-        body = np.stack([s.inertia for s in self.shapes]) * self.density[:, None, None]
+        body = self._table["inertia"] * self.density[:, None, None]
         if self.dim == 2:
             return body
         R = self.rotations()
@@ -87,4 +108,26 @@ class Particles:
 
     def copy(self) -> "Particles":
         return Particles(list(self.shapes), self.density.copy(), self.position.copy(), self.velocity.copy(),
-                         self.orientation.copy(), self.angular_velocity.copy(), self.fixed.copy())
+                         self.orientation.copy(), self.angular_velocity.copy(), self.fixed.copy(), self._table)
+
+
+def _shape_table(shapes: list) -> dict:
+    """Per-particle volume (n,), body inertia per unit density (n, k, k), bounding radius (n,) and,
+    if every shape is a ball, the radii (n,); each distinct shape object evaluated once."""
+    from .shapes import Ball
+
+    ids = np.array([id(s) for s in shapes], dtype=np.int64)
+    uniq, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
+    distinct = [shapes[k] for k in first]
+    k = 1 if not distinct or distinct[0].dim == 2 else 3
+    table = {
+        "volume": np.array([s.volume for s in distinct], dtype=float)[inverse],
+        "inertia": np.array([s.inertia for s in distinct], dtype=float).reshape(-1, k, k)[inverse],
+        "bounding_radius": np.array([s.bounding_radius for s in distinct], dtype=float)[inverse],
+        "ball_radius": None,
+        "group": inverse.astype(np.int64),   # index of each particle's shape in "distinct"
+        "distinct": distinct,
+    }
+    if all(isinstance(s, Ball) for s in distinct):
+        table["ball_radius"] = np.array([s.radius for s in distinct], dtype=float)[inverse]
+    return table

@@ -1,0 +1,147 @@
+"""Numba kernels of the contact solver (3D vectors throughout; 2D problems padded with z = 0).
+
+Each contact ``c`` between particles ``i`` and ``j`` (``j < 0``: a static plane) has three
+constraint rows ``q`` (0: the normal, 1 and 2: the tangents) with direction ``d = D[c, q]`` and
+precomputed angular parts ``a_i = r_i x d``, ``a_j = r_j x d`` (arms ``r = p - X``) and
+``b = I^{-1} a`` (world axes). The relative velocity along the row is
+
+    u = d . (v_i - v_j) + a_i . w_i - a_j . w_j,
+
+and an impulse ``lambda`` (``+lambda d`` on i at its contact point, ``-lambda d`` on j) changes it
+by ``k lambda`` with the effective inverse mass ``k = 1/m_i + a_i . b_i + 1/m_j + a_j . b_j``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import njit
+
+
+@njit
+def _velocity(v, w, i, j, d, ai, aj):
+    u = 0.0
+    for a in range(3):
+        u += d[a] * v[i, a] + ai[a] * w[i, a]
+    if j >= 0:
+        for a in range(3):
+            u -= d[a] * v[j, a] + aj[a] * w[j, a]
+    return u
+
+
+@njit
+def _apply(v, w, inv_m, i, j, d, bi, bj, lam):
+    for a in range(3):
+        v[i, a] += inv_m[i] * lam * d[a]
+        w[i, a] += lam * bi[a]
+    if j >= 0:
+        for a in range(3):
+            v[j, a] -= inv_m[j] * lam * d[a]
+            w[j, a] -= lam * bj[a]
+
+
+@njit
+def row_velocities(ci, cj, D, Ai, Aj, v, w, q):
+    """Relative velocities (m,) of every contact along its row ``q``."""
+    m = ci.shape[0]
+    u = np.empty(m)
+    for c in range(m):
+        u[c] = _velocity(v, w, ci[c], cj[c], D[c, q], Ai[c, q], Aj[c, q])
+    return u
+
+
+@njit
+def warm_start(ci, cj, D, Bi, Bj, inv_m, lam, v, w):
+    """Apply the accumulated impulses ``lam (m, 3)`` to ``v, w`` in place."""
+    for c in range(ci.shape[0]):
+        for q in range(3):
+            if lam[c, q] != 0.0:
+                _apply(v, w, inv_m, ci[c], cj[c], D[c, q], Bi[c, q], Bj[c, q], lam[c, q])
+
+
+@njit
+def natural_residual(ci, cj, D, Ai, Aj, K, target, lam, v, w):
+    """``max_c |min(lambda_c, (u_c - target_c) / k_c)|`` over the normal rows: zero exactly at a
+    solution of the LCP ``lambda >= 0, u - target >= 0, lambda (u - target) = 0`` [impulse]."""
+    r = 0.0
+    for c in range(ci.shape[0]):
+        slack = (_velocity(v, w, ci[c], cj[c], D[c, 0], Ai[c, 0], Aj[c, 0]) - target[c]) / K[c, 0]
+        r = max(r, abs(min(lam[c, 0], slack)))
+    return r
+
+
+@njit
+def pgs(ci, cj, D, Ai, Aj, Bi, Bj, K, target, mu, inv_m, lam, v, w, iterations, tol, history):
+    """Projected Gauss–Seidel sweeps with accumulated-impulse clamping (Box2D's sequential
+    impulses): per contact, friction first (``|lambda_t| <= mu lambda_n``, the two tangential
+    impulses clamped to a disk), then the normal row (``lambda_n >= 0``, ``u_n >= target``).
+    Updates ``lam``, ``v``, ``w`` in place; ``history[s]`` is the natural residual after sweep
+    ``s``. Returns the number of sweeps done (it stops once the residual is at most ``tol``)."""
+    m = ci.shape[0]
+    for s in range(iterations):
+        for c in range(m):
+            i, j = ci[c], cj[c]
+            if mu > 0.0:
+                t1 = 0.0
+                t2 = 0.0
+                if K[c, 1] > 0.0:
+                    t1 = lam[c, 1] - _velocity(v, w, i, j, D[c, 1], Ai[c, 1], Aj[c, 1]) / K[c, 1]
+                if K[c, 2] > 0.0:
+                    t2 = lam[c, 2] - _velocity(v, w, i, j, D[c, 2], Ai[c, 2], Aj[c, 2]) / K[c, 2]
+                limit = mu * lam[c, 0]
+                norm = np.sqrt(t1 * t1 + t2 * t2)
+                if norm > limit:
+                    t1 *= limit / norm
+                    t2 *= limit / norm
+                _apply(v, w, inv_m, i, j, D[c, 1], Bi[c, 1], Bj[c, 1], t1 - lam[c, 1])
+                _apply(v, w, inv_m, i, j, D[c, 2], Bi[c, 2], Bj[c, 2], t2 - lam[c, 2])
+                lam[c, 1] = t1
+                lam[c, 2] = t2
+            u = _velocity(v, w, i, j, D[c, 0], Ai[c, 0], Aj[c, 0])
+            new_n = max(lam[c, 0] + (target[c] - u) / K[c, 0], 0.0)
+            _apply(v, w, inv_m, i, j, D[c, 0], Bi[c, 0], Bj[c, 0], new_n - lam[c, 0])
+            lam[c, 0] = new_n
+        history[s] = natural_residual(ci, cj, D, Ai, Aj, K, target, lam, v, w)
+        if history[s] <= tol:
+            return s + 1
+    return iterations
+
+
+@njit
+def project_positions(ci, cj, n, gap, goal, inv_m, X, sweeps, slop):
+    """Gauss–Seidel projection of the positions (velocities untouched, so no energy is added).
+
+    A contact's current gap is ``gap_c + n_c . (X_i - X_j)`` (``X (N, 3)`` the displacements
+    since ``gap`` was measured). Where ``goal_c`` is NaN the gap must not fall below ``-slop``;
+    elsewhere (collisions of this sub-step) it is set to ``goal_c``. Each correction moves i and j
+    along ``n_c`` in proportion to their inverse masses. Updates ``X`` in place; returns the
+    largest overlap left."""
+    m = ci.shape[0]
+    worst = 0.0
+    for s in range(sweeps):
+        worst = 0.0
+        change = 0.0
+        for c in range(m):
+            i, j = ci[c], cj[c]
+            g = gap[c]
+            for a in range(3):
+                g += n[c, a] * X[i, a]
+                if j >= 0:
+                    g -= n[c, a] * X[j, a]
+            k = inv_m[i] + (inv_m[j] if j >= 0 else 0.0)
+            want = g
+            if not np.isnan(goal[c]):
+                want = goal[c]
+            elif g < -slop:
+                want = -slop
+            if want != g and k > 0:
+                lam = (want - g) / k
+                for a in range(3):
+                    X[i, a] += inv_m[i] * lam * n[c, a]
+                    if j >= 0:
+                        X[j, a] -= inv_m[j] * lam * n[c, a]
+                change = max(change, abs(want - g))
+                g = want
+            worst = max(worst, -g)
+        if change <= 1e-15 * (1.0 + worst):
+            break
+    return worst

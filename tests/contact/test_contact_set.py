@@ -1,0 +1,144 @@
+"""Contact solver without fluid: collisions, the cradle, sticking, rolling, a stack and a pile."""
+import numpy as np
+import pytest
+
+from fbmflow.contact import ContactSet, Planes
+from fbmflow.contact.broadphase import brute_force_pairs
+from fbmflow.particles import Ball, Box, Particles
+
+
+def _run(cs, p, acc, h, steps):
+    ang = np.zeros(p.n) if p.dim == 2 else np.zeros((p.n, 3))
+    for _ in range(steps):
+        p, report = cs.substep(p, acc, ang, h)
+    return p, report
+
+
+def _momentum_energy(p):
+    I = p.inertia_world()
+    w = np.reshape(p.angular_velocity, (p.n, -1))
+    rot = 0.5 * np.einsum("ni,nij,nj->", w, I, w)
+    return (p.mass[:, None] * p.velocity).sum(axis=0), 0.5 * (p.mass * (p.velocity**2).sum(axis=1)).sum() + rot
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.4])
+def test_elastic_pair_conserves_momentum_and_energy(offset):
+    """Head-on (offset 0) and oblique collision of unequal spheres, restitution 1."""
+    p = Particles.at_rest([Ball(1.0, 3), Ball(0.5, 3)], [1.0, 3.0], [[0.0, 0.0, 0.0], [3.0, offset, 0.0]])
+    p.velocity[0] = [1.0, 0.0, 0.0]
+    p.velocity[1] = [-0.5, 0.0, 0.2 if offset else 0.0]
+    P0, E0 = _momentum_energy(p)
+    q, _ = _run(ContactSet(restitution=1.0), p, np.zeros((2, 3)), 0.01, 300)
+    P1, E1 = _momentum_energy(q)
+    assert np.abs(P1 - P0).max() <= 1e-10 and abs(E1 - E0) <= 1e-10 * E0
+    assert q.velocity[1, 0] > 0.0  # the light sphere bounced back
+    if offset == 0.0:  # 1D elastic formulas
+        m1, m2 = p.mass
+        assert q.velocity[0, 0] == pytest.approx(((m1 - m2) * 1.0 + 2 * m2 * -0.5) / (m1 + m2), abs=1e-12)
+
+
+def test_single_contact_gives_the_pair_impulse_formula():
+    """lambda = -(1 + e) u_n / k with k = 1/m_1 + 1/m_2 for spheres."""
+    e = 0.6
+    p = Particles.at_rest([Ball(0.5, 2), Ball(0.5, 2)], [1.0, 2.0], [[0.0, 0.0], [1.02, 0.0]])
+    p.velocity[0] = [3.0, 0.0]
+    q, _ = _run(ContactSet(restitution=e), p, np.zeros((2, 2)), 0.01, 3)
+    m1, m2 = p.mass
+    lam = (1 + e) * 3.0 / (1 / m1 + 1 / m2)
+    assert q.velocity[0, 0] == pytest.approx(3.0 - lam / m1, abs=1e-12)
+    assert q.velocity[1, 0] == pytest.approx(lam / m2, abs=1e-12)
+
+
+def test_newtons_cradle_passes_the_momentum_ball_by_ball():
+    n = 5
+    p = Particles.at_rest([Ball(0.5, 2)] * n, 1.0, [[k * 1.01, 0.0] for k in range(n)])
+    p.position[0, 0] -= 0.5
+    p.velocity[0] = [1.0, 0.0]
+    q, _ = _run(ContactSet(restitution=1.0), p, np.zeros((n, 2)), 0.005, 400)
+    assert np.allclose(q.velocity[:, 0], [0, 0, 0, 0, 1.0], atol=1e-12)
+    assert np.all(np.diff(q.position[:, 0]) > 1.0 - 1e-12)  # nobody overlaps
+
+
+def test_inelastic_pair_sticks():
+    p = Particles.at_rest([Ball(0.5, 3), Ball(0.5, 3)], [1.0, 4.0], [[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]])
+    p.velocity[0] = [2.0, 0.0, 0.0]
+    P0, _ = _momentum_energy(p)
+    q, _ = _run(ContactSet(restitution=0.0), p, np.zeros((2, 3)), 0.01, 200)
+    assert q.velocity[0, 0] == pytest.approx(q.velocity[1, 0], abs=1e-12)
+    assert np.allclose(_momentum_energy(q)[0], P0, atol=1e-12)
+    gap = np.linalg.norm(q.position[1] - q.position[0]) - 1.0
+    assert abs(gap) < 1e-12
+
+
+def test_sliding_sphere_rolls_at_five_sevenths_with_friction():
+    cs = ContactSet(Planes.box([-50, -5, 0], [50, 5, 10]), friction=0.3)
+    p = Particles.at_rest([Ball(0.5, 3)], 1.0, [[0.0, 0.0, 0.5]])
+    p.velocity[0] = [2.0, 0.0, 0.0]
+    q, _ = _run(cs, p, np.array([[0.0, 0.0, -10.0]]), 0.005, 300)
+    assert q.velocity[0, 0] == pytest.approx(5 / 7 * 2.0, rel=1e-10)
+    assert q.angular_velocity[0, 1] * 0.5 == pytest.approx(q.velocity[0, 0], rel=1e-10)
+    assert q.position[0, 2] == pytest.approx(0.5, abs=1e-10)  # stays on the floor
+
+
+def test_box_lands_flat_and_fixed_particles_do_not_move():
+    cs = ContactSet(Planes.box([-5, 0], [5, 5], faces=[(1, 0)]), friction=0.5)
+    p = Particles.at_rest([Box((0.4, 0.1)), Ball(0.2)], 1.0, [[0.0, 1.0], [0.3, 0.2]])
+    p.orientation[0] = 0.05
+    p.fixed[1] = True
+    q, _ = _run(cs, p, np.tile([0.0, -10.0], (2, 1)), 0.002, 1500)
+    assert np.array_equal(q.position[1], p.position[1])
+    assert np.abs(q.velocity[0]).max() < 1e-3  # came to rest on the ball and the floor
+
+
+def test_pgs_residual_decreases_monotonically_on_a_stack():
+    n, R = 10, 0.5
+    p = Particles.at_rest([Ball(R, 3)] * n, 1.0, [[0.0, 0.0, R + 2 * R * k] for k in range(n)])
+    cs = ContactSet(Planes.box([-5, -5, 0], [5, 5, 100]), iterations=300, tol=0.0)
+    _, report = _run(cs, p, np.tile([0.0, 0.0, -10.0], (n, 1)), 0.01, 1)
+    h = report.history
+    assert len(h) == 300 and np.all(np.diff(h) <= 0.0) and h[-1] < 0.01 * h[0]
+
+
+@pytest.mark.slow
+def test_pile_of_1000_spheres_comes_to_rest_without_overlap():
+    N, R = 1000, 0.01
+    rng = np.random.default_rng(1)
+    k = np.arange(N)
+    X = np.column_stack([(k % 10 + 0.5) * 2.2 * R, ((k // 10) % 10 + 0.5) * 2.2 * R,
+                         (k // 100 + 0.5) * 2.2 * R + R])
+    X[:, :2] += rng.uniform(-0.05 * R, 0.05 * R, (N, 2))
+    p = Particles.at_rest([Ball(R, 3)] * N, 2500.0, X)
+    p.velocity = rng.normal(0.0, 0.05, (N, 3))
+    L = 22 * R
+    cs = ContactSet(Planes.box([0, 0, 0], [L, L, 1.0]), restitution=0.3, friction=0.5, iterations=30)
+    q, _ = _run(cs, p, np.tile([0.0, 0.0, -9.81], (N, 1)), 2e-3, 700)
+    pairs = brute_force_pairs(q.position, np.full(N, R))
+    d = np.linalg.norm(q.position[pairs[:, 0]] - q.position[pairs[:, 1]], axis=1)
+    overlap = max((2 * R - d).max(), (R - q.position[:, 2]).max(), (R - q.position[:, :2]).max(),
+                  (q.position[:, :2] + R - L).max())
+    assert overlap < 0.01 * R
+    assert np.linalg.norm(q.velocity, axis=1).max() < 0.01  # m/s: at rest (free fall gains 0.02 per step)
+    assert q.position[:, 2].max() < 0.2  # collapsed from 0.22 m into a pile
+
+
+def test_warm_start_state_round_trip_and_validation():
+    cs = ContactSet(Planes.box([-5, 0], [5, 5]), friction=0.2)
+    p = Particles.at_rest([Ball(0.5)] * 2, 1.0, [[0.0, 0.5], [1.0, 0.5]])
+    _run(cs, p, np.tile([0.0, -10.0], (2, 1)), 0.01, 3)
+    state = cs.state()
+    assert len(state["keys"]) == 3 and np.all(state["normal"][[0, 2]] > 0)  # floor contacts
+    other = ContactSet(Planes.box([-5, 0], [5, 5]), friction=0.2)
+    other.set_state(state)
+    a, _ = _run(cs, p, np.tile([0.0, -10.0], (2, 1)), 0.01, 1)
+    b, _ = _run(other, p, np.tile([0.0, -10.0], (2, 1)), 0.01, 1)
+    assert np.array_equal(a.velocity, b.velocity)
+    bad = dict(state, keys=state["keys"][::-1])
+    with pytest.raises(ValueError, match="sorted"):
+        other.set_state(bad)
+
+
+@pytest.mark.parametrize("kwargs, match", [({"restitution": 1.5}, "restitution"), ({"friction": -1.0}, "non-negative"),
+                                           ({"iterations": 0}, "iterations"), ({"broadphase": "kd"}, "broadphase")])
+def test_bad_settings_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        ContactSet(**kwargs)
