@@ -152,3 +152,43 @@ def test_ten_cate_scene_validation_and_gap_deviation():
     assert gap_deviation(ref[:, 0], ref[:, 1], "E3") == 0.0
     assert gap_deviation(ref[:, 0], 1.02 * ref[:, 1], "E3") == pytest.approx(0.02)
     assert scene.mesh(1, "quarter").shape == (20, 20, 64)  # 6 cells per diameter
+
+
+def test_disk_landing_with_hard_contact_rests_on_the_wall_without_overlap():
+    """Released 0.4 cm above the bottom; hard contact (restitution 0, 10 sub-steps per fluid step,
+    a skin of half a cell) stops it on the wall: never closer than the skin, at rest there. Without
+    the skin the flow solve fails once the disk is within a node spacing of the wall."""
+    from fbmflow.contact import ContactSet, Planes
+    from fbmflow.flow import NoSlip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
+    r, skin = 0.25, 0.125
+    sim = Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
+                     Particles.at_rest([Ball(r, 2)], 1.5, [[1.0, r + 0.4]]), [0.0, -980.0],
+                     coupling="implicit", contact=ContactSet(Planes.box(mesh.lower, mesh.upper), skin=skin),
+                     contact_substeps=10)
+    gaps, speeds = [], []
+    for _ in range(40):
+        rep = sim.step(0.01)
+        gaps.append(rep.position[0, 1] - r)
+        speeds.append(abs(rep.velocity[0, 1]))
+        assert rep.contact is not None and rep.contact.substeps == 10
+    assert min(gaps) >= skin - 1e-12
+    assert max(speeds) > 5.0  # it did fall (cm/s)
+    assert gaps[-1] - skin < 1e-6 and speeds[-1] < 1e-3  # resting at the skin
+
+
+def test_hard_contact_needs_the_semi_implicit_integrator():
+    from fbmflow.contact import ContactSet
+    from fbmflow.flow import NoSlip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    mesh = StructuredMesh.box((4, 4))
+    with pytest.raises(ValueError, match="semi-implicit"):
+        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]),
+                   [0.0, -1.0], integrator="explicit-euler", contact=ContactSet())

@@ -201,6 +201,32 @@ class RepulsionParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class ContactParams:
+    """Hard contact between particles and with the walls (projected Gauss–Seidel, sub-stepped)."""
+
+    enabled: bool = param(True, "hard contact on (no overlap of particles or with the walls)")
+    restitution: float = param(0.0, "coefficient of restitution (0: the fluid damps the rebound)",
+                               minimum=0.0, maximum=1.0)
+    friction: float = param(0.0, "Coulomb friction coefficient", nonnegative=True)
+    substeps: int = param(10, "contact sub-steps per fluid step", minimum=1)
+    iterations: int = param(50, "projected Gauss-Seidel sweeps per sub-step at most", minimum=1)
+    broadphase: str = param("grid", "broadphase", choices=("brute-force", "grid", "hierarchical-grid"))
+    skin_cells: float = param(0.5, "contact distance in mesh cells: the fictitious boundary needs free "
+                              "fluid nodes between surfaces", nonnegative=True)
+
+    def make(self, mesh, walls=None):
+        """The :class:`~fbmflow.contact.ContactSet` with the walls of ``mesh`` (all faces, or the
+        ``(axis, side)`` pairs in ``walls``); None when off."""
+        if not self.enabled:
+            return None
+        from .contact import ContactSet, Planes
+
+        return ContactSet(Planes.box(mesh.lower, mesh.upper, walls), restitution=self.restitution,
+                          friction=self.friction, iterations=self.iterations, broadphase=self.broadphase,
+                          skin=self.skin_cells * float(max(mesh.spacing)))
+
+
+@dataclasses.dataclass(frozen=True)
 class TimeParams:
     """Time stepping."""
 

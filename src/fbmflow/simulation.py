@@ -20,11 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .contact import ContactReport
 from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
-from .particles import (Particles, integrate, pack_velocities, symmetric_motion, unpack_velocities,
-                        velocity_gain)
+from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
+                        unpack_velocities, velocity_gain)
 from .solvers import ConvergenceError
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,7 @@ class StepReport:
     position: np.ndarray
     velocity: np.ndarray
     flow_solves: int = 1  # flow solves of the coupling iteration (1 for the explicit coupling)
+    contact: ContactReport | None = None  # what the contact solver did (None without contact)
 
 
 class Simulation:
@@ -62,15 +64,29 @@ class Simulation:
         stays on the planes. Gravity must lie in the planes.
     repulsion : :class:`~fbmflow.contact.Repulsion` or None, short-range repulsive forces that
         keep particles off the walls and each other (the flow cannot resolve the last gap).
+    contact : :class:`~fbmflow.contact.ContactSet` or None, hard contact: the particles then
+        advance over a fluid step in ``contact_substeps`` contact sub-steps with the hydrodynamic
+        force of the step held constant (semi-implicit Euler with contact impulses, see
+        :mod:`fbmflow.contact.contact_set`), so that contact resolution does not depend on the
+        fluid time step. The warm-start state is restored before every coupling sub-iteration.
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
                  density: float = 1.0, scheme: str = "backward-euler",
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
                  coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
-                 symmetry: tuple = (), repulsion=None):
+                 symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
+        if contact is not None and integrator != "semi-implicit-euler":
+            raise ValueError("hard contact advances the particles by semi-implicit Euler; "
+                             f"integrator {integrator!r} cannot be combined with it")
+        if contact_substeps < 1:
+            raise ValueError(f"contact_substeps must be >= 1, got {contact_substeps}")
+        self.contact = contact
+        self.contact_substeps = int(contact_substeps)
+        self._contact_start = None  # warm-start state at the start of the step
+        self._contact_report = None
         self.symmetry = tuple(symmetry)
         self.repulsion = repulsion
         _check_symmetry(mesh, particles, np.asarray(gravity, dtype=float), self.symmetry)
@@ -123,15 +139,23 @@ class Simulation:
 
     def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float) -> Particles:
         """New particle state under the hydrodynamic and the repulsive forces (the latter at the
-        positions of the start of the step)."""
+        positions of the start of the step) and, with hard contact, the contact impulses."""
         if self.repulsion is not None:
             force = force + self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
-        return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+        if self.contact is None:
+            return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+        lin, ang = accelerations(self.particles, force, torque, self.gravity, self.flow.rho)
+        self.contact.set_state(self._contact_start)
+        new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
+        return new
 
     def step(self, dt: float) -> StepReport:
         """Advance flow and particles over ``dt``; ConvergenceError names the step and time."""
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
         flow_solves = 1
+        self._contact_report = None
+        if self.contact is not None:
+            self._contact_start = self.contact.state()
         try:
             x, reports, force, torque = self._flow_and_forces(dt)
             new = self._integrate(force, torque, dt)
@@ -150,7 +174,7 @@ class Simulation:
         return StepReport(self.step_count, self.t, sum(r.iterations for r in reports),
                           sum(r.linear_iterations for r in reports), force, torque,
                           self.particles.position.copy(), self.particles.velocity.copy(),
-                          flow_solves)
+                          flow_solves, self._contact_report)
 
     def _subiterate(self, dt, x, reports, force, torque, new):
         """Newton iteration on the particles' new generalised velocities ``v``.
@@ -160,7 +184,9 @@ class Simulation:
         response to unit rigid motions of each particle (``S = d f / d v``, the discrete added
         mass and drag, :meth:`NavierStokesProblem.lifting_response`) and the particles' gain
         ``G = d v_new / d f``; each sub-iteration then costs one flow solve, and the iteration
-        converges in two to three of them even for density ratios near 1.
+        converges in two to three of them even for density ratios near 1. Broyden's rank-one
+        update corrects the Jacobian from each sub-iteration's change: a contact that stops a
+        particle (``d v_new / d v = 0`` along the normal) is then found in one more sub-iteration.
         """
         p, space = self.particles, self.flow.space
         gain = velocity_gain(p, dt)
@@ -185,13 +211,22 @@ class Simulation:
         J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
         guess = p.copy()
         v_guess = pack_velocities(p)
+        # velocity scale of the convergence test: the step's velocities, at least what gravity adds
+        floor = max(float(np.linalg.norm(v_guess)), float(np.linalg.norm(self.gravity)) * dt, 1e-30)
         all_reports = list(reports)
+        res_old = step = None
         for k in range(self.max_subiterations):
             res = (pack_velocities(new) - v_guess)[free]
-            scale = max(float(np.linalg.norm(pack_velocities(new))), 1e-30)
+            scale = max(float(np.linalg.norm(pack_velocities(new))), floor)
+            log.debug("coupling sub-iteration %d: relative change %.3e", k, np.linalg.norm(res) / scale)
             if np.linalg.norm(res) <= self.coupling_tol * scale:
                 return x, all_reports, force, torque, new, k + 1
-            v_guess[free] += np.linalg.solve(J, res)
+            if step is not None:  # Broyden's update: contact and nonlinearity bend the map
+                dG = res_old - res
+                J += np.outer(dG - J @ step, step) / (step @ step)
+            step = np.linalg.solve(J, res)
+            res_old = res
+            v_guess[free] += step
             unpack_velocities(guess, v_guess)
             self._constraint_state = guess
             x, reports, force, torque = self._flow_and_forces(dt)

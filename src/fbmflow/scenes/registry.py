@@ -13,6 +13,7 @@ from .base import Scene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
 from .dfg import DFG2D1
+from .dkt import DKT2D
 from .glowinski import GlowinskiFreeFall
 from .taylor_green import TaylorGreen2D
 from .tencate import TenCate
@@ -20,7 +21,7 @@ from .tencate import TenCate
 log = logging.getLogger(__name__)
 
 SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(),
-                                              GlowinskiFreeFall(), TenCate())}
+                                              GlowinskiFreeFall(), TenCate(), DKT2D())}
 
 
 def get_scene(name: str) -> Scene:
