@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact import ContactReport
-from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints
+from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
 from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
@@ -68,7 +68,8 @@ class Simulation:
         advance over a fluid step in ``contact_substeps`` contact sub-steps with the hydrodynamic
         force of the step held constant (semi-implicit Euler with contact impulses, see
         :mod:`fbmflow.contact.contact_set`), so that contact resolution does not depend on the
-        fluid time step. The warm-start state is restored before every coupling sub-iteration.
+        fluid time step. With the implicit coupling, contact acts once the coupling iteration has
+        converged (a collision's velocity change reaches the flow in the next step).
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
@@ -85,7 +86,6 @@ class Simulation:
             raise ValueError(f"contact_substeps must be >= 1, got {contact_substeps}")
         self.contact = contact
         self.contact_substeps = int(contact_substeps)
-        self._contact_start = None  # warm-start state at the start of the step
         self._contact_report = None
         self.symmetry = tuple(symmetry)
         self.repulsion = repulsion
@@ -137,15 +137,15 @@ class Simulation:
         force, torque = self._forces(self._owner(self.flow.space.V), x)
         return x, reports, force, torque
 
-    def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float) -> Particles:
+    def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
         """New particle state under the hydrodynamic and the repulsive forces (the latter at the
-        positions of the start of the step) and, with hard contact, the contact impulses."""
+        positions of the start of the step) and, with hard contact (unless ``contact`` is False),
+        the contact impulses."""
         if self.repulsion is not None:
             force = force + self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
-        if self.contact is None:
+        if self.contact is None or not contact:
             return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
         lin, ang = accelerations(self.particles, force, torque, self.gravity, self.flow.rho)
-        self.contact.set_state(self._contact_start)
         new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
         return new
 
@@ -154,14 +154,11 @@ class Simulation:
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
         flow_solves = 1
         self._contact_report = None
-        if self.contact is not None:
-            self._contact_start = self.contact.state()
         try:
             x, reports, force, torque = self._flow_and_forces(dt)
-            new = self._integrate(force, torque, dt)
             if self.coupling == "implicit":
-                x, reports, force, torque, new, flow_solves = self._subiterate(dt, x, reports, force,
-                                                                              torque, new)
+                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque)
+            new = self._integrate(force, torque, dt)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
         finally:
@@ -176,7 +173,7 @@ class Simulation:
                           self.particles.position.copy(), self.particles.velocity.copy(),
                           flow_solves, self._contact_report)
 
-    def _subiterate(self, dt, x, reports, force, torque, new):
+    def _subiterate(self, dt, x, reports, force, torque):
         """Newton iteration on the particles' new generalised velocities ``v``.
 
         The fixed point is ``v = Phi(v)``: integrate the particles with the forces of the flow
@@ -185,25 +182,19 @@ class Simulation:
         mass and drag, :meth:`NavierStokesProblem.lifting_response`) and the particles' gain
         ``G = d v_new / d f``; each sub-iteration then costs one flow solve, and the iteration
         converges in two to three of them even for density ratios near 1. Broyden's rank-one
-        update corrects the Jacobian from each sub-iteration's change: a contact that stops a
-        particle (``d v_new / d v = 0`` along the normal) is then found in one more sub-iteration.
+        update corrects the Jacobian from each sub-iteration's change (the forces are not exactly
+        linear in ``v``). Contact is left out of the iterated map (its non-smooth response, a
+        constraint switching on and off between sub-iterations, stalls the iteration): it acts
+        once the coupling has converged, with the converged hydrodynamic force.
         """
         p, space = self.particles, self.flow.space
+        new = self._integrate(force, torque, dt, contact=False)
         gain = velocity_gain(p, dt)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
         free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)
         owner = self._owner(space.V)
-        liftings = []
-        for i, b in zip(*np.nonzero(free)):
-            unit = np.zeros((p.n, r))
-            unit[i, b] = 1.0
-            con = rigid_body_constraints(space.V, owner, p.position, unit[:, :p.dim],
-                                         unit[:, p.dim:].reshape(np.shape(p.angular_velocity)))
-            w = np.zeros(space.n_u)
-            w[con.dofs] = con.values
-            liftings.append(w)
-        dX = self.flow.lifting_response(x, np.array(liftings))
+        dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free))
         sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every iterated component k
         for k, dx in enumerate(dX):
             dF, dT = self._forces(owner, dx)
@@ -220,7 +211,7 @@ class Simulation:
             scale = max(float(np.linalg.norm(pack_velocities(new))), floor)
             log.debug("coupling sub-iteration %d: relative change %.3e", k, np.linalg.norm(res) / scale)
             if np.linalg.norm(res) <= self.coupling_tol * scale:
-                return x, all_reports, force, torque, new, k + 1
+                return x, all_reports, force, torque, k + 1
             if step is not None:  # Broyden's update: contact and nonlinearity bend the map
                 dG = res_old - res
                 J += np.outer(dG - J @ step, step) / (step @ step)
@@ -231,7 +222,7 @@ class Simulation:
             self._constraint_state = guess
             x, reports, force, torque = self._flow_and_forces(dt)
             all_reports += reports
-            new = self._integrate(force, torque, dt)
+            new = self._integrate(force, torque, dt, contact=False)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
                                f"sub-iterations (last change {np.linalg.norm(res) / scale:.1e})")
 

@@ -1,6 +1,6 @@
 """The only place where fluid meets particles: node ownership, fictitious-boundary constraints,
 hydrodynamic forces."""
 from .forces import cut_cells, hydrodynamic_forces, mirror_images
-from .indicator import node_owner, rigid_body_constraints
+from .indicator import node_owner, rigid_body_constraints, rigid_liftings
 
-__all__ = ["node_owner", "rigid_body_constraints", "cut_cells", "hydrodynamic_forces", "mirror_images"]
+__all__ = ["node_owner", "rigid_body_constraints", "rigid_liftings", "cut_cells", "hydrodynamic_forces", "mirror_images"]

@@ -7,6 +7,7 @@ the structured mesh (no search over all nodes); only they get the inside test.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..fem.constraints import DirichletConstraints
 from ..fem.dofmap import DofMap
@@ -108,3 +109,35 @@ def rigid_body_constraints(V: DofMap, owner: np.ndarray, centres: np.ndarray, ve
     dofs = np.concatenate([k * n + nodes for k in range(dim)])
     order = np.argsort(dofs)
     return DirichletConstraints(dofs[order], vel.T.ravel()[order])
+
+
+def rigid_liftings(V: DofMap, owner: np.ndarray, centres: np.ndarray, free: np.ndarray) -> sp.csc_matrix:
+    """Unit rigid motions of the particles on their nodes: (dim * n_v, k) sparse, one column per
+    True entry of ``free (n_particles, r)`` (row-major; ``r = 3`` in 2D: ``U_x, U_y, omega_z``;
+    6 in 3D: ``U, omega``), the velocity field ``e_b`` or ``e_b x (x - X_i)`` on the nodes owned by
+    particle ``i`` and zero elsewhere. Built for all particles at once."""
+    nodes = np.flatnonzero(owner >= 0)
+    pid = owner[nodes]
+    dim, n = V.mesh.dim, V.n_dofs
+    rel = periodic_offset(V, V.coordinates[nodes], np.asarray(centres, dtype=float)[pid])
+    column = np.full(free.shape, -1, dtype=np.int64)
+    column[free] = np.arange(int(free.sum()))
+    rows, cols, vals = [], [], []
+    for b in range(free.shape[1]):  # the r rigid motions, each for every particle at once
+        sel = free[pid, b]
+        motion = np.zeros((int(sel.sum()), dim))
+        if b < dim:
+            motion[:, b] = 1.0
+        elif dim == 2:
+            motion[:, 0], motion[:, 1] = -rel[sel, 1], rel[sel, 0]
+        else:
+            axis = np.zeros(3)
+            axis[b - dim] = 1.0
+            motion = np.cross(axis, rel[sel])
+        for a in range(dim):
+            nz = motion[:, a] != 0.0
+            rows.append(a * n + nodes[sel][nz])
+            cols.append(column[pid[sel][nz], b])
+            vals.append(motion[nz, a])
+    return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(dim * n, int(free.sum())))

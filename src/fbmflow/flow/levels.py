@@ -46,19 +46,24 @@ class FlowLevel:
         return DirichletConstraints(con.dofs, np.zeros(con.dofs.size))
 
     def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
-               con: DirichletConstraints | None = None, newton: bool = True) -> SaddlePointSystem:
+               con: DirichletConstraints | None = None, newton: bool = True,
+               own_buffer: bool = False) -> SaddlePointSystem:
         """Newton linearisation ``m rho M + a (mu L + rho (N(u) + R(u)))`` at velocity ``u``.
 
         The velocity block's data lives in a buffer of this level and is overwritten by the next
-        call: use the returned system before linearising again.
+        call: use the returned system before linearising again (or pass ``own_buffer`` to get a
+        fresh array that nothing else writes to).
         """
         s = self.space
         con = con or self.homogeneous_constraints()
         newton = convection and a != 0.0 and newton
         size = s.dim * s.nnz * (s.dim if newton else 1)
-        if self._jacobian_data is None or self._jacobian_data.size != size:
-            self._jacobian_data = np.empty(size)
-        J = self._jacobian_data
+        if own_buffer:
+            J = np.empty(size)
+        else:
+            if self._jacobian_data is None or self._jacobian_data.size != size:
+                self._jacobian_data = np.empty(size)
+            J = self._jacobian_data
         if newton:
             expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
             assemble_convection(s, u, a * rho, newton_out=J)

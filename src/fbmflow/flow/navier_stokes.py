@@ -192,11 +192,31 @@ class NavierStokesProblem:
         u, p = x[:n_u], x[n_u:]
         Fu = self._apply_scalar(self._scalar_operator(u, m, a), u) + self.BT.T @ p - rhs
         Fu[con.dofs] = 0.0
-        Fp = self.BT @ u
-        if orphans is not None:
-            npl = orphans.shape[1]
-            Fp -= np.einsum("cmn,cn->cm", orphans, Fp.reshape(-1, npl)).ravel()
-        return np.concatenate([Fu, Fp])
+        return np.concatenate([Fu, self._continuity(u[:, None], con, orphans)[:, 0]])
+
+    def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: np.ndarray | None) -> np.ndarray:
+        """Continuity residuals ``B u - g(u)`` of velocities ``U (n_u, k)``, (n_p, k).
+
+        The orphaned modes are dropped. In a closed domain (pressure up to a constant) the cells
+        they leave out can carry a net flux ``Q`` of the prescribed velocities (a particle
+        squeezing the fluid of a cell it shares with a wall or another particle), and the
+        remaining equations then have no solution. ``g`` spreads ``Q`` over the constant modes of
+        the other cells in proportion to their area (a uniform source of total ``Q``), which makes
+        them compatible; ``Q`` depends on the constrained values of ``u`` only.
+        """
+        Fp = self.BT @ U
+        if orphans is None:
+            return Fp
+        npl = orphans.shape[1]
+        project = lambda F: F - np.einsum("cmn,cnk->cmk", orphans, F.reshape(-1, npl, F.shape[1])).reshape(F.shape)
+        Fp = project(Fp)
+        if self.mean_weights is not None:
+            Uc = np.zeros_like(U)
+            Uc[con.dofs] = U[con.dofs]
+            Q = project(self.BT @ Uc)[::npl].sum(axis=0)  # (k,)
+            w = self.mean_weights[::npl] * (1.0 - orphans[:, 0, 0])
+            Fp[::npl] -= np.outer(w / w.sum(), Q)
+        return Fp
 
     def orphans(self, con: DirichletConstraints) -> np.ndarray | None:
         """Pressure modes that no free velocity sees under the constraints ``con``."""
@@ -279,25 +299,31 @@ class NavierStokesProblem:
     def lifting_response(self, x: np.ndarray, liftings: np.ndarray) -> np.ndarray:
         """How the solution of the last :meth:`solve` responds to changed constraint values.
 
-        ``liftings (k, dim * n_v)`` are velocity fields that are non-zero only on constrained DOFs
-        (e.g. a unit rigid-body motion on a particle's nodes). Each response ``dx = w + z`` solves
-        the last Newton linearisation ``J dx = 0`` with ``dx = w`` on the constrained DOFs: ``z``
-        vanishes there and solves ``J z = -J w``. ``J w`` is the central difference of the residual
-        at ``x``, exact because the residual is at most quadratic in ``x``. The factorisation of
-        the last Newton step is reused (a Jacobian one iteration old, good enough for the
-        coupling iteration it serves). Returns (k, n_dofs) float64.
+        ``liftings (dim * n_v, k)`` (dense or sparse) are velocity fields, one per column, that
+        are non-zero only on constrained DOFs (e.g. a unit rigid-body motion on a particle's nodes,
+        :func:`~fbmflow.coupling.rigid_liftings`). Each response ``dx = w + z`` solves
+        the Newton linearisation ``J dx = 0`` with ``dx = w`` on the constrained DOFs: ``z``
+        vanishes there and solves ``J z = -J w``. ``J w`` for all ``k`` liftings at once is the
+        product with the Jacobian assembled at ``x`` (one assembly, constrained rows zeroed and
+        orphaned continuity modes dropped as in :meth:`residual`); the factorisation of the last
+        Newton step is reused (a Jacobian one iteration old, good enough for the coupling
+        iteration it serves). Returns (k, n_dofs) float64.
         """
         m, a, con, solve = self._linearisation
-        zero = np.zeros(self.space.n_u)
-        orphans = self.orphans(con)
-        out = np.zeros((len(liftings), self.n_dofs))
-        for k, w in enumerate(liftings):
-            wx = np.concatenate([w, np.zeros(self.n_dofs - w.size)])
-            Jw = 0.5 * (self.residual(x + wx, m, a, zero, con, orphans)
-                        - self.residual(x - wx, m, a, zero, con, orphans))
-            du, dp, _ = solve(-Jw[:self.space.n_u], -Jw[self.space.n_u:])
-            out[k] = wx + np.concatenate([du, dp])
-        return out
+        n_u = self.space.n_u
+        none = DirichletConstraints(np.zeros(0, dtype=np.int64), np.zeros(0))
+        J = self.fine.system(x[:n_u], m, a, self.rho, self.mu, self.convection, con=none, own_buffer=True)
+        W = sp.csc_matrix(liftings)  # (n_u, k)
+        Ju = np.asarray((J.A @ W).todense())
+        Ju[con.dofs] = 0.0
+        Wd = W.toarray()
+        Jp = self._continuity(Wd, con, self.orphans(con))
+        if getattr(solve, "multiple_rhs", False):
+            du, dp, _ = solve(-Ju, -Jp)
+        else:
+            cols = [solve(-Ju[:, k], -Jp[:, k])[:2] for k in range(W.shape[1])]
+            du, dp = np.column_stack([c[0] for c in cols]), np.column_stack([c[1] for c in cols])
+        return np.vstack([Wd + du, dp]).T
 
     def solve_steady(self, x0: np.ndarray | None = None, t: float = 0.0):
         """Steady solution (Newton from ``x0``, default the zero flow). Returns x, NewtonReport."""

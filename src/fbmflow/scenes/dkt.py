@@ -12,7 +12,8 @@ Setups (``setup``):
   curves (digitised) put the kiss at t = 0.175 s and the tumble at t = 0.26 s.
 
 Quantities: ``t_kiss``, the first time the centres come closer than ``kiss_distance`` diameters
-(1.05 by default, the separation the reference curves show during the kiss); ``t_tumble``, the
+(1.05 by default, the separation the reference curves show during the kiss) plus the contact
+skin (half a cell by default: hard contact stops the surfaces that far apart); ``t_tumble``, the
 first time the trailing disk's centre passes below the leading one's; time series ``t``,
 ``x_leading``, ``y_leading``, ``x_trailing``, ``y_trailing``, ``v_leading``, ``v_trailing``.
 Hard contact (restitution 0) keeps the disks apart and off the walls.
@@ -144,7 +145,8 @@ class DKT2D(Scene):
         t, X, V = np.array(t), np.array(X), np.array(V)
         d = s["d"]
         distance = np.linalg.norm(X[:, 0] - X[:, 1], axis=1) / d
-        q = {"t_kiss": _first_crossing(t, distance - c.kiss_distance),
+        skin = 0.0 if contact is None else contact.skin / d  # the contact distance keeps them this far apart
+        q = {"t_kiss": _first_crossing(t, distance - c.kiss_distance - skin),
              "t_tumble": _first_crossing(t, X[:, 1, 1] - X[:, 0, 1]),  # trailing below leading
              "min_distance_over_d": float(distance.min()),
              "cells_per_diameter": float(d / mesh.spacing[0]),

@@ -15,13 +15,15 @@ from .channel import Channel2D, Channel3D
 from .dfg import DFG2D1
 from .dkt import DKT2D
 from .glowinski import GlowinskiFreeFall
+from .sedimentation import FluidizedBed2D, Sedimentation2D, Sedimentation3D
 from .taylor_green import TaylorGreen2D
 from .tencate import TenCate
 
 log = logging.getLogger(__name__)
 
 SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(),
-                                              GlowinskiFreeFall(), TenCate(), DKT2D())}
+                                              GlowinskiFreeFall(), TenCate(), DKT2D(),
+                                              Sedimentation2D(), Sedimentation3D(), FluidizedBed2D())}
 
 
 def get_scene(name: str) -> Scene:

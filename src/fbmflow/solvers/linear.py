@@ -76,7 +76,7 @@ class SaddlePointSystem:
         p = x[self.n_u:]
         const = np.zeros(self.n_p)
         const[::self.space.dim + 1] = 1.0  # the constant pressure: mean DOFs of P1disc
-        p -= const * (self.mean_weights @ p) / (self.mean_weights @ const)
+        p -= np.multiply.outer(const, self.mean_weights @ p) / (self.mean_weights @ const)
 
     def matrix(self, bordered: bool = True) -> sp.csc_matrix:
         """The assembled system matrix, CSC, bordered by ``mean_weights`` unless ``bordered`` is
@@ -146,7 +146,7 @@ def factorize(system: SaddlePointSystem):
     coupling = K_free[:, ~free]
     lu = spla.splu(K_free[:, free].tocsc(), permc_spec="COLAMD", diag_pivot_thresh=0.01)
 
-    def solve(f, g):
+    def solve(f, g):  # (n_u,), (n_p,) or, for k right-hand sides at once, (n_u, k), (n_p, k)
         x = np.concatenate([f, g])
         if pinned is not None:
             x[pinned] = 0.0
@@ -189,6 +189,7 @@ class DirectSolver:
             setup = pending.pop() if pending else 0.0
             return u, p, LinearReport(self.name, setup + time.perf_counter() - t1, iterations=1,
                                       setup_time_s=setup)
+        solve.multiple_rhs = True  # f (n_u, k) and g (n_p, k) solve k systems in one call
         return solve
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
