@@ -195,28 +195,13 @@ class NavierStokesProblem:
         return np.concatenate([Fu, self._continuity(u[:, None], con, orphans)[:, 0]])
 
     def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: np.ndarray | None) -> np.ndarray:
-        """Continuity residuals ``B u - g(u)`` of velocities ``U (n_u, k)``, (n_p, k).
-
-        The orphaned modes are dropped. In a closed domain (pressure up to a constant) the cells
-        they leave out can carry a net flux ``Q`` of the prescribed velocities (a particle
-        squeezing the fluid of a cell it shares with a wall or another particle), and the
-        remaining equations then have no solution. ``g`` spreads ``Q`` over the constant modes of
-        the other cells in proportion to their area (a uniform source of total ``Q``), which makes
-        them compatible; ``Q`` depends on the constrained values of ``u`` only.
-        """
+        """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
+        dropped, (n_p, k)."""
         Fp = self.BT @ U
         if orphans is None:
             return Fp
         npl = orphans.shape[1]
-        project = lambda F: F - np.einsum("cmn,cnk->cmk", orphans, F.reshape(-1, npl, F.shape[1])).reshape(F.shape)
-        Fp = project(Fp)
-        if self.mean_weights is not None:
-            Uc = np.zeros_like(U)
-            Uc[con.dofs] = U[con.dofs]
-            Q = project(self.BT @ Uc)[::npl].sum(axis=0)  # (k,)
-            w = self.mean_weights[::npl] * (1.0 - orphans[:, 0, 0])
-            Fp[::npl] -= np.outer(w / w.sum(), Q)
-        return Fp
+        return Fp - np.einsum("cmn,cnk->cmk", orphans, Fp.reshape(-1, npl, Fp.shape[1])).reshape(Fp.shape)
 
     def orphans(self, con: DirichletConstraints) -> np.ndarray | None:
         """Pressure modes that no free velocity sees under the constraints ``con``."""
