@@ -211,7 +211,7 @@ class ContactParams:
     substeps: int = param(10, "contact sub-steps per fluid step", minimum=1)
     iterations: int = param(50, "projected Gauss-Seidel sweeps per sub-step at most", minimum=1)
     broadphase: str = param("grid", "broadphase", choices=("brute-force", "grid", "hierarchical-grid"))
-    skin_cells: float = param(0.5, "contact distance in mesh cells: the fictitious boundary needs free "
+    skin_cells: float = param(1.0, "contact distance in mesh cells: the fictitious boundary needs free "
                               "fluid nodes between surfaces", nonnegative=True)
 
     def make(self, mesh, walls=None):

@@ -13,7 +13,7 @@ Setups (``setup``):
 
 Quantities: ``t_kiss``, the first time the centres come closer than ``kiss_distance`` diameters
 (1.05 by default, the separation the reference curves show during the kiss) plus the contact
-skin (half a cell by default: hard contact stops the surfaces that far apart); ``t_tumble``, the
+skin (one cell by default: hard contact stops the surfaces that far apart); ``t_tumble``, the
 first time the trailing disk's centre passes below the leading one's; time series ``t``,
 ``x_leading``, ``y_leading``, ``x_trailing``, ``y_trailing``, ``v_leading``, ``v_trailing``.
 Hard contact (restitution 0) keeps the disks apart and off the walls.
