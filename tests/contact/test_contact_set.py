@@ -142,3 +142,47 @@ def test_warm_start_state_round_trip_and_validation():
 def test_bad_settings_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
         ContactSet(**kwargs)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_lubrication_slows_an_approach_as_the_film_law_says(dim):
+    """Two equal balls approaching head-on with only the film force: the relative velocity as a
+    function of the gap follows m* du/dg = -c(g) (m* the reduced mass), integrated in closed form
+    (3D) or by quadrature (2D)."""
+    from scipy.integrate import quad
+
+    from fbmflow.contact import Lubrication
+
+    R, mu, delta = 0.5, 0.05, 0.5
+    lub = Lubrication(mu, delta, 1e-6)
+    p = Particles.at_rest([Ball(R, dim)] * 2, 1.0, np.array([[0.0] * dim, [1.0 + 0.4] + [0.0] * (dim - 1)]))
+    u0 = 1.0
+    p.velocity[0, 0], p.velocity[1, 0] = u0 / 2, -u0 / 2
+    cs = ContactSet(lubrication=lub)
+    m_red = p.mass[0] / 2
+    zero = np.zeros(2) if dim == 2 else np.zeros((2, 3))
+    for _ in range(4000):
+        p, _ = cs.substep(p, np.zeros((2, dim)), zero, 2e-4)
+        gap = p.position[1, 0] - p.position[0, 0] - 2 * R
+        u = p.velocity[0, 0] - p.velocity[1, 0]  # closing speed
+        if gap < 0.05:
+            break
+    assert 0.0 < gap < 0.05
+    Rs = R / 2
+    c = lambda g: lub.coefficient(np.array([g]), np.array([R]), np.array([R]), dim)[0]
+    expected = u0 - quad(c, gap, 0.4, limit=200)[0] / m_red
+    assert expected > 0.0 and u == pytest.approx(expected, rel=0.01)
+    if dim == 3:  # closed form of the same integral
+        closed = u0 - 6 * np.pi * mu * Rs**2 * (np.log(0.4 / gap) - (0.4 - gap) / delta) / m_red
+        assert u == pytest.approx(closed, rel=0.01)
+
+
+def test_lubrication_stops_a_slow_approach_before_contact():
+    from fbmflow.contact import Lubrication
+
+    p = Particles.at_rest([Ball(0.5, 3)] * 2, 1.0, [[0.0, 0.0, 0.0], [1.2, 0.0, 0.0]])
+    p.velocity[0, 0] = 0.1
+    cs = ContactSet(lubrication=Lubrication(0.05, 0.5, 1e-6))
+    q, _ = _run(cs, p, np.zeros((2, 3)), 1e-3, 3000)
+    gap = q.position[1, 0] - q.position[0, 0] - 1.0
+    assert 0.0 < gap < 0.2 and abs(q.velocity[0, 0] - q.velocity[1, 0]) < 0.005  # from 0.1

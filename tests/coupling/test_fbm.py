@@ -142,7 +142,7 @@ def test_dfg_2d1_drag_converges_in_the_level():
     assert errors[2] < 0.02, errors
 
 
-def test_particle_at_the_contact_skin_from_a_wall_still_solves():
+def test_particle_half_a_cell_from_a_wall_of_a_closed_box_still_solves():
     """A disk (3.2 cells/d) driven into the bottom wall of a closed box, half a cell (half the default
     contact skin) from it: the cells it shares with the wall lose continuity modes, and the Stokes
     solve still converges with the remaining equations satisfied. (At 0.4 cells it stagnates: the

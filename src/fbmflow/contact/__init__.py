@@ -6,8 +6,9 @@ alternative.
 """
 from .broadphase import BROADPHASES, candidate_pairs, plane_candidates
 from .contact_set import ContactReport, ContactSet
+from .lubrication import Lubrication
 from .narrowphase import Contacts, Planes
 from .repulsion import Repulsion
 
 __all__ = ["BROADPHASES", "candidate_pairs", "plane_candidates", "ContactReport", "ContactSet",
-           "Contacts", "Planes", "Repulsion"]
+           "Contacts", "Lubrication", "Planes", "Repulsion"]

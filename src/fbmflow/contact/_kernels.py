@@ -145,3 +145,17 @@ def project_positions(ci, cj, n, gap, goal, inv_m, X, sweeps, slop):
         if change <= 1e-15 * (1.0 + worst):
             break
     return worst
+
+
+@njit
+def lubricate(ci, cj, D, Ai, Aj, Bi, Bj, K, c, h, inv_m, v, w):
+    """Implicit lubrication damping, one Gauss–Seidel sweep: per contact with coefficient
+    ``c > 0`` [N s/m] the normal impulse ``lambda = -c h u / (1 + c h k)`` (backward Euler of
+    ``m* du/dt = -c u`` for the pair's relative normal velocity ``u``). Updates ``v, w``."""
+    for k in range(ci.shape[0]):
+        if c[k] <= 0.0:
+            continue
+        i, j = ci[k], cj[k]
+        u = _velocity(v, w, i, j, D[k, 0], Ai[k, 0], Aj[k, 0])
+        lam = -c[k] * h * u / (1.0 + c[k] * h * K[k, 0])
+        _apply(v, w, inv_m, i, j, D[k, 0], Bi[k, 0], Bj[k, 0], lam)

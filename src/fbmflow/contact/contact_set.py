@@ -13,6 +13,8 @@ One contact sub-step of length ``h`` (:meth:`ContactSet.substep`):
    *collision*, ``u_n < -u_threshold`` and ``g + h u_n < 0`` (it would arrive within the
    sub-step), ``u* = -e u_n`` with restitution ``e``, so an elastic pair leaves with its approach
    speed reversed exactly and an inelastic one with none;
+   With a lubrication correction, the film force of close pairs damps their approach
+   implicitly here (:mod:`fbmflow.contact.lubrication`).
 4. **warm start** with the impulses stored for the same pair ``(i, j)`` at the last sub-step;
 5. **iterate**: PGS sweeps on the LCP ``lambda >= 0, u_n - u* >= 0, lambda (u_n - u*) = 0``
    with Coulomb friction ``|lambda_t| <= mu lambda_n`` (accumulated impulses clamped);
@@ -111,14 +113,16 @@ class ContactSet:
     slop : overlap the position projection leaves alone [m]
     projection_sweeps : Gauss–Seidel sweeps of the position projection at most
     skin : contact distance [m]: surfaces touch when their gap is ``skin`` (0: at the true
-        surfaces). Coupled to a fluid on a fixed mesh, a skin of a fraction of a mesh cell keeps a
-        layer of free fluid nodes between surfaces, which the fictitious boundary method needs.
+        surfaces). Coupled to a fluid on a fixed mesh, a skin of a mesh cell keeps a layer of
+        free fluid nodes between surfaces, which the fictitious boundary method needs.
+    lubrication : :class:`~fbmflow.contact.lubrication.Lubrication` or None, the film force
+        below the resolved gap, applied implicitly before the contact impulses of each sub-step
     """
 
     def __init__(self, planes: Planes | None = None, restitution: float = 0.0, friction: float = 0.0,
                  iterations: int = 50, tol: float = 1e-8, restitution_threshold: float | None = None,
                  broadphase: str = "grid", slop: float = 0.0, projection_sweeps: int = 20,
-                 skin: float = 0.0):
+                 skin: float = 0.0, lubrication=None):
         if not 0.0 <= restitution <= 1.0:
             raise ValueError(f"restitution must lie in [0, 1], got {restitution}")
         if friction < 0 or (restitution_threshold or 0.0) < 0 or slop < 0 or skin < 0:
@@ -137,6 +141,7 @@ class ContactSet:
         self.slop = float(slop)
         self.projection_sweeps = int(projection_sweeps)
         self.skin = float(skin)
+        self.lubrication = lubrication
         # warm-start state: sorted pair keys, normal impulses, friction impulses (world vectors)
         self._stored_keys = np.zeros(0, dtype=np.int64)
         self._stored_normal = np.zeros(0)
@@ -203,6 +208,13 @@ class ContactSet:
         keys = contacts.keys(0 if self.planes is None else self.planes.n)
         return _Rows(contacts, keys, ci, cj, D, Ai, Aj, Bi, Bj, K, target, goal, np.zeros((len(ci), 3)))
 
+    def lubricate(self, p: Particles, rows: _Rows, v, w, h: float, inv_m) -> None:
+        """Implicit lubrication damping of the approach of close pairs (before the warm start)."""
+        R = p.bounding_radius
+        R_j = np.where(rows.cj >= 0, R[np.maximum(rows.cj, 0)], np.inf)
+        c = self.lubrication.coefficient(rows.contacts.gap + self.skin, R[rows.ci], R_j, p.dim)
+        _kernels.lubricate(rows.ci, rows.cj, rows.D, rows.Ai, rows.Aj, rows.Bi, rows.Bj, rows.K, c, h, inv_m, v, w)
+
     def warm_start(self, rows: _Rows, v, w, inv_m) -> None:
         """Start from the impulses of the same pairs at the last sub-step (stage 4); the friction
         impulse is kept as a world vector and projected on the new tangents."""
@@ -257,7 +269,10 @@ class ContactSet:
         # every pair that may touch within the sub-step, and the near neighbours the position
         # projection may push a particle into
         start = time.perf_counter()
-        contacts = self.detect(p, 2.0 * h * speed + 0.1 * float(p.bounding_radius.min()))
+        margin = 2.0 * h * speed + 0.1 * float(p.bounding_radius.min())
+        if self.lubrication is not None:
+            margin = max(margin, self.lubrication.range_ - self.skin)
+        contacts = self.detect(p, margin)
         report = ContactReport(substeps=1, contacts=contacts.m, detect_s=time.perf_counter() - start)
         start = time.perf_counter()
         dX = h * v
@@ -266,6 +281,8 @@ class ContactSet:
             if threshold is None:
                 threshold = 2.0 * h * float(np.linalg.norm(np.where(free[:, None], lin_acc, 0.0), axis=1).max(initial=0.0))
             rows = self.prepare(p, contacts, v, w, h, inv_m, inv_I, threshold)
+            if self.lubrication is not None:
+                self.lubricate(p, rows, v, w, h, inv_m)
             self.warm_start(rows, v, w, inv_m)
             report.sweeps, report.history = self.iterate(rows, v, w, inv_m)
             report.residual = float(report.history[-1]) if len(report.history) else 0.0
