@@ -213,17 +213,28 @@ class ContactParams:
     broadphase: str = param("grid", "broadphase", choices=("brute-force", "grid", "hierarchical-grid"))
     skin_cells: float = param(1.0, "contact distance in mesh cells: the fictitious boundary needs free "
                               "fluid nodes between surfaces", nonnegative=True)
+    lubrication: bool = param(False, "lubrication correction for gaps below lubrication_range_cells")
+    lubrication_range_cells: float = param(2.0, "gap in mesh cells below which the film force acts "
+                                           "(the flow resolves larger gaps); it saturates at 1 % of it",
+                                           positive=True)
 
-    def make(self, mesh, walls=None):
+    def make(self, mesh, walls=None, viscosity: float | None = None):
         """The :class:`~fbmflow.contact.ContactSet` with the walls of ``mesh`` (all faces, or the
-        ``(axis, side)`` pairs in ``walls``); None when off."""
+        ``(axis, side)`` pairs in ``walls``); None when off. ``viscosity``: the fluid's, for the
+        lubrication correction."""
         if not self.enabled:
             return None
-        from .contact import ContactSet, Planes
+        from .contact import ContactSet, Lubrication, Planes
 
+        h = float(max(mesh.spacing))
+        lubrication = None
+        if self.lubrication:
+            if viscosity is None:
+                raise ParamError("contact.lubrication needs the fluid viscosity; this scene does not support it")
+            lubrication = Lubrication(viscosity, self.lubrication_range_cells * h, 0.01 * self.lubrication_range_cells * h)
         return ContactSet(Planes.box(mesh.lower, mesh.upper, walls), restitution=self.restitution,
                           friction=self.friction, iterations=self.iterations, broadphase=self.broadphase,
-                          skin=self.skin_cells * float(max(mesh.spacing)))
+                          skin=self.skin_cells * h, lubrication=lubrication)
 
 
 @dataclasses.dataclass(frozen=True)

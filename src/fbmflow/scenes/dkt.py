@@ -121,7 +121,7 @@ class DKT2D(Scene):
         disk = Ball(s["d"] / 2, 2)
         particles = Particles.at_rest([disk, disk], s["rho_s"], centres)
         linear = params.solver.linear_solver()
-        contact = params.contact.make(mesh)
+        contact = params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"])
         sim = Simulation(mesh, s["nu"] * s["rho_f"], {t: NoSlip() for t in mesh.tags}, particles,
                          [0.0, -c.gravity], density=s["rho_f"], scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,

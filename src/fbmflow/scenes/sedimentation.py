@@ -191,7 +191,7 @@ class _ManyParticles(Scene):
         gravity = np.zeros(self.dim)
         gravity[-1] = -f.gravity
         linear = params.solver.linear_solver()
-        contact = params.contact.make(mesh)
+        contact = params.contact.make(mesh, viscosity=f.viscosity)
         sim = Simulation(mesh, f.viscosity, self.boundary(mesh, params), particles, gravity,
                          density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
