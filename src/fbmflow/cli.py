@@ -1,11 +1,13 @@
 """The ``fbmflow`` command line.
 
     fbmflow scenes
-    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--quiet] [--no-plot]
+    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--checkpoint-every N]
+                      [--quiet] [--no-plot]
+    fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
-User errors exit with status 2 and one line on stderr; a run that fails to converge exits with
-status 1 and a message naming a remedy.
+User errors (and unusable checkpoints) exit with status 2 and one line on stderr; a run that fails
+to converge exits with status 1 and a message naming a remedy.
 """
 from __future__ import annotations
 
@@ -43,6 +45,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, default=None, help="output directory (default fbmflow-out/SCENE)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     run.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
+    run.add_argument("--checkpoint-every", type=int, default=0, metavar="N",
+                     help="time-dependent scenes: write DIR/checkpoint.h5 every N steps (0: never)")
+    resume = sub.add_parser("resume", help="continue a stopped or killed run from its checkpoint")
+    resume.add_argument("directory", type=Path, help="the --out directory of the run")
+    resume.add_argument("--quiet", action="store_true", help="no progress output")
+    resume.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
     plot = sub.add_parser("plot", help="redraw the plot of a finished run from its summary.json")
     plot.add_argument("directory", type=Path)
     return p
@@ -68,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
                         format="%(message)s", stream=sys.stderr)
-    from .scenes import SCENES, get_scene, load_scene, run_scene
+    from .io import CheckpointError
+    from .scenes import SCENES, get_scene, load_scene, resume_scene, run_scene
 
     try:
         if args.command == "scenes":
@@ -84,15 +93,23 @@ def main(argv: list[str] | None = None) -> int:
             path = args.directory / f"{scene.name}.png"
             print(path if scene.plot(summary, path) else f"scene {scene.name} has no plot")
             return 0
-        scene, params, level = load_scene(args.scene, args.level, args.overrides)
-        out = args.out or Path("fbmflow-out") / scene.name
-        log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
-        summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot)
+        if args.command == "resume":
+            out = args.directory
+            log.info("fbmflow %s: resuming %s", __version__, out)
+            summary = resume_scene(out, _progress(args.quiet), plot=not args.no_plot)
+        else:
+            if args.checkpoint_every < 0:
+                raise ParamError(f"--checkpoint-every must be >= 0, got {args.checkpoint_every}")
+            scene, params, level = load_scene(args.scene, args.level, args.overrides)
+            out = args.out or Path("fbmflow-out") / scene.name
+            log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
+            summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
+                                checkpoint_every=args.checkpoint_every)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations; summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], out / "summary.json")
         return 0
-    except ParamError as err:
+    except (ParamError, CheckpointError) as err:
         sys.stderr.write(f"fbmflow: error: {err}\n")
         return 2
     except ConvergenceError as err:

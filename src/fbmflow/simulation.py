@@ -149,6 +149,38 @@ class Simulation:
         new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
         return new
 
+    def state(self) -> dict:
+        """Everything a restart needs, as arrays and numbers: flow ``x``, time, step count, the
+        particles' positions, velocities, orientations, angular velocities, densities, fixed
+        flags and the contact warm-start impulses. (The shapes come from the scene.)"""
+        p = self.particles
+        out = {"x": self.x.copy(), "t": self.t, "step_count": self.step_count,
+               "position": p.position.copy(), "velocity": p.velocity.copy(),
+               "orientation": p.orientation.copy(), "angular_velocity": p.angular_velocity.copy(),
+               "density": p.density.copy(), "fixed": p.fixed.copy()}
+        if self.contact is not None:
+            out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
+        return out
+
+    def set_state(self, state: dict) -> None:
+        """Restore :meth:`state`; ValueError when it does not fit this simulation."""
+        p = self.particles
+        if np.shape(state["x"]) != self.x.shape or np.shape(state["position"]) != p.position.shape:
+            raise ValueError(f"state of {np.shape(state['position'])[0]} particles and "
+                             f"{np.size(state['x'])} unknowns does not fit this simulation "
+                             f"({p.n} particles, {self.x.size} unknowns)")
+        if (self.contact is not None) != ("contact_keys" in state):
+            raise ValueError("the state and this simulation disagree on hard contact")
+        self.x = np.array(state["x"], dtype=float)
+        self.t, self.step_count = float(state["t"]), int(state["step_count"])
+        for name in ("position", "velocity", "orientation", "angular_velocity", "density"):
+            setattr(p, name, np.array(state[name], dtype=float))
+        p.fixed = np.array(state["fixed"], dtype=bool)
+        if self.contact is not None:
+            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items() if k.startswith("contact_")})
+        self._owner_of = None
+        self.flow.forget_linearisation()
+
     def step(self, dt: float) -> StepReport:
         """Advance flow and particles over ``dt``; ConvergenceError names the step and time."""
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"

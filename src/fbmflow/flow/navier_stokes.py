@@ -281,6 +281,11 @@ class NavierStokesProblem:
             self._linearisation = (m, a, con, last[3])
         return self._linearisation[3]
 
+    def forget_linearisation(self) -> None:
+        """Drop the stored factorisation: the next solve starts with a fresh Jacobian, as after
+        a restart (checkpoints call this so that a resumed run repeats the same iterations)."""
+        self._linearisation = None
+
     def lifting_response(self, x: np.ndarray, liftings: np.ndarray) -> np.ndarray:
         """How the solution of the last :meth:`solve` responds to changed constraint values.
 

@@ -11,6 +11,8 @@ import logging
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+import numpy as np
+
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, float | None], None]  # (step, n_steps, time or None if steady)
@@ -46,3 +48,100 @@ class Scene:
     def plot(self, summary: dict, path) -> bool:
         """Save a PNG of the key curves of a finished run; False when the scene has none."""
         return False
+
+
+@dataclass
+class Setup:
+    """A built time-dependent scene: the simulation, its time step and number of steps."""
+
+    sim: Any
+    dt: float
+    n_steps: int
+
+
+@dataclass
+class RunFiles:
+    """Where a time-dependent run keeps its files (None: no files) and how often it checkpoints."""
+
+    out: Any = None
+    checkpoint_every: int = 0
+    resume: bool = False
+    meta: dict = field(default_factory=dict)  # scene, level, params, fbmflow_version
+
+
+class SimulationScene(Scene):
+    """A scene whose run is the time loop of a :class:`~fbmflow.simulation.Simulation`.
+
+    Subclasses give :meth:`build`, :meth:`observe` (one row of named time series per step, and at
+    ``t = 0``), :meth:`quantities` and optionally :meth:`stop`. The loop here writes the run data
+    (``run.h5``), checkpoints every ``checkpoint_every`` steps (``checkpoint.h5``), and resumes
+    from the checkpoint: the resumed run repeats the uninterrupted one's iterations, because the
+    stored Newton factorisation is dropped at every checkpoint in both.
+    """
+
+    def build(self, params, level: int) -> Setup:
+        raise NotImplementedError
+
+    def observe(self, params, sim) -> dict[str, float]:
+        raise NotImplementedError
+
+    def stop(self, params, row: dict) -> bool:
+        return False
+
+    def quantities(self, params, series: dict[str, list], sim) -> dict:
+        raise NotImplementedError
+
+    def run(self, params, level: int, progress: Progress | None = None, files: RunFiles | None = None) -> SceneResult:
+        from pathlib import Path
+
+        from ..io import RunData, load_checkpoint, save_checkpoint
+
+        files = files or RunFiles()
+        setup = self.build(params, level)
+        sim = setup.sim
+        series = {k: [v] for k, v in self.observe(params, sim).items()}
+        newton_its = 0
+        out = Path(files.out) if files.out is not None else None
+        data = None
+        if files.resume:
+            state, _, extra = load_checkpoint(out / "checkpoint.h5", expect=files.meta)
+            sim.set_state(state)
+            series, newton_its = extra["series"], extra["newton_iterations"]
+            log.info("resumed from step %d (t = %.6g)", sim.step_count, sim.t)
+        if out is not None:
+            data = RunData(out / "run.h5", files.meta, resume_step=sim.step_count if files.resume else None)
+            if not files.resume:
+                data.append(self._row(sim, None))
+        for k in range(sim.step_count + 1, setup.n_steps + 1):
+            rep = sim.step(setup.dt)
+            newton_its += rep.newton_iterations
+            row = self.observe(params, sim)
+            for key, value in row.items():
+                series[key].append(value)
+            if data is not None:
+                data.append(self._row(sim, rep))
+            if progress:
+                progress(k, setup.n_steps, rep.t)
+            if self.stop(params, row):
+                break
+            if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
+                sim.flow.forget_linearisation()
+                if out is not None:
+                    save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": k},
+                                    {"series": series, "newton_iterations": newton_its})
+        return SceneResult(self.quantities(params, series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
+                           steps=sim.step_count, newton_iterations=newton_its)
+
+    @staticmethod
+    def _row(sim, rep) -> dict:
+        p = sim.particles
+        n, dim = p.position.shape
+        zero = np.zeros((n, dim)), np.zeros((n, 3))
+        return {"step": sim.step_count, "t": sim.t, "position": p.position, "velocity": p.velocity,
+                "orientation": p.orientation, "angular_velocity": p.angular_velocity,
+                "force": rep.force if rep is not None else zero[0],
+                "torque": rep.torque if rep is not None else zero[1],
+                "newton_iterations": rep.newton_iterations if rep is not None else 0,
+                "linear_iterations": rep.linear_iterations if rep is not None else 0,
+                "flow_solves": rep.flow_solves if rep is not None else 0,
+                "contacts": rep.contact.contacts if rep is not None and rep.contact is not None else 0}

@@ -29,7 +29,7 @@ from ..mesh import StructuredMesh
 from ..params import ContactParams, CouplingParams, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
-from .base import Scene, SceneResult
+from .base import Setup, SimulationScene
 
 # setup: (box (width, height) [cm], diameter [cm], rho_s, rho_f, nu [cm^2/s], leading centre,
 # trailing centre, (leading, trailing) x offsets in units of `offset`, cells per cm at level 0)
@@ -95,7 +95,7 @@ def _first_crossing(t: np.ndarray, f: np.ndarray) -> float | None:
     return float(t[k - 1] + (t[k] - t[k - 1]) * f[k - 1] / (f[k - 1] - f[k]))
 
 
-class DKT2D(Scene):
+class DKT2D(SimulationScene):
     name = "dkt-2d"
     description = "drafting, kissing and tumbling of two settling disks (Glowinski / Uhlmann set-ups)"
     Params = DktParams
@@ -108,20 +108,18 @@ class DKT2D(Scene):
         n = s["cells_per_cm"] * 2**level
         return StructuredMesh.box((int(s["box"][0] * n), int(s["box"][1] * n)), upper=s["box"])
 
-    def run(self, params: DktParams, level: int, progress=None) -> SceneResult:
+    def build(self, params: DktParams, level: int) -> Setup:
         c = params.case
         s = SETUPS[c.setup]
         default = DEFAULTS[c.setup]
         dt = params.time.dt or default["dt"]
         t_end = params.time.t_end or default["t_end"]
-        offset = c.offset or default["offset"]
         mesh = self.mesh(c.setup, level)
         centres = np.array([s["leading"], s["trailing"]], dtype=float)
-        centres[:, 0] += offset * np.array(s["shift"])
+        centres[:, 0] += (c.offset or default["offset"]) * np.array(s["shift"])
         disk = Ball(s["d"] / 2, 2)
         particles = Particles.at_rest([disk, disk], s["rho_s"], centres)
         linear = params.solver.linear_solver()
-        contact = params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"])
         sim = Simulation(mesh, s["nu"] * s["rho_f"], {t: NoSlip() for t in mesh.tags}, particles,
                          [0.0, -c.gravity], density=s["rho_f"], scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
@@ -129,36 +127,34 @@ class DKT2D(Scene):
                          coupling_tol=params.coupling.tol,
                          max_subiterations=params.coupling.max_subiterations,
                          repulsion=params.repulsion.make(mesh),
-                         contact=contact, contact_substeps=params.contact.substeps)
+                         contact=params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"]),
+                         contact_substeps=params.contact.substeps)
         n_steps = max(1, int(np.ceil(t_end / dt - 1e-9)))
-        dt = t_end / n_steps
-        t, X, V = [0.0], [centres.copy()], [np.zeros((2, 2))]
-        newton_its = 0
-        for k in range(1, n_steps + 1):
-            rep = sim.step(dt)
-            newton_its += rep.newton_iterations
-            t.append(rep.t)
-            X.append(rep.position.copy())
-            V.append(rep.velocity.copy())
-            if progress:
-                progress(k, n_steps, rep.t)
-        t, X, V = np.array(t), np.array(X), np.array(V)
-        d = s["d"]
-        distance = np.linalg.norm(X[:, 0] - X[:, 1], axis=1) / d
-        skin = 0.0 if contact is None else contact.skin / d  # the contact distance keeps them this far apart
+        return Setup(sim, t_end / n_steps, n_steps)
+
+    def observe(self, params: DktParams, sim) -> dict:
+        X, V = sim.particles.position, sim.particles.velocity
+        return {"t": sim.t, "x_leading": float(X[0, 0]), "y_leading": float(X[0, 1]),
+                "x_trailing": float(X[1, 0]), "y_trailing": float(X[1, 1]),
+                "v_leading": float(V[0, 1]), "v_trailing": float(V[1, 1])}
+
+    def quantities(self, params: DktParams, series: dict, sim) -> dict:
+        c = params.case
+        d = SETUPS[c.setup]["d"]
+        t = np.array(series["t"])
+        lead = np.column_stack([series["x_leading"], series["y_leading"]])
+        trail = np.column_stack([series["x_trailing"], series["y_trailing"]])
+        distance = np.linalg.norm(lead - trail, axis=1) / d
+        skin = 0.0 if sim.contact is None else sim.contact.skin / d  # hard contact keeps them this far apart
         q = {"t_kiss": _first_crossing(t, distance - c.kiss_distance - skin),
-             "t_tumble": _first_crossing(t, X[:, 1, 1] - X[:, 0, 1]),  # trailing below leading
+             "t_tumble": _first_crossing(t, trail[:, 1] - lead[:, 1]),  # trailing below leading
              "min_distance_over_d": float(distance.min()),
-             "cells_per_diameter": float(d / mesh.spacing[0]),
-             "t": t.tolist(),
-             "x_leading": X[:, 0, 0].tolist(), "y_leading": X[:, 0, 1].tolist(),
-             "x_trailing": X[:, 1, 0].tolist(), "y_trailing": X[:, 1, 1].tolist(),
-             "v_leading": V[:, 0, 1].tolist(), "v_trailing": V[:, 1, 1].tolist()}
+             "cells_per_diameter": float(d / sim.flow.mesh.spacing[0]), **series}
         for key, ref in REFERENCE.get(c.setup, {}).items():
             q[f"{key}_reference"] = ref
             if q[key] is not None:
                 q[f"{key}_error"] = (q[key] - ref) / ref
-        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=n_steps, newton_iterations=newton_its)
+        return q
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib

@@ -16,7 +16,7 @@ from ..mesh import StructuredMesh
 from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
-from .base import Scene, SceneResult
+from .base import Setup, SimulationScene
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class GlowinskiParams:
                              "inside the 2 x 6 cm box; move it inside")
 
 
-class GlowinskiFreeFall(Scene):
+class GlowinskiFreeFall(SimulationScene):
     name = "glowinski-free-fall"
     description = "2D disk settling in a closed 2 x 6 cm channel (Glowinski et al.)"
     Params = GlowinskiParams
@@ -78,7 +78,7 @@ class GlowinskiFreeFall(Scene):
         n = 2**level
         return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
 
-    def run(self, params: GlowinskiParams, level: int, progress=None) -> SceneResult:
+    def build(self, params: GlowinskiParams, level: int) -> Setup:
         f, pp = params.fluid, params.particle
         mesh = self.mesh(level)
         particles = Particles.at_rest([Ball(pp.diameter / 2, 2)], pp.density, [[pp.x, pp.y]])
@@ -91,18 +91,15 @@ class GlowinskiFreeFall(Scene):
                          max_subiterations=params.coupling.max_subiterations,
                          repulsion=params.repulsion.make(mesh))
         n_steps = params.time.n_steps
-        dt = params.time.t_end / n_steps
-        t, y, v, newton_its = [0.0], [pp.y], [0.0], 0
-        for k in range(1, n_steps + 1):
-            rep = sim.step(dt)
-            newton_its += rep.newton_iterations
-            t.append(rep.t)
-            y.append(float(rep.position[0, 1]))
-            v.append(float(rep.velocity[0, 1]))
-            if progress:
-                progress(k, n_steps, rep.t)
-        speed = np.abs(np.array(v))
-        q = {"max_settling_velocity": float(speed.max()),
-             "max_reynolds_number": float(f.density * speed.max() * pp.diameter / f.viscosity),
-             "final_position": sim.particles.position[0].tolist(), "t": t, "y": y, "v": v}
-        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=n_steps, newton_iterations=newton_its)
+        return Setup(sim, params.time.t_end / n_steps, n_steps)
+
+    def observe(self, params: GlowinskiParams, sim) -> dict:
+        p = sim.particles
+        return {"t": sim.t, "y": float(p.position[0, 1]), "v": float(p.velocity[0, 1])}
+
+    def quantities(self, params: GlowinskiParams, series: dict, sim) -> dict:
+        f, pp = params.fluid, params.particle
+        speed = np.abs(np.array(series["v"]))
+        return {"max_settling_velocity": float(speed.max()),
+                "max_reynolds_number": float(f.density * speed.max() * pp.diameter / f.viscosity),
+                "final_position": sim.particles.position[0].tolist(), **series}

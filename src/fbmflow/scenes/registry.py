@@ -9,7 +9,8 @@ from pathlib import Path
 
 from .. import __version__
 from ..params import ParamError, from_dict, parse_value, set_dotted, to_dict
-from .base import Scene
+from ..io import export_csv
+from .base import RunFiles, Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
 from .dfg import DFG2D1
@@ -79,12 +80,28 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
     return scene, params, level
 
 
-def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True) -> dict:
-    """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary."""
+def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
+              checkpoint_every: int = 0, resume: bool = False) -> dict:
+    """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
+
+    Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
+    (what :func:`resume_scene` needs), the per-step particle data ``run.h5`` and its CSV export
+    ``particles.csv``, and with ``checkpoint_every > 0`` a checkpoint every that many steps;
+    ``resume`` continues from the checkpoint in ``out``.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
     t0 = time.perf_counter()
-    result = scene.run(params, level, progress)
+    if isinstance(scene, SimulationScene):
+        if not resume:
+            (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every}, indent=1))
+        result = scene.run(params, level, progress, RunFiles(out, checkpoint_every, resume, meta))
+        export_csv(out / "run.h5", out / "particles.csv")
+    else:
+        if checkpoint_every or resume:
+            raise ParamError(f"scene {scene.name} has no time loop to checkpoint or resume")
+        result = scene.run(params, level, progress)
     wall = time.perf_counter() - t0
     summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
                "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
@@ -94,3 +111,21 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     if plot and scene.plot(summary, out / f"{scene.name}.png"):
         log.info("plot written to %s", out / f"{scene.name}.png")
     return summary
+
+
+def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
+    """Continue the run in ``out`` (written by :func:`run_scene` with ``checkpoint_every > 0``)
+    from its checkpoint; ParamError (CheckpointError) when there is nothing usable to resume."""
+    out = Path(out)
+    info_path = out / "run.json"
+    if not info_path.is_file():
+        raise ParamError(f"{info_path} not found; give the --out directory of a run started with "
+                         "'fbmflow run ... --checkpoint-every N'")
+    try:
+        info = json.loads(info_path.read_text())
+        scene = get_scene(info["scene"])
+        params = from_dict(scene.Params, info["params"])
+        level, every = int(info["level"]), int(info["checkpoint_every"])
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+        raise ParamError(f"{info_path} is damaged ({err}); start the run again") from None
+    return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True)

@@ -33,7 +33,7 @@ from ..params import (ContactParams, CouplingParams, ParamError, RepulsionParams
                       param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
-from .base import Scene, SceneResult
+from .base import Setup, SimulationScene
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,7 @@ def max_overlap(p: Particles, lower, upper) -> float:
     return max(worst, float(np.max(wall / R[:, None])), 0.0)
 
 
-class _ManyParticles(Scene):
+class _ManyParticles(SimulationScene):
     """Shared set-up and loop of the many-particle scenes."""
 
     dim = 2
@@ -182,45 +182,43 @@ class _ManyParticles(Scene):
         lower[-1], upper[-1] = self.fill[0] * self.box[-1], self.fill[1] * self.box[-1]
         return lattice(pp.count, pp.diameter, lower, upper, pp.seed)
 
-    def run(self, params, level: int, progress=None) -> SceneResult:
+    def build(self, params, level: int) -> Setup:
         f, pp = params.fluid, params.particles
         mesh = self.mesh(level)
         X = self.initial_positions(params)
-        ball = Ball(pp.diameter / 2, self.dim)
-        particles = Particles.at_rest([ball] * pp.count, pp.density, X)
+        particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density, X)
         gravity = np.zeros(self.dim)
         gravity[-1] = -f.gravity
         linear = params.solver.linear_solver()
-        contact = params.contact.make(mesh, viscosity=f.viscosity)
         sim = Simulation(mesh, f.viscosity, self.boundary(mesh, params), particles, gravity,
                          density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol, max_subiterations=params.coupling.max_subiterations,
-                         repulsion=params.repulsion.make(mesh), contact=contact,
+                         repulsion=params.repulsion.make(mesh),
+                         contact=params.contact.make(mesh, viscosity=f.viscosity),
                          contact_substeps=params.contact.substeps)
         n_steps = params.time.n_steps
-        dt = params.time.t_end / n_steps
-        t, mean_v, top = [0.0], [0.0], [self._top(X, pp.diameter)]
-        worst, newton_its = max_overlap(particles, mesh.lower, mesh.upper), 0
-        lo, hi = X[:, -1].min(), X[:, -1].max()
-        for k in range(1, n_steps + 1):
-            rep = sim.step(dt)
-            newton_its += rep.newton_iterations
-            p = sim.particles
-            worst = max(worst, max_overlap(p, mesh.lower, mesh.upper))
-            lo, hi = min(lo, p.position[:, -1].min()), max(hi, p.position[:, -1].max())
-            t.append(rep.t)
-            mean_v.append(float(p.velocity[:, -1].mean()))
-            top.append(self._top(p.position, pp.diameter))
-            if progress:
-                progress(k, n_steps, rep.t)
-        q = {"max_overlap": worst, "min_height": float(lo), "max_height": float(hi),
-             "cells_per_diameter": float(pp.diameter / mesh.spacing[0]),
-             "t": t, "mean_velocity": mean_v, "final_positions": sim.particles.position.tolist()}
+        return Setup(sim, params.time.t_end / n_steps, n_steps)
+
+    def observe(self, params, sim) -> dict:
+        p, mesh = sim.particles, sim.flow.mesh
+        row = {"t": sim.t, "mean_velocity": float(p.velocity[:, -1].mean()),
+               "overlap": max_overlap(p, mesh.lower, mesh.upper),
+               "min_height": float(p.position[:, -1].min()), "max_height": float(p.position[:, -1].max())}
         if self.reports_bed_height:
-            q["bed_height"] = top
-        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=n_steps, newton_iterations=newton_its)
+            row["bed_height"] = self._top(p.position, params.particles.diameter)
+        return row
+
+    def quantities(self, params, series: dict, sim) -> dict:
+        q = {"max_overlap": max(series["overlap"]), "min_height": min(series["min_height"]),
+             "max_height": max(series["max_height"]),
+             "cells_per_diameter": float(params.particles.diameter / sim.flow.mesh.spacing[0]),
+             "t": series["t"], "mean_velocity": series["mean_velocity"],
+             "final_positions": sim.particles.position.tolist()}
+        if self.reports_bed_height:
+            q["bed_height"] = series["bed_height"]
+        return q
 
     @staticmethod
     def _top(X: np.ndarray, d: float) -> float:

@@ -21,7 +21,7 @@ from ..mesh import StructuredMesh
 from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
-from .base import Scene, SceneResult
+from .base import Setup, SimulationScene
 from .data import tencate2002
 
 CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
@@ -97,7 +97,7 @@ def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0)
     return float(np.max(np.abs(sim - ref[sel, 1]) / ref[sel, 1])) if sel.any() else float("nan")
 
 
-class TenCate(Scene):
+class TenCate(SimulationScene):
     name = "ten-cate"
     description = "3D sphere settling in a closed box, ten Cate et al. (2002) E1-E4"
     Params = TenCateParams
@@ -111,7 +111,7 @@ class TenCate(Scene):
             return StructuredMesh.box((10 * n, 10 * n, 32 * n), lower=(0.05, 0.05, 0.0), upper=tuple(BOX))
         return StructuredMesh.box((20 * n, 20 * n, 32 * n), upper=tuple(BOX))
 
-    def run(self, params: TenCateParams, level: int, progress=None) -> SceneResult:
+    def build(self, params: TenCateParams, level: int) -> Setup:
         pp, case = params.particle, params.fluid.case
         rho_f, mu = CASES[case]
         quarter = params.domain.symmetry == "quarter"
@@ -119,8 +119,7 @@ class TenCate(Scene):
         bc = {t: NoSlip() for t in mesh.tags}
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
-        d = pp.diameter
-        particles = Particles.at_rest([Ball(d / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
+        particles = Particles.at_rest([Ball(pp.diameter / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
         sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
                          scheme=params.time.scheme, linear_solver=params.solver.linear_solver(),
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
@@ -131,25 +130,24 @@ class TenCate(Scene):
                                                          else None))
         t_end = params.time.t_end or T_END[case]
         n_steps = max(1, int(round(t_end / params.time.dt)))
-        dt = t_end / n_steps
-        t, gap, v, newton_its = [0.0], [(pp.height - d / 2) / d], [0.0], 0
-        for k in range(1, n_steps + 1):
-            rep = sim.step(dt)
-            newton_its += rep.newton_iterations
-            t.append(rep.t)
-            gap.append(float((rep.position[0, 2] - d / 2) / d))
-            v.append(float(-rep.velocity[0, 2]))
-            if progress:
-                progress(k, n_steps, rep.t)
-            if gap[-1] < pp.stop_gap:
-                break
-        u_max = max(v)
-        q = {"max_settling_velocity": u_max,
-             "max_settling_velocity_error": u_max / tencate2002.U_MAX[case] - 1.0,
-             "gap_max_deviation": gap_deviation(np.array(t), np.array(gap), case),
-             "cells_per_diameter": float(d / mesh.spacing.max()),
-             "t": t, "gap_over_d": gap, "settling_velocity": v}
-        return SceneResult(q, mesh.n_cells, sim.flow.n_dofs, steps=len(t) - 1, newton_iterations=newton_its)
+        return Setup(sim, t_end / n_steps, n_steps)
+
+    def observe(self, params: TenCateParams, sim) -> dict:
+        d, p = params.particle.diameter, sim.particles
+        return {"t": sim.t, "gap_over_d": float((p.position[0, 2] - d / 2) / d),
+                "settling_velocity": float(-p.velocity[0, 2])}
+
+    def stop(self, params: TenCateParams, row: dict) -> bool:
+        return row["gap_over_d"] < params.particle.stop_gap
+
+    def quantities(self, params: TenCateParams, series: dict, sim) -> dict:
+        case = params.fluid.case
+        u_max = max(series["settling_velocity"])
+        return {"max_settling_velocity": u_max,
+                "max_settling_velocity_error": u_max / tencate2002.U_MAX[case] - 1.0,
+                "gap_max_deviation": gap_deviation(np.array(series["t"]), np.array(series["gap_over_d"]), case),
+                "cells_per_diameter": float(params.particle.diameter / sim.flow.mesh.spacing.max()),
+                **series}
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib

@@ -1,0 +1,95 @@
+"""Checkpoints and run data: a run killed by a signal resumes to the uninterrupted run's final
+state; corrupt, mismatched or missing checkpoints are refused with exit status 2."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from fbmflow.cli import main
+
+RUN = ["glowinski-free-fall", "--level", "1", "--set", "time.t_end=0.12", "--set", "time.dt=0.005",
+       "--checkpoint-every", "4", "--quiet", "--no-plot"]
+
+
+def _cli(*args):
+    return subprocess.Popen([sys.executable, "-m", "fbmflow.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _checkpoint_step(path):
+    try:
+        with h5py.File(path, "r") as f:
+            return json.loads(f.attrs["meta"])["step"]
+    except (OSError, KeyError):
+        return 0
+
+
+@pytest.mark.slow
+def test_killed_run_resumes_to_the_uninterrupted_final_state(tmp_path):
+    killed, whole = tmp_path / "killed", tmp_path / "whole"
+    proc = _cli("run", *RUN, "--out", str(killed))
+    deadline = time.time() + 300
+    while _checkpoint_step(killed / "checkpoint.h5") < 8 and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run finished before it could be killed"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (killed / "summary.json").exists()
+    resumed = _cli("resume", str(killed), "--quiet", "--no-plot")
+    assert resumed.wait() == 0, resumed.stderr.read()
+    assert main(["run", *RUN, "--out", str(whole)]) == 0
+    a = json.loads((killed / "summary.json").read_text())["quantities"]
+    b = json.loads((whole / "summary.json").read_text())["quantities"]
+    np.testing.assert_allclose(a["final_position"], b["final_position"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a["v"], b["v"], rtol=0, atol=1e-12)
+    with h5py.File(killed / "run.h5") as f, h5py.File(whole / "run.h5") as g:
+        assert f["step"].shape == g["step"].shape == (25,)
+        assert np.array_equal(f["step"][()], np.arange(25))
+        np.testing.assert_allclose(f["position"][()], g["position"][()], rtol=0, atol=1e-12)
+
+
+def _short_run(out):
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
+                 "--checkpoint-every", "2", "--quiet", "--no-plot", "--out", str(out)]) == 0
+
+
+def test_run_data_and_csv(tmp_path):
+    _short_run(tmp_path)
+    with h5py.File(tmp_path / "run.h5") as f:
+        assert f["position"].shape == (7, 1, 2) and f["t"][-1] == pytest.approx(0.03)
+        assert f.attrs["scene"] == "glowinski-free-fall" and "fbmflow_version" in f.attrs
+        assert json.loads(f.attrs["params"])["fluid"]["viscosity"] == 0.1
+    lines = (tmp_path / "particles.csv").read_text().splitlines()
+    assert lines[0].startswith("step,t,particle,x,y") and len(lines) == 8
+
+
+def test_corrupt_checkpoint_is_refused(tmp_path, capsys):
+    _short_run(tmp_path)
+    with h5py.File(tmp_path / "checkpoint.h5", "a") as f:
+        f["x"][0] += 1.0  # a flipped value: the checksum no longer matches
+    assert main(["resume", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "checksum" in err[0]
+    (tmp_path / "checkpoint.h5").write_bytes(b"not an HDF5 file")
+    assert main(["resume", str(tmp_path), "--quiet"]) == 2
+    assert "unreadable" in capsys.readouterr().err
+
+
+def test_mismatched_or_missing_checkpoint_is_refused(tmp_path, capsys):
+    _short_run(tmp_path)
+    info = json.loads((tmp_path / "run.json").read_text())
+    info["params"]["fluid"]["viscosity"] = 0.2
+    (tmp_path / "run.json").write_text(json.dumps(info))
+    assert main(["resume", str(tmp_path), "--quiet"]) == 2
+    assert "another params" in capsys.readouterr().err
+    (tmp_path / "checkpoint.h5").unlink()
+    assert main(["resume", str(tmp_path), "--quiet"]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+    assert main(["resume", str(tmp_path / "nowhere"), "--quiet"]) == 2
+    assert main(["run", "cavity-2d", "--checkpoint-every", "2", "--out", str(tmp_path / "c")]) == 2
