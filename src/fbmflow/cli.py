@@ -2,7 +2,7 @@
 
     fbmflow scenes
     fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--checkpoint-every N]
-                      [--quiet] [--no-plot]
+                      [--fields-every N] [--quiet] [--no-plot]
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
@@ -47,6 +47,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
     run.add_argument("--checkpoint-every", type=int, default=0, metavar="N",
                      help="time-dependent scenes: write DIR/checkpoint.h5 every N steps (0: never)")
+    run.add_argument("--fields-every", type=int, default=0, metavar="N",
+                     help="time-dependent scenes: ParaView output (fields.xdmf, particles.pvd) every N steps")
     resume = sub.add_parser("resume", help="continue a stopped or killed run from its checkpoint")
     resume.add_argument("directory", type=Path, help="the --out directory of the run")
     resume.add_argument("--quiet", action="store_true", help="no progress output")
@@ -98,13 +100,13 @@ def main(argv: list[str] | None = None) -> int:
             log.info("fbmflow %s: resuming %s", __version__, out)
             summary = resume_scene(out, _progress(args.quiet), plot=not args.no_plot)
         else:
-            if args.checkpoint_every < 0:
-                raise ParamError(f"--checkpoint-every must be >= 0, got {args.checkpoint_every}")
+            if args.checkpoint_every < 0 or args.fields_every < 0:
+                raise ParamError("--checkpoint-every and --fields-every must be >= 0")
             scene, params, level = load_scene(args.scene, args.level, args.overrides)
             out = args.out or Path("fbmflow-out") / scene.name
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
             summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
-                                checkpoint_every=args.checkpoint_every)
+                                checkpoint_every=args.checkpoint_every, fields_every=args.fields_every)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations; summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], out / "summary.json")

@@ -108,6 +108,10 @@ class Simulation:
         self.t = 0.0
         self.step_count = 0
 
+    def owner(self) -> np.ndarray:
+        """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
+        return self._owner(self.flow.space.V)
+
     def _owner(self, V):
         """Owner of every node for the current particle state; computed once per state (the
         positions do not change during a step's flow solves and coupling iterations)."""

@@ -66,6 +66,7 @@ class RunFiles:
     out: Any = None
     checkpoint_every: int = 0
     resume: bool = False
+    fields_every: int = 0  # ParaView output every that many steps (0: none)
     meta: dict = field(default_factory=dict)  # scene, level, params, fbmflow_version
 
 
@@ -74,9 +75,10 @@ class SimulationScene(Scene):
 
     Subclasses give :meth:`build`, :meth:`observe` (one row of named time series per step, and at
     ``t = 0``), :meth:`quantities` and optionally :meth:`stop`. The loop here writes the run data
-    (``run.h5``), checkpoints every ``checkpoint_every`` steps (``checkpoint.h5``), and resumes
-    from the checkpoint: the resumed run repeats the uninterrupted one's iterations, because the
-    stored Newton factorisation is dropped at every checkpoint in both.
+    (``run.h5``), the ParaView output every ``fields_every`` steps, checkpoints every
+    ``checkpoint_every`` steps (``checkpoint.h5``; also the last good state when a step fails),
+    and resumes from the checkpoint: the resumed run repeats the uninterrupted one's iterations,
+    because the stored Newton factorisation is dropped at every checkpoint in both.
     """
 
     def build(self, params, level: int) -> Setup:
@@ -94,7 +96,8 @@ class SimulationScene(Scene):
     def run(self, params, level: int, progress: Progress | None = None, files: RunFiles | None = None) -> SceneResult:
         from pathlib import Path
 
-        from ..io import RunData, load_checkpoint, save_checkpoint
+        from ..io import FieldWriter, RunData, load_checkpoint, save_checkpoint
+        from ..solvers import ConvergenceError
 
         files = files or RunFiles()
         setup = self.build(params, level)
@@ -108,18 +111,37 @@ class SimulationScene(Scene):
             sim.set_state(state)
             series, newton_its = extra["series"], extra["newton_iterations"]
             log.info("resumed from step %d (t = %.6g)", sim.step_count, sim.t)
+        fields = None
         if out is not None:
             data = RunData(out / "run.h5", files.meta, resume_step=sim.step_count if files.resume else None)
             if not files.resume:
                 data.append(self._row(sim, None))
+            if files.fields_every:
+                fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count)
+                if not files.resume:
+                    fields.write(0, sim.t, sim.x, sim.owner(), sim.particles, np.zeros_like(sim.particles.position))
+
+        def checkpoint(step):
+            save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
+                            {"series": series, "newton_iterations": newton_its})
+
         for k in range(sim.step_count + 1, setup.n_steps + 1):
-            rep = sim.step(setup.dt)
+            try:
+                rep = sim.step(setup.dt)
+            except ConvergenceError as err:
+                if out is None:
+                    raise
+                checkpoint(sim.step_count)  # the last good state, for inspection or resumption
+                raise ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
+                                       f"{out / 'checkpoint.h5'}") from None
             newton_its += rep.newton_iterations
             row = self.observe(params, sim)
             for key, value in row.items():
                 series[key].append(value)
             if data is not None:
                 data.append(self._row(sim, rep))
+            if fields is not None and k % files.fields_every == 0:
+                fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, rep.force)
             if progress:
                 progress(k, setup.n_steps, rep.t)
             if self.stop(params, row):
@@ -127,8 +149,7 @@ class SimulationScene(Scene):
             if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
                 sim.flow.forget_linearisation()
                 if out is not None:
-                    save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": k},
-                                    {"series": series, "newton_iterations": newton_its})
+                    checkpoint(k)
         return SceneResult(self.quantities(params, series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=newton_its)
 

@@ -81,13 +81,14 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
 
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
-              checkpoint_every: int = 0, resume: bool = False) -> dict:
+              checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0) -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
     (what :func:`resume_scene` needs), the per-step particle data ``run.h5`` and its CSV export
-    ``particles.csv``, and with ``checkpoint_every > 0`` a checkpoint every that many steps;
-    ``resume`` continues from the checkpoint in ``out``.
+    ``particles.csv``, with ``checkpoint_every > 0`` a checkpoint every that many steps and with
+    ``fields_every > 0`` ParaView output (:mod:`fbmflow.io.fields`); ``resume`` continues from the
+    checkpoint in ``out``.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -95,12 +96,13 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     t0 = time.perf_counter()
     if isinstance(scene, SimulationScene):
         if not resume:
-            (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every}, indent=1))
-        result = scene.run(params, level, progress, RunFiles(out, checkpoint_every, resume, meta))
+            (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every,
+                                                      "fields_every": fields_every}, indent=1))
+        result = scene.run(params, level, progress, RunFiles(out, checkpoint_every, resume, fields_every, meta))
         export_csv(out / "run.h5", out / "particles.csv")
     else:
-        if checkpoint_every or resume:
-            raise ParamError(f"scene {scene.name} has no time loop to checkpoint or resume")
+        if checkpoint_every or resume or fields_every:
+            raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
         result = scene.run(params, level, progress)
     wall = time.perf_counter() - t0
     summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
@@ -125,7 +127,8 @@ def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
         info = json.loads(info_path.read_text())
         scene = get_scene(info["scene"])
         params = from_dict(scene.Params, info["params"])
-        level, every = int(info["level"]), int(info["checkpoint_every"])
+        level, every, fields = int(info["level"]), int(info["checkpoint_every"]), int(info.get("fields_every", 0))
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
         raise ParamError(f"{info_path} is damaged ({err}); start the run again") from None
-    return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True)
+    return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True,
+                     fields_every=fields)
