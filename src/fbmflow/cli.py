@@ -59,15 +59,21 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _progress(quiet: bool):
+    """A one-line progress bar on stderr: step, simulated time, elapsed time and ETA, and what the
+    scene reports about the step (Newton iterations, linear cycles, fastest particle)."""
     if quiet:
         return None
     start = time.perf_counter()
+    width = 20
 
-    def report(step: int, n: int, t: float | None) -> None:
+    def report(step: int, n: int, t: float | None, info: dict | None = None) -> None:
         elapsed = time.perf_counter() - start
         eta = elapsed / step * (n - step)
+        done = int(width * step / n)
         where = f"t = {t:.4g}" if t is not None else "steady stage"
-        sys.stderr.write(f"\r  step {step}/{n}  {where}  elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
+        extra = "".join(f"  {k} {v:.3g}" if isinstance(v, float) else f"  {k} {v}" for k, v in (info or {}).items())
+        sys.stderr.write(f"\r  [{'#' * done}{'.' * (width - done)}] {step}/{n}  {where}{extra}  "
+                         f"elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
         if step == n:
             sys.stderr.write("\n")
         sys.stderr.flush()

@@ -15,7 +15,8 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-Progress = Callable[[int, int, float | None], None]  # (step, n_steps, time or None if steady)
+# (step, n_steps, time or None if steady[, {name: value} about the step])
+Progress = Callable[..., None]
 
 
 @dataclass
@@ -143,7 +144,9 @@ class SimulationScene(Scene):
             if fields is not None and k % files.fields_every == 0:
                 fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, rep.force)
             if progress:
-                progress(k, setup.n_steps, rep.t)
+                speed = np.linalg.norm(sim.particles.velocity, axis=1).max(initial=0.0)
+                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations,
+                                                   "linear": rep.linear_iterations, "max|U|": float(speed)})
             if self.stop(params, row):
                 break
             if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
