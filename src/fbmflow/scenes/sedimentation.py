@@ -7,7 +7,7 @@
 * ``sedimentation-3d``: ``n`` spheres (20, d = 0.25 cm, rho_s = 2) in a closed
   1 x 1 x 2 cm box. Level ``L``: ``4 2^L x 4 2^L x 8 2^L`` cells, ``2^L`` across a diameter.
 * ``fluidized-bed-2d``: ``n`` disks (60, d = 0.1 cm, rho_s = 1.5) resting on a jittered lattice
-  at the bottom of a 1 x 4 cm channel; fluid enters through the bottom at ``inflow`` cm/s
+  in the lower half of a 2 x 4 cm channel; fluid enters through the bottom at ``inflow`` cm/s
   (uniform) and leaves through the top (do-nothing); no-slip side walls. The bottom and top act
   as walls for the particles (a distributor plate and a sieve).
 
@@ -277,10 +277,8 @@ class Sedimentation3D(_ManyParticles):
 
 class FluidizedBed2D(_ManyParticles):
     name = "fluidized-bed-2d"
-    description = "60 disks fluidised by inflow through the bottom of a 1 x 4 cm channel"
+    description = "60 disks fluidised by inflow through the bottom of a 2 x 4 cm channel"
     Params = FluidizedBedParams
-    box = (1.0, 4.0)
-    cells_level0 = (10, 40)
     fill = (0.0, 0.5)
     reports_bed_height = True
 
