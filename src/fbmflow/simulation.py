@@ -95,7 +95,7 @@ class Simulation:
         self.max_subiterations = max_subiterations
         self._constraint_state: Particles | None = None
         self._owner_of: np.ndarray | None = None  # positions and orientations of _owner_cache
-        self._owner_cache: np.ndarray | None = None
+        self._owner_cache: dict = {}  # id of the DOF map (fine or multigrid level) -> owner
         self.particles = particles
         self.gravity = np.asarray(gravity, dtype=float)
         self.scheme = scheme
@@ -118,9 +118,10 @@ class Simulation:
         p = self.particles
         key = np.concatenate([p.position.ravel(), np.ravel(p.orientation)])
         if self._owner_of is None or not np.array_equal(self._owner_of, key):
-            self._owner_cache = node_owner(V, p.position, p.shapes, p.rotations())
-            self._owner_of = key
-        return self._owner_cache
+            self._owner_cache, self._owner_of = {}, key
+        if id(V) not in self._owner_cache:
+            self._owner_cache[id(V)] = node_owner(V, p.position, p.shapes, p.rotations())
+        return self._owner_cache[id(V)]
 
     def _constraints(self, V, t):
         """Rigid-body constraints at the current positions with the velocities of the particle
