@@ -192,3 +192,37 @@ def test_hard_contact_needs_the_semi_implicit_integrator():
     with pytest.raises(ValueError, match="semi-implicit"):
         Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]),
                    [0.0, -1.0], integrator="explicit-euler", contact=ContactSet())
+
+
+def test_state_round_trip_with_contact_repeats_the_run():
+    """Restoring a saved state (flow, particles, contact warm start) into a fresh simulation
+    repeats the original's steps exactly (the original drops its factorisation at the save, as
+    the scenes do at every checkpoint)."""
+    from fbmflow.contact import ContactSet, Planes
+    from fbmflow.flow import NoSlip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    def make():
+        mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
+        return Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
+                          Particles.at_rest([Ball(0.25, 2), Ball(0.25, 2)], 1.5, [[0.7, 0.5], [1.35, 1.2]]),
+                          [0.0, -980.0], coupling="implicit",
+                          contact=ContactSet(Planes.box(mesh.lower, mesh.upper), skin=0.25, friction=0.3),
+                          contact_substeps=5)
+
+    a = make()
+    for _ in range(12):
+        a.step(0.01)
+    state = a.state()
+    assert len(state["contact_keys"]) > 0  # contacts are active: the warm start matters
+    a.flow.forget_linearisation()
+    b = make()
+    b.set_state(state)
+    for _ in range(4):
+        ra, rb = a.step(0.01), b.step(0.01)
+    assert np.abs(ra.position - rb.position).max() <= 1e-12
+    assert np.abs(a.x - b.x).max() <= 1e-12 * np.abs(a.x).max()
+    with pytest.raises(ValueError, match="does not fit"):
+        b.set_state({**state, "position": state["position"][:1]})

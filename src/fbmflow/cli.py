@@ -2,7 +2,7 @@
 
     fbmflow scenes
     fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--checkpoint-every N]
-                      [--fields-every N] [--quiet] [--no-plot]
+                      [--fields-every N] [--fields-format xdmf|vtu] [--quiet] [--no-plot]
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
@@ -49,6 +49,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="time-dependent scenes: write DIR/checkpoint.h5 every N steps (0: never)")
     run.add_argument("--fields-every", type=int, default=0, metavar="N",
                      help="time-dependent scenes: ParaView output (fields.xdmf, particles.pvd) every N steps")
+    run.add_argument("--fields-format", choices=("xdmf", "vtu"), default="xdmf",
+                     help="field output as one XDMF+HDF5 series (default) or one VTU per output")
     resume = sub.add_parser("resume", help="continue a stopped or killed run from its checkpoint")
     resume.add_argument("directory", type=Path, help="the --out directory of the run")
     resume.add_argument("--quiet", action="store_true", help="no progress output")
@@ -112,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             out = args.out or Path("fbmflow-out") / scene.name
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
             summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
-                                checkpoint_every=args.checkpoint_every, fields_every=args.fields_every)
+                                checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
+                                fields_format=args.fields_format)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations; summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], out / "summary.json")

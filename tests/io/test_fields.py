@@ -35,3 +35,14 @@ def test_field_and_particle_output_round_trip(tmp_path, scene, level, dim):
     m = meshio.read(tmp_path / "particles_000004.vtu")
     np.testing.assert_allclose(m.points[:, :dim], final, atol=1e-12)
     assert set(m.point_data) >= {"id", "radius", "velocity", "angular_velocity", "force"}
+
+
+def test_vtu_field_output_reads_back(tmp_path):
+    import meshio
+
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.01", "--set", "time.dt=0.005",
+                 "--fields-every", "1", "--fields-format", "vtu", "--quiet", "--no-plot", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "fields.pvd").read_text().count("<DataSet") == 3
+    m = meshio.read(tmp_path / "fields_000002.vtu")
+    assert m.cells[0].type == "quad" and m.point_data["velocity"].shape == (len(m.points), 3)
+    assert m.cell_data["pressure"][0].shape == (len(m.cells[0].data),)

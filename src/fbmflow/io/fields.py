@@ -13,7 +13,8 @@ The XDMF series (written here with h5py: one mesh, one group of arrays per time 
 file beside it) has its XML index rewritten after every output, so a killed run leaves a
 readable series up to its last output; a resumed run starts a new series
 (``fields_from_<step>.xdmf``) next to the first one. meshio reads it back
-(``meshio.xdmf.TimeSeriesReader``).
+(``meshio.xdmf.TimeSeriesReader``). The VTU option writes one ``fields_<step>.vtu`` per output
+and a ``fields.pvd`` collection instead.
 """
 from __future__ import annotations
 
@@ -27,18 +28,41 @@ def _pad3(a: np.ndarray) -> np.ndarray:
     return np.pad(a, ((0, 0), (0, 3 - a.shape[1]))) if a.shape[1] < 3 else a
 
 
+class _Collection:
+    """A ParaView collection file (``.pvd``) listing one dataset per time, rewritten on every
+    addition; a resumed run keeps the entries already there."""
+
+    def __init__(self, path: Path, keep: bool):
+        import xml.etree.ElementTree as ET
+
+        self.path = path
+        self.entries: list[tuple[float, str]] = []
+        if keep and path.is_file():
+            self.entries = [(float(e.get("timestep")), e.get("file")) for e in ET.parse(path).getroot().iter("DataSet")]
+
+    def add(self, t: float, name: str) -> None:
+        self.entries.append((t, name))
+        rows = "\n".join(f'    <DataSet timestep="{t!r}" file="{f}"/>' for t, f in self.entries)
+        self.path.write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+                             f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
+
+
 class FieldWriter:
-    """Writes ``fields*.xdmf`` and ``particles_<step>.vtu`` + ``particles.pvd`` into ``out``.
+    """Writes the flow (``fields*.xdmf``, or with ``fmt = "vtu"`` ``fields_<step>.vtu`` and
+    ``fields.pvd``) and the particles (``particles_<step>.vtu`` and ``particles.pvd``) into ``out``.
 
     Parameters
     ----------
     out : directory; space : the :class:`~fbmflow.fem.FlowSpace`; start_step : 0 for a new run,
-    the checkpoint's step for a resumed one
+    the checkpoint's step for a resumed one; fmt : ``xdmf`` or ``vtu``
     """
 
-    def __init__(self, out, space, start_step: int = 0):
+    def __init__(self, out, space, start_step: int = 0, fmt: str = "xdmf"):
         import h5py
 
+        if fmt not in ("xdmf", "vtu"):
+            raise ValueError(f"field output format must be 'xdmf' or 'vtu', got {fmt!r}")
+        self.fmt = fmt
         self.out = Path(out)
         self.space = space
         V, mesh = space.V, space.mesh
@@ -57,21 +81,16 @@ class FieldWriter:
         self.parent = (idx // 2 * np.cumprod((1,) + tuple(mesh.shape[:-1]))).sum(axis=1)
         self.rel = np.where(idx % 2 == 0, -0.5, 0.5)
         self.cell_type = "Quadrilateral" if self.dim == 2 else "Hexahedron"
-        stem = "fields" if start_step == 0 else f"fields_from_{start_step:06d}"
-        self._xdmf, self._h5 = self.out / f"{stem}.xdmf", self.out / f"{stem}.h5"
-        with h5py.File(self._h5, "w") as f:
-            f["points"] = self.points
-            f["cells"] = self.cells
         self._times: list[tuple[float, dict, dict]] = []  # time, point fields, cell fields (shapes)
-        self._pvd = self.out / "particles.pvd"
-        self._entries = self._read_pvd() if start_step else []
-
-    def _read_pvd(self) -> list[tuple[float, str]]:
-        import xml.etree.ElementTree as ET
-
-        if not self._pvd.is_file():
-            return []
-        return [(float(e.get("timestep")), e.get("file")) for e in ET.parse(self._pvd).getroot().iter("DataSet")]
+        if fmt == "xdmf":
+            stem = "fields" if start_step == 0 else f"fields_from_{start_step:06d}"
+            self._xdmf, self._h5 = self.out / f"{stem}.xdmf", self.out / f"{stem}.h5"
+            with h5py.File(self._h5, "w") as f:
+                f["points"] = self.points
+                f["cells"] = self.cells
+        else:
+            self._fields = _Collection(self.out / "fields.pvd", keep=start_step > 0)
+        self._particles = _Collection(self.out / "particles.pvd", keep=start_step > 0)
 
     def vorticity(self, u: np.ndarray) -> np.ndarray:
         """|curl u| at the nodes from central differences on the lattice, (n_v,)."""
@@ -94,8 +113,14 @@ class FieldWriter:
         p = x[s.n_u:].reshape(-1, dim + 1)[self.parent]
         pressure = p[:, 0] + np.einsum("ka,ka->k", p[:, 1:], self.rel)
         velocity = _pad3(u.reshape(dim, s.n_v).T)
-        self._append(t, {"velocity": velocity, "owner": owner.astype(np.int64), "vorticity": self.vorticity(u)},
-                     {"pressure": pressure})
+        point = {"velocity": velocity, "owner": owner.astype(np.int64), "vorticity": self.vorticity(u)}
+        if self.fmt == "xdmf":
+            self._append(t, point, {"pressure": pressure})
+        else:
+            name = f"fields_{step:06d}.vtu"
+            meshio.write(self.out / name, meshio.Mesh(self.points, [("quad" if dim == 2 else "hexahedron", self.cells)],
+                                                      point_data=point, cell_data={"pressure": [pressure]}))
+            self._fields.add(t, name)
         n = particles.n
         name = f"particles_{step:06d}.vtu"
         meshio.write(self.out / name, meshio.Mesh(
@@ -104,13 +129,7 @@ class FieldWriter:
                         "velocity": _pad3(particles.velocity),
                         "angular_velocity": _pad3(np.reshape(particles.angular_velocity, (n, -1))),
                         "force": _pad3(force)}))
-        self._entries.append((t, name))
-        self._write_pvd()
-
-    def _write_pvd(self) -> None:
-        rows = "\n".join(f'    <DataSet timestep="{t!r}" file="{f}"/>' for t, f in self._entries)
-        self._pvd.write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
-                             f"  <Collection>\n{rows}\n  </Collection>\n</VTKFile>\n")
+        self._particles.add(t, name)
 
     def _append(self, t: float, point: dict, cell: dict) -> None:
         import h5py

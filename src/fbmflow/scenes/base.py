@@ -68,6 +68,7 @@ class RunFiles:
     checkpoint_every: int = 0
     resume: bool = False
     fields_every: int = 0  # ParaView output every that many steps (0: none)
+    fields_format: str = "xdmf"  # or "vtu"
     meta: dict = field(default_factory=dict)  # scene, level, params, fbmflow_version
 
 
@@ -118,7 +119,7 @@ class SimulationScene(Scene):
             if not files.resume:
                 data.append(self._row(sim, None))
             if files.fields_every:
-                fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count)
+                fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
                 if not files.resume:
                     fields.write(0, sim.t, sim.x, sim.owner(), sim.particles, np.zeros_like(sim.particles.position))
 

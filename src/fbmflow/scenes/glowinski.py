@@ -103,3 +103,27 @@ class GlowinskiFreeFall(SimulationScene):
         return {"max_settling_velocity": float(speed.max()),
                 "max_reynolds_number": float(f.density * speed.max() * pp.diameter / f.viscosity),
                 "final_position": sim.particles.position[0].tolist(), **series}
+
+    def plot(self, summary: dict, path) -> bool:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        q, f = summary["quantities"], summary["params"]["fluid"]
+        d = summary["params"]["particle"]["diameter"]
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        ax[0].plot(q["t"], q["y"])
+        ax[0].set_ylabel("y [cm]")
+        ax[1].plot(q["t"], -np.array(q["v"]), label="fbmflow")
+        # Re_max about 17.3 in the literature for this set-up (Glowinski et al. 2001; Wan & Turek 2006)
+        ax[1].axhline(17.3 * f["viscosity"] / (f["density"] * d), ls=":", c="k", label="Re = 17.3 (literature)")
+        ax[1].set_ylabel("settling velocity [cm/s]")
+        ax[1].legend()
+        for a in ax:
+            a.set_xlabel("t [s]")
+            a.grid(alpha=0.3)
+        fig.suptitle(f"glowinski-free-fall, level {summary['level']}: Re_max {q['max_reynolds_number']:.2f}")
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return True

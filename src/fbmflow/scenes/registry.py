@@ -81,7 +81,8 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
 
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
-              checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0) -> dict:
+              checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0,
+              fields_format: str = "xdmf") -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
@@ -97,8 +98,10 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     if isinstance(scene, SimulationScene):
         if not resume:
             (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every,
-                                                      "fields_every": fields_every}, indent=1))
-        result = scene.run(params, level, progress, RunFiles(out, checkpoint_every, resume, fields_every, meta))
+                                                      "fields_every": fields_every,
+                                                      "fields_format": fields_format}, indent=1))
+        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
+        result = scene.run(params, level, progress, files)
         export_csv(out / "run.h5", out / "particles.csv")
     else:
         if checkpoint_every or resume or fields_every:
@@ -128,7 +131,8 @@ def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
         scene = get_scene(info["scene"])
         params = from_dict(scene.Params, info["params"])
         level, every, fields = int(info["level"]), int(info["checkpoint_every"]), int(info.get("fields_every", 0))
+        fmt = str(info.get("fields_format", "xdmf"))
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
         raise ParamError(f"{info_path} is damaged ({err}); start the run again") from None
     return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True,
-                     fields_every=fields)
+                     fields_every=fields, fields_format=fmt)
