@@ -42,7 +42,7 @@ def test_fluidized_bed_inflow_lifts_the_bed():
 
 
 def test_sedimentation_3d_runs_with_contact():
-    q = _run("sedimentation-3d", 1, particles={"count": 2}, time={"t_end": 0.01})
+    q = _run("sedimentation-3d", 0, particles={"count": 2}, time={"t_end": 0.01})
     assert q["max_overlap"] == 0.0 and q["mean_velocity"][-1] < 0.0
 
 
