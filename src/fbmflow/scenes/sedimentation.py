@@ -92,7 +92,7 @@ class BedParticles(ManyParticles):
 class BedInflow:
     """Inflow through the bottom."""
 
-    velocity: float = param(2.0, "uniform inflow velocity", "cm/s", positive=True)
+    velocity: float = param(1.0, "uniform inflow velocity", "cm/s", positive=True)
 
 
 @dataclass(frozen=True)
