@@ -50,7 +50,7 @@ def report(rows, setup, reference: Path):
     lines = [f"# Drafting, kissing, tumbling ({setup})", "",
              f"Command: `python benchmarks/bench_dkt.py --setup {setup} --levels "
              f"{' '.join(str(r['level']) for r in rows)}`; 2-core machine, implicit coupling, hard "
-             "contact (skin half a cell), backward Euler.", "",
+             "contact (skin one cell), backward Euler.", "",
              "| level | cells/d | unknowns | wall s | t_kiss s | error | t_tumble s | error | "
              "closest centres / d | t_tumble change vs finer |", "|---|---|---|---|---|---|---|---|---|---|"]
     for k, r in enumerate(rows):
