@@ -201,6 +201,14 @@ class RepulsionParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class ContactRepulsionParams(RepulsionParams):
+    """Short-range repulsion, off by default in scenes with hard contact (which keeps the
+    particles apart)."""
+
+    enabled: bool = param(False, "repulsive forces on, in addition to hard contact")
+
+
+@dataclasses.dataclass(frozen=True)
 class ContactParams:
     """Hard contact between particles and with the walls (projected Gauss–Seidel, sub-stepped)."""
 

@@ -26,7 +26,8 @@ import numpy as np
 
 from ..flow import NoSlip
 from ..mesh import StructuredMesh
-from ..params import ContactParams, CouplingParams, RepulsionParams, SolverParams, TimeParams, param, section
+from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, SolverParams, TimeParams, param,
+                      section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
@@ -66,13 +67,6 @@ class DktTime(TimeParams):
 
 
 @dataclass(frozen=True)
-class DktRepulsion(RepulsionParams):
-    """Short-range repulsion (off by default: hard contact keeps the disks apart)."""
-
-    enabled: bool = param(False, "repulsive forces on, in addition to hard contact")
-
-
-@dataclass(frozen=True)
 class DktParams:
     """Parameters of ``dkt-2d``."""
 
@@ -80,7 +74,7 @@ class DktParams:
     time: DktTime = section(DktTime)
     coupling: CouplingParams = section(CouplingParams)
     contact: ContactParams = section(ContactParams)
-    repulsion: DktRepulsion = section(DktRepulsion)
+    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
     solver: SolverParams = section(SolverParams)
 
 

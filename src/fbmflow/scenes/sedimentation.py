@@ -30,7 +30,7 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams,
+from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, ParamError, SolverParams, TimeParams,
                       param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
@@ -54,13 +54,6 @@ class ManyTime(TimeParams):
     t_end: float = param(1.0, "final time", "s", positive=True)
     scheme: str = param("backward-euler", "implicit time scheme",
                         choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
-
-
-@dataclass(frozen=True)
-class ManyRepulsion(RepulsionParams):
-    """Short-range repulsion (off by default: hard contact keeps the particles apart)."""
-
-    enabled: bool = param(False, "repulsive forces on, in addition to hard contact")
 
 
 @dataclass(frozen=True)
@@ -105,7 +98,7 @@ class Sedimentation2DParams:
     time: ManyTime = section(ManyTime)
     coupling: CouplingParams = section(CouplingParams)
     contact: ContactParams = section(ContactParams)
-    repulsion: ManyRepulsion = section(ManyRepulsion)
+    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
     solver: SolverParams = section(SolverParams)
 
 
