@@ -27,6 +27,25 @@ def test_owner_matches_brute_force(dim):
     assert (owner == 0).sum() > 0 and (owner == 1).sum() > 0
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_owner_on_a_graded_mesh_matches_brute_force(dim):
+    """Rectilinear mesh graded towards x = 0.3 (cells from 0.02 to 0.3 wide): the candidate boxes
+    found by binary search on the node axes miss no inside node, a ball near the box corner
+    included."""
+    fine = np.linspace(0.2, 0.4, 11)
+    axes = [np.concatenate([[0.0, 0.1], fine, [0.6, 1.0]])] + [np.array([0.0, 0.15, 0.4, 0.5, 0.7, 1.0])] * (dim - 1)
+    space = FlowSpace(StructuredMesh.rectilinear(axes))
+    centres = np.array([[0.31] + [0.45] * (dim - 1), [0.93] + [0.08] * (dim - 1)])
+    shapes = [Ball(0.07, dim), Ball(0.12, dim)]
+    owner = node_owner(space.V, centres, shapes)
+    X = space.V.coordinates
+    ref = np.full(space.n_v, -1)
+    for i in (1, 0):
+        ref[np.einsum("ij,ij->i", X - centres[i], X - centres[i]) <= shapes[i].radius ** 2] = i
+    assert np.array_equal(owner, ref)
+    assert (owner == 0).sum() > 0 and (owner == 1).sum() > 0
+
+
 @pytest.mark.parametrize("shape", [Ellipsoid((0.3, 0.1)), Box((0.25, 0.1)), Ellipsoid((0.3, 0.2, 0.1)),
                                    Box((0.3, 0.1, 0.2))], ids=["ellipse", "rectangle", "ellipsoid", "box"])
 def test_owner_of_rotated_shapes(shape):

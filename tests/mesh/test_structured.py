@@ -308,3 +308,27 @@ def test_hierarchy_lengths():
     h = mesh.hierarchy(3)
     assert len(h) == 4
     assert [m.shape for m in h] == [(2, 2), (4, 4), (8, 8), (16, 16)]
+
+
+# -- rectilinear (graded) meshes --------------------------------------------------------------
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rectilinear_axes_survive_refine_and_coarsen(dim):
+    axes = [np.array([0.0, 0.1, 0.15, 0.5, 2.0]), np.array([-1.0, 0.0, 0.25, 1.0]), np.array([0.0, 3.0])][:dim]
+    mesh = StructuredMesh.rectilinear(axes)
+    assert mesh.shape == tuple(a.size - 1 for a in axes) and not mesh.is_uniform
+    for a, b in zip(mesh.axis_coordinates, axes):
+        np.testing.assert_array_equal(a, b)
+    fine = mesh.refine()
+    for a, b in zip(fine.axis_coordinates, axes):
+        np.testing.assert_allclose(a[0::2], b, atol=1e-15)
+        np.testing.assert_allclose(a[1::2], 0.5 * (b[:-1] + b[1:]), atol=1e-15)
+    for a, b in zip(fine.coarsen().axis_coordinates, axes):
+        np.testing.assert_allclose(a, b, atol=1e-15)
+    assert _random_interior_move(StructuredMesh.box(SHAPES[dim]), seed=3).axis_coordinates is None
+
+
+def test_rectilinear_errors():
+    with pytest.raises(ValueError, match="strictly increasing"):
+        StructuredMesh.rectilinear([np.array([0.0, 1.0, 0.5]), np.array([0.0, 1.0])])
+    with pytest.raises(ValueError, match="periodic axis x must be uniform"):
+        StructuredMesh.rectilinear([np.array([0.0, 0.2, 1.0]), np.array([0.0, 1.0])], periodic=(True, False))

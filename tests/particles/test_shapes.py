@@ -3,7 +3,7 @@ kernel against a NumPy reference; meshio file round trip; clear errors for bad s
 import numpy as np
 import pytest
 
-from fbmflow.particles import Ball, Box, Ellipsoid, ImplicitShape, TriangulatedSurface
+from fbmflow.particles import Ball, Box, Cylinder, Ellipsoid, ImplicitShape, TriangulatedSurface
 from fbmflow.particles import _kernels
 
 
@@ -73,6 +73,26 @@ def test_box_closed_forms():
     np.testing.assert_allclose(np.diag(b3.inertia), 0.1 / 3 * np.array([0.0725, 0.26, 0.3125]))
     assert b3.bounding_radius == pytest.approx(np.sqrt(0.25 + 0.0625 + 0.01))
     assert b3.inside(np.array([[0.49, -0.24, 0.09], [0.0, 0.0, 0.11]])).tolist() == [True, False]
+
+
+def test_cylinder_closed_forms_and_support():
+    """Volume and inertia against the lattice moments of the same inside test (an ImplicitShape);
+    support points lie on the surface and maximise d . x over sampled inside points."""
+    c = Cylinder(0.1, 0.5)
+    lattice = ImplicitShape(c.inside, dim=3, extent=0.26, kind="inside", resolution=200)
+    assert c.volume == pytest.approx(np.pi * 0.01 * 0.5) == pytest.approx(lattice.volume, rel=5e-3)
+    np.testing.assert_allclose(c.inertia, lattice.inertia, rtol=1e-2, atol=1e-9)
+    assert c.bounding_radius == pytest.approx(np.hypot(0.1, 0.25))
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(50, 3))
+    s = c.support(d)
+    np.testing.assert_allclose(np.hypot(s[:, 0], s[:, 1]), 0.1)
+    np.testing.assert_allclose(np.abs(s[:, 2]), 0.25)
+    x = rng.uniform(-0.3, 0.3, (20000, 3))
+    x = x[c.inside(x)]
+    assert np.all(np.einsum("kd,kd->k", d, s) >= (d @ x.T).max(axis=1) - 1e-12)
+    with pytest.raises(ValueError, match="positive"):
+        Cylinder(0.1, 0.0)
 
 
 def test_implicit_shape_moments_converge_to_exact():

@@ -14,21 +14,29 @@ from ..fem.dofmap import DofMap
 
 
 def candidate_dofs(V: DofMap, centres: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Q2 nodes of the boxes ``centres[i] +- radii[i]`` on an undeformed mesh: (particle (k,),
-    node (k,)) int64, every particle's nodes once. All boxes at once, no loop over particles.
+    """Q2 nodes of the boxes ``centres[i] +- radii[i]`` on a tensor-product (uniform or
+    rectilinear) mesh: (particle (k,), node (k,)) int64, every particle's nodes once, the box
+    widened to the enclosing nodes. All boxes at once, no loop over particles.
 
-    Periodic axes wrap around (a particle crossing a periodic side finds its nodes on both sides).
+    Periodic axes (uniform) wrap around (a particle crossing a periodic side finds its nodes on
+    both sides).
     """
     mesh = V.mesh
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
-    radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centres),))[:, None]
-    step = np.asarray(mesh.spacing) / 2.0
+    radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centres),))
     shape = np.array(V.lattice_shape)
     periodic = np.array(mesh.periodic)
-    lo = np.floor((centres - radii - np.array(mesh.lower)) / step).astype(np.int64)
-    hi = np.ceil((centres + radii - np.array(mesh.lower)) / step).astype(np.int64)
-    lo = np.where(periodic, lo, np.maximum(lo, 0))
-    hi = np.where(periodic, np.minimum(hi, lo + shape - 1), np.minimum(hi, shape - 1))
+    lo = np.empty(centres.shape, dtype=np.int64)
+    hi = np.empty(centres.shape, dtype=np.int64)
+    for d, nodes in enumerate(V.lattice_axes):  # per axis, all particles at once
+        a, b = centres[:, d] - radii, centres[:, d] + radii
+        if periodic[d]:
+            step = nodes[1] - nodes[0]
+            lo[:, d] = np.floor((a - nodes[0]) / step)
+            hi[:, d] = np.minimum(np.ceil((b - nodes[0]) / step), lo[:, d] + shape[d] - 1)
+        else:
+            lo[:, d] = np.maximum(np.searchsorted(nodes, a, side="right") - 1, 0)
+            hi[:, d] = np.minimum(np.searchsorted(nodes, b, side="left"), shape[d] - 1)
     count = np.maximum(hi - lo + 1, 0)                       # (n, dim) lattice points per axis
     total = np.prod(count, axis=1)
     part = np.repeat(np.arange(len(centres)), total)
@@ -65,8 +73,9 @@ def node_owner(V: DofMap, centres: np.ndarray, shapes: list, rotations: np.ndarr
     shapes : list of shapes with ``inside`` and ``bounding_radius``
     rotations : (n_particles, dim, dim) float64, body-to-world rotations (identity if omitted)
     """
-    if not V.mesh.is_uniform:
-        raise NotImplementedError("fictitious boundaries need an undeformed mesh for now")
+    if V.mesh.axis_coordinates is None:
+        raise NotImplementedError("fictitious boundaries need a tensor-product (uniform or rectilinear) "
+                                  "mesh; point location on a deformed mesh is not implemented")
     owner = np.full(V.n_dofs, -1, dtype=np.int64)
     group = np.unique(np.array([id(s) for s in shapes], dtype=np.int64), return_inverse=True)[1]
     first = [shapes[k] for k in np.unique(group, return_index=True)[1]]

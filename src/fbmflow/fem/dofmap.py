@@ -49,6 +49,20 @@ class DofMap:
         return np.indices(self.lattice_shape).reshape(self.mesh.dim, -1, order="F").T.copy()
 
     @cached_property
+    def lattice_axes(self) -> tuple[np.ndarray, ...]:
+        """Node coordinates per axis of a tensor-product mesh (vertices and cell midpoints),
+        ``(lattice_shape[d],)`` each; ValueError on a deformed mesh."""
+        axes = self.mesh.axis_coordinates
+        if axes is None:
+            raise ValueError("lattice axes need a tensor-product (uniform or rectilinear) mesh")
+        out = []
+        for a, m in zip(axes, self.lattice_shape):
+            nodes = np.empty(2 * a.size - 1)
+            nodes[0::2], nodes[1::2] = a, 0.5 * (a[:-1] + a[1:])
+            out.append(nodes[:m])
+        return tuple(out)
+
+    @cached_property
     def coordinates(self) -> np.ndarray:
         """Physical coordinates of every DOF, (n_dofs, dim) float64 (lower side if periodic)."""
         mesh = self.mesh

@@ -12,7 +12,8 @@ from .space import FlowSpace
 
 
 def locate(space: FlowSpace, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cell and reference coordinates of physical points on an undeformed mesh.
+    """Cell and reference coordinates of physical points on a tensor-product (uniform or
+    rectilinear) mesh.
 
     Parameters
     ----------
@@ -24,16 +25,20 @@ def locate(space: FlowSpace, points: np.ndarray) -> tuple[np.ndarray, np.ndarray
     xi : (n, dim) float64 in [-1, 1]^dim
     """
     mesh = space.mesh
-    if not mesh.is_uniform:
+    axes = mesh.axis_coordinates
+    if axes is None:
         raise NotImplementedError("point location on a deformed mesh is not implemented")
     points = np.atleast_2d(np.asarray(points, dtype=float))
-    lower, h, shape = np.array(mesh.lower), mesh.spacing, np.array(mesh.shape)
-    rel = (points - lower) / h
-    tol = 1e-9
-    if np.any(rel < -tol) or np.any(rel > shape + tol):
+    lower, upper = np.array(mesh.lower), np.array(mesh.upper)
+    tol = 1e-9 * (upper - lower)
+    if np.any(points < lower - tol) or np.any(points > upper + tol):
         raise ValueError("points outside the mesh box")
-    idx = np.clip(np.floor(rel).astype(np.int64), 0, shape - 1)
-    xi = 2.0 * (rel - idx) - 1.0
+    idx = np.empty(points.shape, dtype=np.int64)
+    xi = np.empty(points.shape)
+    for d, a in enumerate(axes):  # one binary search per axis, all points at once
+        k = np.clip(np.searchsorted(a, points[:, d], side="right") - 1, 0, a.size - 2)
+        idx[:, d] = k
+        xi[:, d] = 2.0 * (points[:, d] - a[k]) / (a[k + 1] - a[k]) - 1.0
     strides = np.cumprod((1,) + mesh.shape[:-1])
     return (idx * strides).sum(axis=1), xi
 

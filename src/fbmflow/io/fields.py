@@ -95,9 +95,9 @@ class FieldWriter:
     def vorticity(self, u: np.ndarray) -> np.ndarray:
         """|curl u| at the nodes from central differences on the lattice, (n_v,)."""
         dim, n_v = self.dim, self.space.n_v
-        step = np.asarray(self.space.mesh.spacing) / 2.0
+        axes = self.space.V.lattice_axes
         comp = [u[a * n_v:(a + 1) * n_v].reshape(self.shape, order="F") for a in range(dim)]
-        grad = [[np.gradient(comp[a], step[b], axis=b) for b in range(dim)] for a in range(dim)]
+        grad = [[np.gradient(comp[a], axes[b], axis=b) for b in range(dim)] for a in range(dim)]
         if dim == 2:
             w = grad[1][0] - grad[0][1]
         else:

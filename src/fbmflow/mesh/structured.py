@@ -76,6 +76,23 @@ class StructuredMesh:
         vertices = np.stack([g.ravel(order="F") for g in grids], axis=1)
         return cls(shape, lower, upper, periodic, vertices)
 
+    @classmethod
+    def rectilinear(cls, axes, periodic=None) -> "StructuredMesh":
+        """Tensor-product mesh with the vertex coordinates ``axes[d]`` (strictly increasing, at least
+        two values) along axis ``d``: graded cells, e.g. fine near an obstacle and coarse far away.
+        Periodic axes must be uniform."""
+        axes = [np.asarray(a, dtype=float) for a in axes]
+        if len(axes) not in (2, 3) or any(a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0) for a in axes):
+            raise ValueError("a rectilinear mesh needs 2 or 3 strictly increasing coordinate arrays "
+                             "of at least two values each")
+        mesh = cls.box([a.size - 1 for a in axes], [a[0] for a in axes], [a[-1] for a in axes], periodic)
+        for d, a in enumerate(axes):
+            if mesh.periodic[d] and not np.allclose(np.diff(a), np.diff(a)[0]):
+                raise ValueError(f"periodic axis {AXES[d]} must be uniform")
+        grids = np.meshgrid(*axes, indexing="ij")
+        vertices = np.stack([g.ravel(order="F") for g in grids], axis=1)
+        return cls(mesh.shape, mesh.lower, mesh.upper, mesh.periodic, vertices)
+
     def __post_init__(self):
         n_vertices = int(np.prod([n + 1 for n in self.shape]))
         if self.vertices.shape != (n_vertices, self.dim):
@@ -186,6 +203,19 @@ class StructuredMesh:
         """True when the vertices still sit on the uniform box lattice (point location by index)."""
         ref = StructuredMesh.box(self.shape, self.lower, self.upper, self.periodic).vertices
         return bool(np.allclose(ref, self.vertices, rtol=0, atol=1e-12 * np.max(self.spacing)))
+
+    @cached_property
+    def axis_coordinates(self) -> tuple[np.ndarray, ...] | None:
+        """Vertex coordinates per axis, ``(n_d + 1,)`` each, when the mesh is a tensor product of
+        axes (uniform or graded, :meth:`rectilinear`); None for a deformed mesh."""
+        lattice = self.vertices.reshape(self.vertex_shape + (self.dim,), order="F")
+        axes = tuple(np.moveaxis(lattice[..., d], d, 0).reshape(self.vertex_shape[d], -1)[:, 0].copy()
+                     for d in range(self.dim))
+        grids = np.meshgrid(*axes, indexing="ij")
+        expected = np.stack([g.ravel(order="F") for g in grids], axis=1)
+        if not np.allclose(expected, self.vertices, rtol=0, atol=1e-12 * np.max(self.spacing)):
+            return None
+        return axes
 
     def refine(self) -> "StructuredMesh":
         """Uniform refinement: every cell splits into ``2**dim`` children.

@@ -174,6 +174,49 @@ class Box:
         return _axes_inertia(self.volume, self.volume * np.array(self.half_extents) ** 2 / 3.0)
 
 
+@dataclass(frozen=True)
+class Cylinder:
+    """Circular cylinder (3D) ``x^2 + y^2 <= r^2, |z| <= L / 2`` [m], axis along body axis z."""
+
+    radius: float
+    length: float
+
+    def __post_init__(self):
+        if not (self.radius > 0 and self.length > 0):
+            raise ValueError(f"radius and length must be positive, got {self.radius}, {self.length}")
+
+    dim = 3
+
+    def inside(self, x: np.ndarray) -> np.ndarray:
+        return (x[:, 0] ** 2 + x[:, 1] ** 2 <= self.radius**2) & (np.abs(x[:, 2]) <= self.length / 2.0)
+
+    def support(self, d: np.ndarray) -> np.ndarray:
+        """Rim point: the disk's support in the x-y plane plus ``sign(d_z) L / 2`` along z."""
+        d = np.asarray(d, dtype=float)
+        s = np.zeros_like(d)
+        s[..., :2] = self.radius * _unit(d[..., :2])
+        s[..., 2] = np.where(d[..., 2] >= 0.0, 0.5, -0.5) * self.length
+        return s
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.hypot(self.radius, self.length / 2.0))
+
+    @property
+    def centre_of_mass(self) -> np.ndarray:
+        return np.zeros(3)
+
+    @property
+    def volume(self) -> float:
+        return float(np.pi * self.radius**2 * self.length)
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """``int x^2 dV = int y^2 dV = V r^2 / 4``, ``int z^2 dV = V L^2 / 12``."""
+        r2, l2 = self.radius**2, self.length**2
+        return _axes_inertia(self.volume, self.volume * np.array([r2 / 4.0, r2 / 4.0, l2 / 12.0]))
+
+
 def _lattice_moments(inside: Callable, lower: np.ndarray, upper: np.ndarray, n: int):
     """Volume, first and second moments of ``{inside}`` by the midpoint rule on an ``n^dim``
     lattice over the box ``[lower, upper]``; evaluated slab by slab to bound memory."""
