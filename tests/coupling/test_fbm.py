@@ -183,3 +183,41 @@ def test_particle_half_a_cell_from_a_wall_of_a_closed_box_still_solves():
     assert report.converged
     F = flow.residual(x, 0.0, 1.0, flow.load(0.0), con, orphans)
     assert np.abs(F).max() < 1e-9
+
+
+@pytest.mark.parametrize("centre, radius", [((0.307, 0.625), 0.283), ((0.443, 0.529), 0.164),
+                                            ((0.476, 0.682), 0.2)])
+def test_orphaned_pressure_modes_span_the_null_space(centre, radius):
+    """A cylinder through both walls of a 6 x 6 x 2 box: cut cells next to the walls leave
+    pressure modes spread over several cells that no free velocity sees. The projector found by
+    ``orphan_pressure_modes`` spans exactly the null space of B on the free velocities (dense SVD
+    reference), so the saddle-point matrix with C = P is regular; some modes couple cells."""
+    from fbmflow.flow import DoNothing, NavierStokesProblem, NoSlip
+    from fbmflow.particles import Cylinder
+    from fbmflow.solvers.linear import orphan_pressure_modes
+
+    mesh = StructuredMesh.box((6, 6, 2))
+    centres = np.array([[*centre, 0.5]])
+    cylinder = Cylinder(radius, 2.0)
+
+    def obstacle(V, t):
+        return rigid_body_constraints(V, node_owner(V, centres, [cylinder]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+
+    bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
+    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
+    con = flow.constraints(0.0)
+    BT = con.constrain_divergence(flow.BT).tocsr()
+    P = orphan_pressure_modes(BT, 4)
+    free = np.ones(BT.shape[1], dtype=bool)
+    free[con.dofs] = False
+    sv = np.linalg.svd(BT[:, free].toarray(), compute_uv=False)
+    null_dim = int((sv <= 1e-10 * sv.max()).sum()) + max(0, BT.shape[0] - int(free.sum()))
+    assert round(P.diagonal().sum()) == null_dim > 0
+    assert abs(BT.T @ P).max() < 1e-14 * abs(BT).max()
+    assert abs(P @ P - P).max() < 1e-12
+    C = P.tocoo()
+    assert np.any(C.row // 4 != C.col // 4)  # a mode spread over several cells
+    K = flow.linear_system(flow.zero_state(0.0), 0.0, 1.0, con).matrix(bordered=False).toarray()
+    keep = np.ones(K.shape[0], dtype=bool)
+    keep[con.dofs] = False
+    assert np.linalg.matrix_rank(K[keep][:, keep]) == keep.sum()

@@ -24,7 +24,7 @@ from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
-from ..solvers.linear import orphan_pressure_block
+from ..solvers.linear import orphan_pressure_modes
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -180,13 +180,13 @@ class NavierStokesProblem:
         return self._apply_scalar(self._scalar_operator(u, 0.0, 1.0), u)
 
     def residual(self, x: np.ndarray, m: float, a: float, rhs: np.ndarray,
-                 con: DirichletConstraints, orphans: np.ndarray | None = None) -> np.ndarray:
+                 con: DirichletConstraints, orphans: sp.csr_matrix | None = None) -> np.ndarray:
         """``[F_u, F_p]`` (n_dofs,) with the constrained rows of ``F_u`` zero.
 
-        ``orphans (n_cells, dim+1, dim+1)``: projectors onto the pressure modes of cells whose
-        velocities are all constrained (see :func:`~fbmflow.solvers.linear.orphan_pressure_block`);
-        their continuity equations are removed from ``F_p``: a cell covered by a particle and a
-        wall has prescribed velocities whose divergence no unknown can change.
+        ``orphans (n_p, n_p)``: projector onto the pressure modes that no free velocity sees
+        (see :func:`~fbmflow.solvers.linear.orphan_pressure_modes`); their continuity equations
+        are removed from ``F_p``: a cell covered by a particle and a wall has prescribed
+        velocities whose divergence no unknown can change.
         """
         n_u = self.space.n_u
         u, p = x[:n_u], x[n_u:]
@@ -194,20 +194,19 @@ class NavierStokesProblem:
         Fu[con.dofs] = 0.0
         return np.concatenate([Fu, self._continuity(u[:, None], con, orphans)[:, 0]])
 
-    def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: np.ndarray | None) -> np.ndarray:
+    def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: sp.csr_matrix | None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
         dropped, (n_p, k)."""
         Fp = self.BT @ U
         if orphans is None:
             return Fp
-        npl = orphans.shape[1]
-        return Fp - np.einsum("cmn,cnk->cmk", orphans, Fp.reshape(-1, npl, Fp.shape[1])).reshape(Fp.shape)
+        return Fp - orphans @ Fp
 
-    def orphans(self, con: DirichletConstraints) -> np.ndarray | None:
+    def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """Pressure modes that no free velocity sees under the constraints ``con``."""
         if self.extra_constraints is None:
             return None
-        return orphan_pressure_block(con.constrain_divergence(self.BT), self.space.dim + 1)
+        return orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1)
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:

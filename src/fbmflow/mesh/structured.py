@@ -272,6 +272,37 @@ class StructuredMesh:
         return AXES.index(tag[0]), tag[1:]
 
 
+def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float, ratio: float = 1.3) -> np.ndarray:
+    """Vertex coordinates of one axis of a :meth:`StructuredMesh.rectilinear` mesh: cells of size
+    about ``h`` on the interval ``fine = (a, b)``, growing by ``ratio`` per cell towards
+    ``lower`` and ``upper``.
+
+    Each side gets the fewest cells whose geometric sizes ``h ratio^k`` (k = 1, 2, ...) cover it,
+    all scaled to fit it exactly (so no side cell is larger than ``h ratio^k``); the fine zone gets
+    ``ceil((b - a) / h)`` equal cells. Every zone's count is rounded up to an even number, so the
+    mesh coarsens at least once (multigrid). Returns (n + 1,) float64, strictly increasing.
+    """
+    a, b = fine
+    if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0):
+        raise ValueError(f"need lower <= a < b <= upper, h > 0 and ratio >= 1; got {lower}, {fine}, "
+                         f"{upper}, h = {h}, ratio = {ratio}")
+
+    def side(length):  # cell sizes from the fine zone outwards
+        if length <= 1e-12 * (upper - lower):
+            return np.zeros(0)
+        sizes = [h * ratio]
+        while sum(sizes) < length or len(sizes) % 2:
+            sizes.append(sizes[-1] * ratio)
+        return np.array(sizes) * (length / sum(sizes))
+
+    n_fine = int(np.ceil((b - a) / h - 1e-9))
+    middle = np.linspace(a, b, n_fine + n_fine % 2 + 1)
+    left, right = side(a - lower), side(upper - b)
+    axis = np.concatenate([a - np.cumsum(left)[::-1], middle, b + np.cumsum(right)])
+    axis[0], axis[-1] = lower, upper
+    return axis
+
+
 def q1_basis(xi: np.ndarray) -> np.ndarray:
     """Multilinear basis on ``[-1, 1]^dim`` at points ``xi (n, dim)`` -> (n, 2**dim) float64."""
     xi = np.atleast_2d(xi)

@@ -1,10 +1,18 @@
-"""DFG benchmark 2D-1 (Schäfer & Turek 1996): steady flow around a cylinder at Re = 20, the
-cylinder a fixed fictitious boundary on the structured channel mesh.
+"""DFG benchmarks 2D-1 and 3D-1Z (Schäfer & Turek 1996): steady flow around a cylinder at
+Re = 20, the cylinder a fixed fictitious boundary on a structured channel mesh.
 
-Channel ``[0, 2.2] x [0, 0.41]``, cylinder of diameter 0.1 centred at (0.2, 0.2), parabolic inflow
-``u = 4 U y (H - y) / H^2`` with ``U = 0.3`` (mean 0.2), ``rho = 1``, ``mu = 1e-3``, no-slip walls,
-do-nothing outflow. Level ``L`` has ``22 2^L x 4 2^L`` cells, about ``2^L`` cells across the
-diameter. Reference values: C_D = 5.57953523384, C_L = 0.010618948146, dp = 0.11752016697.
+* ``dfg-2d-1``: channel ``[0, 2.2] x [0, 0.41]``, cylinder of diameter 0.1 centred at (0.2, 0.2),
+  parabolic inflow ``u = 4 U y (H - y) / H^2`` with ``U = 0.3`` (mean 0.2). Uniform mesh: level
+  ``L`` has ``22 2^L x 4 2^L`` cells, about ``2^L`` cells across the diameter. Reference values:
+  C_D = 5.57953523384, C_L = 0.010618948146, dp = 0.11752016697.
+* ``dfg-3d-1z``: channel ``[0, 2.5] x [0, 0.41] x [0, 0.41]``, cylinder of diameter 0.1 along z
+  through (0.5, 0.2), inflow ``u = 16 U y z (H - y)(H - z) / H^4`` with ``U = 0.45`` (mean 0.2).
+  Graded (rectilinear) mesh: ``2^L`` cells across the diameter in the zone ``[0.4, 0.6] x
+  [0.1, 0.3]`` about the cylinder, cells growing by 1.3 per cell towards the channel ends and
+  walls, ``2^L`` uniform cells along z. Reference values (Bayraktar, Mierka & Turek 2012):
+  C_D = 6.18533, C_L = 0.009401; ``C = 2 F / (rho u_mean^2 D H)``.
+
+``rho = 1``, ``mu = 1e-3``, no-slip walls, do-nothing outflow in both.
 """
 from __future__ import annotations
 
@@ -16,20 +24,21 @@ from ..coupling import hydrodynamic_forces, node_owner, rigid_body_constraints
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
-from ..mesh import StructuredMesh
+from ..mesh import StructuredMesh, graded_axis
 from ..params import SolverParams, param, section
-from ..particles import Ball
+from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
 
 REFERENCE = {"drag_coefficient": 5.57953523384, "lift_coefficient": 0.010618948146,
              "pressure_difference": 0.11752016697}
-H, LENGTH, D, CENTRE = 0.41, 2.2, 0.1, np.array([0.2, 0.2])
-DIRECT_LIMIT = 400_000  # unknowns up to which solver.linear = "auto" uses the direct solver here
+REFERENCE_3D = {"drag_coefficient": 6.18533, "lift_coefficient": 0.009401}
+H, D = 0.41, 0.1
+DIRECT_LIMIT = {2: 400_000, 3: 300_000}  # unknowns up to which solver.linear = "auto" is direct here
 
 
 @dataclass(frozen=True)
 class DFGFluid:
-    """Fluid of the DFG benchmark."""
+    """Fluid of the DFG 2D benchmark."""
 
     density: float = param(1.0, "density rho", "kg/m^3", positive=True)
     viscosity: float = param(1e-3, "dynamic viscosity mu", "Pa s", positive=True)
@@ -44,57 +53,144 @@ class DFGParams:
     solver: SolverParams = section(SolverParams)
 
 
-class DFG2D1(Scene):
-    name = "dfg-2d-1"
-    description = "DFG 2D-1: steady flow around a fixed fictitious-boundary cylinder, Re = 20 (drag, lift)"
-    Params = DFGParams
-    default_level = 4
-    max_level = 6
+@dataclass(frozen=True)
+class DFG3DFluid:
+    """Fluid of the DFG 3D benchmark."""
 
-    @staticmethod
-    def mesh(level: int) -> StructuredMesh:
-        n = 2**level
-        return StructuredMesh.box((22 * n, 4 * n), upper=(LENGTH, H))
+    density: float = param(1.0, "density rho", "kg/m^3", positive=True)
+    viscosity: float = param(1e-3, "dynamic viscosity mu", "Pa s", positive=True)
+    max_inflow: float = param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True)
 
-    def run(self, params: DFGParams, level: int, progress=None) -> SceneResult:
-        f = params.fluid
+
+@dataclass(frozen=True)
+class DFG3DParams:
+    """Parameters of ``dfg-3d-1z``."""
+
+    fluid: DFG3DFluid = section(DFG3DFluid)
+    solver: SolverParams = section(SolverParams)
+
+
+class _DFGScene(Scene):
+    """Steady flow past a fixed fictitious-boundary cylinder: the shared run of both benchmarks.
+
+    Subclasses give the mesh, the cylinder (shape and centre), the inflow profile and its mean,
+    the depth that enters the force coefficients (1 in 2D, H in 3D) and the reference values.
+    """
+
+    dim = 2
+    centre: np.ndarray
+    reference: dict
+    depth = 1.0
+
+    def mesh(self, level: int) -> StructuredMesh:
+        raise NotImplementedError
+
+    def cylinder(self):
+        raise NotImplementedError
+
+    def inflow(self, U: float):
+        """Dirichlet value ``f(x (n, dim), t) -> (n, dim)`` on ``xmin``."""
+        raise NotImplementedError
+
+    def mean_inflow(self, U: float) -> float:
+        raise NotImplementedError
+
+    def run(self, params, level: int, progress=None) -> SceneResult:
+        f, dim = params.fluid, self.dim
         mesh = self.mesh(level)
-        cylinder = Ball(D / 2, 2)
-        centres = CENTRE[None, :]
+        cylinder, centres = self.cylinder(), self.centre[None, :]
+        at_rest = (np.zeros((1, dim)), np.zeros(1) if dim == 2 else np.zeros((1, 3)))  # U, omega
 
         def obstacle(V, t):
-            owner = node_owner(V, centres, [cylinder])
-            return rigid_body_constraints(V, owner, centres, np.zeros((1, 2)), np.zeros(1))
+            return rigid_body_constraints(V, node_owner(V, centres, [cylinder]), centres, *at_rest)
 
-        U = f.max_inflow
-        bcs = {"xmin": Dirichlet(lambda x, t: np.column_stack([4 * U * x[:, 1] * (H - x[:, 1]) / H**2, 0 * x[:, 0]])),
-               "xmax": DoNothing(), "ymin": NoSlip(), "ymax": NoSlip()}
+        bcs = {"xmin": Dirichlet(self.inflow(f.max_inflow)), "xmax": DoNothing(),
+               **{tag: NoSlip() for tag in mesh.tags if tag not in ("xmin", "xmax")}}
         linear = params.solver.linear_solver()
         if linear == "auto":
             # multigrid does not yet handle fictitious boundaries efficiently (65 s against 10 s
-            # for the direct solver at level 3): direct while it fits, multigrid beyond
-            linear = "direct" if FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT else "multigrid"
-        problem = NavierStokesProblem(mesh, f.viscosity, bcs, density=f.density, linear_solver=linear,
-                                      newton=params.solver.newton_settings(), extra_constraints=obstacle,
-                                      coarse_cells=self.mesh(min(level, 2)).n_cells)
+            # for the direct solver at 2D level 3): direct while it fits, multigrid beyond
+            linear = "direct" if FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
+        problem = NavierStokesProblem(mesh, f.viscosity, bcs, density=f.density, linear_solver=linear,
+                                      newton=params.solver.newton_settings(), extra_constraints=obstacle,
+                                      coarse_cells=mesh.n_cells // 2**(dim * max(level - 2, 0)))
         x, report = problem.solve_steady()
         space = problem.space
         u, p = x[:space.n_u], x[space.n_u:]
         owner = node_owner(space.V, centres, [cylinder])
         force, _ = hydrodynamic_forces(space, owner, centres, u, p, f.viscosity)
-        mean = 2.0 * U / 3.0
-        scale = 2.0 / (f.density * mean**2 * D)
+        mean = self.mean_inflow(f.max_inflow)
+        scale = 2.0 / (f.density * mean**2 * D * self.depth)
         # front and back points of the cylinder; the cell behind a surface point is partly inside
         # the particle, so the pressure is extrapolated from the fluid cell one cell further out
-        h = mesh.spacing[0]
-        front_back = np.array([[CENTRE[0] - D / 2, CENTRE[1]], [CENTRE[0] + D / 2, CENTRE[1]]])
-        outward = front_back + np.array([[-1.5 * h, 0.0], [1.5 * h, 0.0]])
-        dp = sample_pressure(space, p, front_back, cells_at=outward)
+        h = D / self.cells_per_diameter(mesh)
+        shift = np.zeros(dim)
+        shift[0] = D / 2
+        front_back = self.centre + np.array([-shift, shift])
+        dp = sample_pressure(space, p, front_back, cells_at=front_back + 3 * h * np.array([-shift, shift]) / D)
         q = {"drag_coefficient": float(scale * force[0, 0]), "lift_coefficient": float(scale * force[0, 1]),
              "pressure_difference": float(dp[0] - dp[1]),
-             "cells_per_diameter": float(D / mesh.spacing.max())}
-        for key, ref in REFERENCE.items():
+             "cells_per_diameter": self.cells_per_diameter(mesh)}
+        for key, ref in self.reference.items():
             q[f"{key}_error"] = abs(q[key] - ref) / abs(ref)
         return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations)
+
+    def cells_per_diameter(self, mesh: StructuredMesh) -> float:
+        """Cells across the diameter along x at the cylinder centre."""
+        x = mesh.axis_coordinates[0]
+        k = int(np.clip(np.searchsorted(x, self.centre[0]) - 1, 0, x.size - 2))
+        return float(D / (x[k + 1] - x[k]))
+
+
+class DFG2D1(_DFGScene):
+    name = "dfg-2d-1"
+    description = "DFG 2D-1: steady flow around a fixed fictitious-boundary cylinder, Re = 20 (drag, lift)"
+    Params = DFGParams
+    default_level = 4
+    max_level = 6
+    centre = np.array([0.2, 0.2])
+    reference = REFERENCE
+
+    def mesh(self, level: int) -> StructuredMesh:
+        n = 2**level
+        return StructuredMesh.box((22 * n, 4 * n), upper=(2.2, H))
+
+    def cylinder(self):
+        return Ball(D / 2, 2)
+
+    def inflow(self, U: float):
+        return lambda x, t: np.column_stack([4 * U * x[:, 1] * (H - x[:, 1]) / H**2, 0 * x[:, 0]])
+
+    def mean_inflow(self, U: float) -> float:
+        return 2.0 * U / 3.0
+
+
+class DFG3D1Z(_DFGScene):
+    name = "dfg-3d-1z"
+    description = "DFG 3D-1Z: steady flow around a fixed fictitious-boundary cylinder along z, Re = 20"
+    Params = DFG3DParams
+    default_level = 3
+    max_level = 5
+    dim = 3
+    centre = np.array([0.5, 0.2, H / 2])
+    reference = REFERENCE_3D
+    depth = H
+
+    def mesh(self, level: int) -> StructuredMesh:
+        h = D / 2**level
+        return StructuredMesh.rectilinear([graded_axis(0.0, 2.5, (0.4, 0.6), h), graded_axis(0.0, H, (0.1, 0.3), h),
+                                           np.linspace(0.0, H, 2**level + 1)])
+
+    def cylinder(self):
+        return Cylinder(D / 2, 2 * H)  # longer than the channel is high: cuts through both z walls
+
+    def inflow(self, U: float):
+        def value(x, t):
+            u = 16 * U * x[:, 1] * x[:, 2] * (H - x[:, 1]) * (H - x[:, 2]) / H**4
+            return np.column_stack([u, 0 * u, 0 * u])
+        return value
+
+    def mean_inflow(self, U: float) -> float:
+        return 4.0 * U / 9.0

@@ -13,7 +13,7 @@ from ..io import export_csv
 from .base import RunFiles, Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
-from .dfg import DFG2D1
+from .dfg import DFG2D1, DFG3D1Z
 from .dkt import DKT2D
 from .glowinski import GlowinskiFreeFall
 from .sedimentation import FluidizedBed2D, Sedimentation2D, Sedimentation3D
@@ -22,7 +22,7 @@ from .tencate import TenCate
 
 log = logging.getLogger(__name__)
 
-SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(),
+SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(), DFG3D1Z(),
                                               GlowinskiFreeFall(), TenCate(), DKT2D(),
                                               Sedimentation2D(), Sedimentation3D(), FluidizedBed2D())}
 

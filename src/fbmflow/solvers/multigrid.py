@@ -12,6 +12,7 @@ Cycles: V (gamma = 1), W (gamma = 2) and F. Used stand-alone (cycles until the r
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 
@@ -20,6 +21,8 @@ import numpy as np
 from .krylov import fgmres
 from .linear import LinearReport, SaddlePointSystem, factorize
 from .vanka import VANKA_VARIANTS, VankaSmoother
+
+log = logging.getLogger(__name__)
 
 CYCLES = ("V", "W", "F")
 
@@ -169,6 +172,8 @@ class MultigridSolver:
                 cycles += 1
         if project is not None:
             project(x)
+        log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
+                  time.perf_counter() - t0)
         report = LinearReport(self.name, time.perf_counter() - t0, iterations=cycles,
                               residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup)
         return x[:system.n_u], x[system.n_u:], report

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _kernels
-from .linear import SaddlePointSystem
+from .linear import SaddlePointSystem, cell_blocks
 
 
 class VankaSmoother:
@@ -43,8 +43,7 @@ class VankaSmoother:
         self._b = (B.indptr.astype(np.int64), B.indices.astype(np.int64), B.data)
         nb = system.A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
         npl = space.dim + 1
-        pblock = (system.pressure_block if system.pressure_block is not None
-                  else np.zeros((space.mesh.n_cells, npl, npl)))
+        pblock = cell_blocks(system.orphans, space.mesh.n_cells, npl)  # cluster modes: cell parts only
         self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, system.A.data,
                         *self._b, system.BT.data, space.local_rank, space.V.cell_dofs, pblock)
         if variant == "vanka-diagonal":

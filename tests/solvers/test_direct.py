@@ -1,0 +1,49 @@
+"""Direct solver backends: SuperLU (always there) and PARDISO (optional) give the same solution."""
+import numpy as np
+import pytest
+
+from fbmflow.coupling import node_owner, rigid_body_constraints
+from fbmflow.flow import DoNothing, NavierStokesProblem, NoSlip
+from fbmflow.mesh import StructuredMesh
+from fbmflow.particles import Ball
+from fbmflow.solvers import DirectSolver
+from fbmflow.solvers.linear import factorize, pardiso_available
+
+
+def fbm_system():
+    """A 3D channel with a sphere held still: orphaned pressure modes inside it, do-nothing outflow."""
+    mesh = StructuredMesh.box((6, 4, 4))
+    centres = np.array([[0.45, 0.5, 0.5]])
+
+    def obstacle(V, t):
+        return rigid_body_constraints(V, node_owner(V, centres, [Ball(0.3, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+
+    bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
+    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
+    con = flow.constraints(0.0)
+    x = flow.zero_state(0.0)
+    x[:flow.space.n_u] = np.random.default_rng(0).normal(size=flow.space.n_u)
+    con.apply_to_vector(x[:flow.space.n_u])
+    return flow.linear_system(x, 1.0, 1.0, con)
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_pardiso_matches_superlu():
+    system = fbm_system()
+    rng = np.random.default_rng(1)
+    f, g = rng.normal(size=(system.n_u, 2)), rng.normal(size=(system.n_p, 2))
+    f[system.fixed] = 0.0
+    u1, p1 = factorize(system, "superlu")(f, g)
+    u2, p2 = factorize(system, "pardiso")(f, g)
+    np.testing.assert_allclose(u2, u1, atol=1e-10 * np.abs(u1).max())
+    np.testing.assert_allclose(p2, p1, atol=1e-10 * np.abs(p1).max())
+    r = system.apply(np.concatenate([u2[:, 0], p2[:, 0]])) - np.concatenate([f[:, 0], g[:, 0]])
+    assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f[:, 0], g[:, 0]]))
+
+
+def test_backend_errors():
+    with pytest.raises(ValueError, match="unknown direct backend"):
+        DirectSolver(backend="mumps")
+    if not pardiso_available():
+        with pytest.raises(ValueError, match="pip install"):
+            DirectSolver(backend="pardiso")
