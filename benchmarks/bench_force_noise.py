@@ -43,9 +43,13 @@ def box_mesh(dim: int, cells_per_d: int, graded: bool) -> StructuredMesh:
         n = int(2 * half * cells_per_d)
         return StructuredMesh.box((n, n) if dim == 2 else (n, n // 2, n // 2), lower=lower,
                                   upper=(half,) * dim)
-    reach = 0.5 + 2 * h
-    axes = [graded_axis(-half, half, (-reach, reach + h), h)]
-    axes += [graded_axis(lo, half, (max(lo, -reach), reach), h) for lo in lower[1:]]
+    def zone(a, b):  # whole cells of size h, an even number of them (nested coarsening)
+        a, b = np.floor(a / h + 1e-9) * h, np.ceil(b / h - 1e-9) * h
+        return (a, b + h) if round((b - a) / h) % 2 else (a, b)
+
+    reach = 0.5 + 2 * h  # the sphere's surface plus two cells; it moves by one cell along x
+    axes = [graded_axis(-half, half, zone(-reach, reach + h), h)]
+    axes += [graded_axis(lo, half, zone(max(lo, -reach), reach), h) for lo in lower[1:]]
     return StructuredMesh.rectilinear(axes)
 
 

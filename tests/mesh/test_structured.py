@@ -332,3 +332,20 @@ def test_rectilinear_errors():
         StructuredMesh.rectilinear([np.array([0.0, 1.0, 0.5]), np.array([0.0, 1.0])])
     with pytest.raises(ValueError, match="periodic axis x must be uniform"):
         StructuredMesh.rectilinear([np.array([0.0, 0.2, 1.0]), np.array([0.0, 1.0])], periodic=(True, False))
+
+
+def test_graded_axis_grows_smoothly_from_the_fine_zone():
+    from fbmflow.mesh import graded_axis
+
+    x = graded_axis(0.0, 2.5, (0.4, 0.6), 0.0125, ratio=1.3)
+    dx = np.diff(x)
+    assert x[0] == 0.0 and x[-1] == 2.5 and np.all(dx > 0)
+    fine = (x[:-1] >= 0.4 - 1e-12) & (x[1:] <= 0.6 + 1e-12)
+    np.testing.assert_allclose(dx[fine], 0.0125)
+    left, right = dx[:np.argmax(fine)][::-1], dx[len(dx) - np.argmax(fine[::-1]):]
+    for side in (left, right):  # growing outwards, by at most the ratio, from at least h
+        growth = side[1:] / side[:-1]
+        assert np.all(growth >= 1.0 - 1e-12) and np.all(growth <= 1.3 + 1e-12) and side[0] >= 0.0125
+    assert all(n % 2 == 0 for n in (fine.sum(), left.size, right.size))
+    with pytest.raises(ValueError, match="lower <= a < b <= upper"):
+        graded_axis(0.0, 1.0, (0.5, 0.4), 0.1)

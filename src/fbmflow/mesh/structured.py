@@ -277,10 +277,12 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     about ``h`` on the interval ``fine = (a, b)``, growing by ``ratio`` per cell towards
     ``lower`` and ``upper``.
 
-    Each side gets the fewest cells whose geometric sizes ``h ratio^k`` (k = 1, 2, ...) cover it,
-    all scaled to fit it exactly (so no side cell is larger than ``h ratio^k``); the fine zone gets
-    ``ceil((b - a) / h)`` equal cells. Every zone's count is rounded up to an even number, so the
-    mesh coarsens at least once (multigrid). Returns (n + 1,) float64, strictly increasing.
+    Each side gets the fewest (even) number ``n`` of cells whose sizes ``h ratio^k`` (k = 1..n)
+    cover it; the growth factor is then lowered (to no less than 1) until they fit it exactly, so
+    side cells grow smoothly from ``h`` (they are smaller than ``h`` only when the side is shorter
+    than ``n h``). The fine zone gets ``ceil((b - a) / h)`` equal cells, rounded up to an even
+    number, so the mesh coarsens at least once (multigrid). Returns (n + 1,) float64, strictly
+    increasing.
     """
     a, b = fine
     if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0):
@@ -290,10 +292,15 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     def side(length):  # cell sizes from the fine zone outwards
         if length <= 1e-12 * (upper - lower):
             return np.zeros(0)
-        sizes = [h * ratio]
-        while sum(sizes) < length or len(sizes) % 2:
-            sizes.append(sizes[-1] * ratio)
-        return np.array(sizes) * (length / sum(sizes))
+        n = 2
+        while h * np.sum(ratio ** np.arange(1, n + 1)) < length:
+            n += 2
+        lo, hi = 1.0, ratio  # the growth factor that fits the side exactly with n cells
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if h * np.sum(mid ** np.arange(1, n + 1)) < length else (lo, mid)
+        sizes = h * hi ** np.arange(1, n + 1)
+        return sizes * (length / sizes.sum())
 
     n_fine = int(np.ceil((b - a) / h - 1e-9))
     middle = np.linspace(a, b, n_fine + n_fine % 2 + 1)
