@@ -54,20 +54,17 @@ class DFGParams:
 
 
 @dataclass(frozen=True)
-class DFG3DFluid:
-    """Fluid of the DFG 3D benchmark."""
+class DFG3DFluid(DFGFluid):
+    """Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow)."""
 
-    density: float = param(1.0, "density rho", "kg/m^3", positive=True)
-    viscosity: float = param(1e-3, "dynamic viscosity mu", "Pa s", positive=True)
     max_inflow: float = param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True)
 
 
 @dataclass(frozen=True)
-class DFG3DParams:
+class DFG3DParams(DFGParams):
     """Parameters of ``dfg-3d-1z``."""
 
     fluid: DFG3DFluid = section(DFG3DFluid)
-    solver: SolverParams = section(SolverParams)
 
 
 class _DFGScene(Scene):
