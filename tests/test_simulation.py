@@ -151,7 +151,23 @@ def test_ten_cate_scene_validation_and_gap_deviation():
     ref = tencate2002.GAP["E3"]
     assert gap_deviation(ref[:, 0], ref[:, 1], "E3") == 0.0
     assert gap_deviation(ref[:, 0], 1.02 * ref[:, 1], "E3") == pytest.approx(0.02)
-    assert scene.mesh(1, "quarter").shape == (20, 20, 64)  # 6 cells per diameter
+    assert scene.mesh(1, "quarter", "uniform").shape == (20, 20, 64)  # 6 cells per diameter
+
+
+@pytest.mark.parametrize("symmetry", ["quarter", "none"])
+def test_ten_cate_graded_mesh_is_uniform_along_the_path(symmetry):
+    """Cells of 2.5 mm (level 1) within one diameter of the axis and from the bottom to one
+    diameter above the release height; larger, growing by at most 1.3, beyond; far fewer cells."""
+    scene = get_scene("ten-cate")
+    graded, uniform = scene.mesh(1, symmetry), scene.mesh(1, symmetry, "uniform")
+    assert graded.n_cells < 0.4 * uniform.n_cells
+    np.testing.assert_allclose(graded.finest_spacing, uniform.spacing)
+    for axis, (a, b) in zip(graded.axis_coordinates, [(0.035, 0.065)] * 2 + [(0.0, 0.1425)]):
+        h = np.diff(axis)
+        mid = 0.5 * (axis[1:] + axis[:-1])
+        np.testing.assert_allclose(h[(mid > a) & (mid < b)], 0.0025)
+        assert np.all(h[1:] / h[:-1] <= 1.3 + 1e-9) and np.all(h[:-1] / h[1:] <= 1.3 + 1e-9)
+        assert h.max() > 0.004  # grown beyond the fine cells
 
 
 def test_disk_landing_with_hard_contact_rests_on_the_wall_without_overlap():

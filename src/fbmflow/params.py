@@ -142,7 +142,7 @@ class SolverParams:
     """Nonlinear and linear solver settings."""
 
     linear: str = param("auto", "linear solver for the Newton systems ('auto': multigrid above "
-                        "20 000 unknowns in 2D / 15 000 in 3D, else direct)",
+                        "20 000 unknowns in 2D / 15 000 in 3D (300 000 with PARDISO), else direct)",
                         choices=("auto", "direct", "multigrid"))
     linear_rtol: float = param(1e-8, "multigrid: relative residual reduction per linear solve",
                                positive=True, maximum=0.1)
@@ -191,12 +191,13 @@ class RepulsionParams:
 
     def make(self, mesh, walls=None):
         """The :class:`~fbmflow.contact.Repulsion` for the walls of ``mesh`` (all faces, or the
-        ``(axis, side)`` pairs in ``walls``); None when off."""
+        ``(axis, side)`` pairs in ``walls``); None when off. The range is counted in the
+        mesh's finest cells (those of the fine zone of a graded mesh)."""
         if not self.enabled:
             return None
         from .contact import Repulsion
 
-        return Repulsion(self.range_cells * float(max(mesh.spacing)), tuple(mesh.lower), tuple(mesh.upper),
+        return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower), tuple(mesh.upper),
                          self.strength, None if walls is None else tuple(walls))
 
 
@@ -234,7 +235,7 @@ class ContactParams:
             return None
         from .contact import ContactSet, Lubrication, Planes
 
-        h = float(max(mesh.spacing))
+        h = float(max(mesh.finest_spacing))  # the fine zone's cells on a graded mesh
         lubrication = None
         if self.lubrication:
             if viscosity is None:

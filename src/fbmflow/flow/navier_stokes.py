@@ -24,15 +24,19 @@ from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
-from ..solvers.linear import orphan_pressure_modes
+from ..solvers.linear import orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
 log = logging.getLogger(__name__)
 
-#: unknowns above which ``linear_solver="auto"`` picks multigrid (measured crossover, see
-#: benchmarks/bench_solvers.py)
+#: unknowns above which ``linear_solver="auto"`` picks multigrid (measured crossover against
+#: SuperLU, see benchmarks/bench_solvers.py)
 AUTO_MULTIGRID_DOFS = {2: 20_000, 3: 15_000}
+#: the same in 3D when the PARDISO backend is installed: limited by memory (252 000 unknowns
+#: took a 12.5 GB peak), not by speed; with fictitious boundaries multigrid is far slower (ten-cate
+#: level 0, 99 000 unknowns: 11 s per time step direct, over 20 minutes with multigrid)
+AUTO_MULTIGRID_DOFS_PARDISO = 300_000
 
 
 class NavierStokesProblem:
@@ -53,7 +57,8 @@ class NavierStokesProblem:
         False solves the (time-dependent) Stokes equations.
     linear_solver : str or solver object, default "auto"
         Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`, ``"auto"`` (multigrid above
-        :data:`AUTO_MULTIGRID_DOFS` unknowns, else direct) or an instance (e.g. a configured
+        :data:`AUTO_MULTIGRID_DOFS` unknowns, :data:`AUTO_MULTIGRID_DOFS_PARDISO` in 3D with PARDISO,
+        else direct) or an instance (e.g. a configured
         :class:`~fbmflow.solvers.MultigridSolver`).
     newton : NewtonSettings
     coarse_cells : int, optional
@@ -87,7 +92,9 @@ class NavierStokesProblem:
         self.newton = newton
         if linear_solver == "auto":
             n_unknowns = FlowSpace.estimate_dofs(mesh)
-            linear_solver = "multigrid" if n_unknowns > AUTO_MULTIGRID_DOFS[mesh.dim] else "direct"
+            limit = (AUTO_MULTIGRID_DOFS_PARDISO if mesh.dim == 3 and pardiso_available()
+                     else AUTO_MULTIGRID_DOFS[mesh.dim])
+            linear_solver = "multigrid" if n_unknowns > limit else "direct"
         self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
                               else linear_solver)
         pressure_fixed = not pressure_is_determined(boundary)

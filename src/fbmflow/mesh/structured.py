@@ -121,6 +121,15 @@ class StructuredMesh:
         return (np.array(self.upper) - np.array(self.lower)) / np.array(self.shape)
 
     @property
+    def finest_spacing(self) -> np.ndarray:
+        """Smallest cell size per axis, (dim,) float64: :attr:`spacing` on a uniform mesh, the
+        fine zone's cells on a graded one (where the particles are meant to move)."""
+        axes = self.axis_coordinates
+        if axes is None:
+            return self.spacing
+        return np.array([float(np.diff(a).min()) for a in axes])
+
+    @property
     def tags(self) -> tuple[str, ...]:
         """Boundary face tags of the non-periodic directions."""
         return tuple(t for t in face_tags(self.dim) if not self.periodic[AXES.index(t[0])])
