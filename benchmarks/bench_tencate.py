@@ -1,0 +1,128 @@
+"""ten Cate et al. (2002): a sphere settling in a closed box, against the experiment, per case
+and mesh level.
+
+Run:  python benchmarks/bench_tencate.py [--cases E1 E2 E3 E4] [--levels 0 1] [--dt 0.01]
+      python benchmarks/bench_tencate.py --cases E4 --levels 1 --set domain.mesh=uniform
+
+Writes ``benchmarks/results/tencate.md``, ``.json`` and ``.png``: per run the case, level,
+cells across the diameter, unknowns, time step, steps, wall time (the JIT compilation is done by
+a two-step warm-up run first and not timed), the peak settling velocity and its deviation from
+ten Cate's Table II, and the largest deviation of the gap curve from the experiment's up to
+gap/d = 1. Runs already in the JSON file (same case, level, time step and settings) are kept
+and not repeated, so a long study can be continued after an interruption.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from fbmflow.params import from_dict, parse_value, set_dotted
+from fbmflow.scenes import get_scene
+from fbmflow.scenes.data import tencate2002
+from fbmflow.solvers.linear import pardiso_available
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def run(scene, case: str, level: int, dt: float, settings: dict) -> dict:
+    data = {"fluid": {"case": case}, "time": {"dt": dt}}
+    for key, value in settings.items():
+        set_dotted(data, key, value)
+    params = from_dict(scene.Params, data)
+    t0 = time.perf_counter()
+
+    def progress(k, n, t, info):  # one line per step: a long run shows where it is
+        print(f"  step {k}/{n}  t = {t:.3f} s  {time.perf_counter() - t0:.0f} s  newton {info['newton']}  "
+              f"|U| {info['max|U|']:.5f} m/s", flush=True)
+
+    result = scene.run(params, level, progress)
+    q = result.quantities
+    row = dict(case=case, level=level, settings=settings, cells_per_diameter=q["cells_per_diameter"],
+               n_dofs=result.n_dofs, dt=dt, steps=result.steps, wall_s=time.perf_counter() - t0,
+               newton=result.newton_iterations, u_max=q["max_settling_velocity"],
+               u_max_error=q["max_settling_velocity_error"], gap_deviation=q["gap_max_deviation"],
+               t=q["t"], gap_over_d=q["gap_over_d"], settling_velocity=q["settling_velocity"])
+    print(f"{case} level {level} dt {dt} {settings or ''}: {row['n_dofs']} unknowns, {row['steps']} steps, "
+          f"{row['wall_s']:.0f} s, u_max {row['u_max']:.5f} m/s ({100 * row['u_max_error']:+.2f} %), "
+          f"gap deviation {100 * row['gap_deviation']:.1f} %", flush=True)
+    return row
+
+
+def write_table(rows: list[dict]) -> None:
+    backend = "PARDISO" if pardiso_available() else "SuperLU"
+    lines = ["# ten Cate et al. (2002) sphere settling (benchmarks/bench_tencate.py)", "",
+             "Quarter box with two mirror planes, implicit coupling, backward Euler, direct solver "
+             f"({backend}); wall time on this machine without the JIT compilation. u_max error against "
+             "Table II of ten Cate et al.; gap deviation: the largest of |gap - gap_exp| / gap_exp over "
+             "the experiment's samples with gap_exp >= 1.", "",
+             "| case | level | settings | cells/d | unknowns | dt s | steps | wall s | u_max m/s | u_max error | gap deviation |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r["case"], r["level"], -r["dt"])):
+        settings = ", ".join(f"{k}={v}" for k, v in r["settings"].items()) or "defaults"
+        lines.append(f"| {r['case']} | {r['level']} | {settings} | {r['cells_per_diameter']:.0f} | {r['n_dofs']} | "
+                     f"{r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {r['u_max']:.5f} | "
+                     f"{100 * r['u_max_error']:+.2f} % | {100 * r['gap_deviation']:.1f} % |")
+    (RESULTS / "tencate.md").write_text("\n".join(lines) + "\n")
+
+
+def plot(rows: list[dict]) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = sorted({r["case"] for r in rows})
+    fig, ax = plt.subplots(2, len(cases), figsize=(4.2 * len(cases), 7), squeeze=False)
+    for j, case in enumerate(cases):
+        ax[0, j].plot(*tencate2002.GAP[case].T, "ko", mfc="none", label="experiment")
+        ax[1, j].plot(*tencate2002.VELOCITY[case].T, "ko", mfc="none", label="experiment")
+        ax[1, j].axhline(tencate2002.U_MAX[case], ls=":", c="k", label="u_max, Table II")
+        for r in (r for r in rows if r["case"] == case):
+            extra = "".join(f", {v}" for v in r["settings"].values())
+            label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {r['dt']}{extra}"
+            ax[0, j].plot(r["t"], r["gap_over_d"], label=label)
+            ax[1, j].plot(r["t"], r["settling_velocity"], label=label)
+        ax[0, j].set_title(case)
+        ax[0, j].set_ylabel("gap / d")
+        ax[1, j].set_ylabel("settling velocity [m/s]")
+        for a in ax[:, j]:
+            a.set_xlabel("t [s]")
+            a.grid(alpha=0.3)
+            a.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "tencate.png", dpi=110)
+    plt.close(fig)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", nargs="+", default=["E1", "E2", "E3", "E4"], choices=("E1", "E2", "E3", "E4"))
+    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--dt", type=float, default=0.01)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="further scene parameters, e.g. domain.mesh=uniform")
+    args = ap.parse_args()
+    settings = dict(kv.split("=", 1) for kv in args.set)
+    settings = {k: parse_value(v) for k, v in settings.items()}
+    scene = get_scene("ten-cate")
+    path = RESULTS / "tencate.json"
+    rows = json.loads(path.read_text()) if path.is_file() else []
+    RESULTS.mkdir(exist_ok=True)
+    warm = False
+    for case in args.cases:
+        for level in args.levels:
+            key = (case, level, args.dt, settings)
+            if any((r["case"], r["level"], r["dt"], r["settings"]) == key for r in rows):
+                continue
+            if not warm:  # JIT compilation, not timed
+                scene.run(from_dict(scene.Params, {"time": {"t_end": 2 * args.dt, "dt": args.dt}}), 0)
+                warm = True
+            rows.append(run(scene, case, level, args.dt, settings))
+            path.write_text(json.dumps(rows))  # after every run: an interrupted study keeps its runs
+            write_table(rows)
+            plot(rows)
+
+
+if __name__ == "__main__":
+    main()
