@@ -9,7 +9,8 @@ cells across the diameter, unknowns, time step, steps, wall time (the JIT compil
 a two-step warm-up run first and not timed), the peak settling velocity and its deviation from
 ten Cate's Table II, and the largest deviation of the gap curve from the experiment's up to
 gap/d = 1. Runs already in the JSON file (same case, level, time step and settings) are kept
-and not repeated, so a long study can be continued after an interruption.
+and not repeated, so a long study can be continued after an interruption (and the table and plot
+redrawn from it); runs of concurrent studies writing to the same file are merged.
 """
 from __future__ import annotations
 
@@ -24,6 +25,10 @@ from fbmflow.scenes.data import tencate2002
 from fbmflow.solvers.linear import pardiso_available
 
 RESULTS = Path(__file__).parent / "results"
+
+
+def load(path: Path) -> list[dict]:
+    return json.loads(path.read_text()) if path.is_file() else []
 
 
 def run(scene, case: str, level: int, dt: float, settings: dict) -> dict:
@@ -50,7 +55,7 @@ def run(scene, case: str, level: int, dt: float, settings: dict) -> dict:
     return row
 
 
-def write_table(rows: list[dict]) -> None:
+def write_table(rows: list[dict], results: Path) -> None:
     backend = "PARDISO" if pardiso_available() else "SuperLU"
     lines = ["# ten Cate et al. (2002) sphere settling (benchmarks/bench_tencate.py)", "",
              "Quarter box with two mirror planes, implicit coupling, backward Euler, direct solver "
@@ -64,10 +69,10 @@ def write_table(rows: list[dict]) -> None:
         lines.append(f"| {r['case']} | {r['level']} | {settings} | {r['cells_per_diameter']:.0f} | {r['n_dofs']} | "
                      f"{r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {r['u_max']:.5f} | "
                      f"{100 * r['u_max_error']:+.2f} % | {100 * r['gap_deviation']:.1f} % |")
-    (RESULTS / "tencate.md").write_text("\n".join(lines) + "\n")
+    (results / "tencate.md").write_text("\n".join(lines) + "\n")
 
 
-def plot(rows: list[dict]) -> None:
+def plot(rows: list[dict], results: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -91,7 +96,7 @@ def plot(rows: list[dict]) -> None:
             a.grid(alpha=0.3)
             a.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(RESULTS / "tencate.png", dpi=110)
+    fig.savefig(results / "tencate.png", dpi=110)
     plt.close(fig)
 
 
@@ -102,13 +107,14 @@ def main():
     ap.add_argument("--dt", type=float, default=0.01)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="further scene parameters, e.g. domain.mesh=uniform")
+    ap.add_argument("--results", type=Path, default=RESULTS, help="output directory")
     args = ap.parse_args()
     settings = dict(kv.split("=", 1) for kv in args.set)
     settings = {k: parse_value(v) for k, v in settings.items()}
     scene = get_scene("ten-cate")
-    path = RESULTS / "tencate.json"
-    rows = json.loads(path.read_text()) if path.is_file() else []
-    RESULTS.mkdir(exist_ok=True)
+    args.results.mkdir(parents=True, exist_ok=True)
+    path = args.results / "tencate.json"
+    rows = load(path)
     warm = False
     for case in args.cases:
         for level in args.levels:
@@ -118,10 +124,14 @@ def main():
             if not warm:  # JIT compilation, not timed
                 scene.run(from_dict(scene.Params, {"time": {"t_end": 2 * args.dt, "dt": args.dt}}), 0)
                 warm = True
-            rows.append(run(scene, case, level, args.dt, settings))
+            row = run(scene, case, level, args.dt, settings)
+            rows = load(path) + [row]  # re-read: another study may have added runs meanwhile
             path.write_text(json.dumps(rows))  # after every run: an interrupted study keeps its runs
-            write_table(rows)
-            plot(rows)
+            write_table(rows, args.results)
+            plot(rows, args.results)
+    if rows:  # also when every run was already there: redraw from the JSON file
+        write_table(rows, args.results)
+        plot(rows, args.results)
 
 
 if __name__ == "__main__":
