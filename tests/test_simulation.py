@@ -44,6 +44,21 @@ def test_neutrally_buoyant_disk_stays_at_rest(coupling):
     assert np.allclose(q["final_position"], [1.0, 4.0], atol=1e-12)
 
 
+def test_graded_mesh_is_uniform_along_the_path_and_symmetric():
+    """Level 3: cells of 1/32 cm within one diameter of x = 1 and up to one diameter above the
+    release height, growing by at most 1.3 beyond, mirror-symmetric about x = 1; under 40 % of
+    the uniform mesh's cells."""
+    scene = get_scene("glowinski-free-fall")
+    graded, uniform = scene.mesh(3), scene.mesh(3, "uniform")
+    assert graded.n_cells < 0.4 * uniform.n_cells
+    x, y = graded.axis_coordinates
+    np.testing.assert_allclose(x, 2.0 - x[::-1], atol=1e-12)
+    for axis, (a, b) in ((x, (0.75, 1.25)), (y, (0.0, 4.25))):
+        h, mid = np.diff(axis), 0.5 * (axis[1:] + axis[:-1])
+        np.testing.assert_allclose(h[(mid > a) & (mid < b)], 1 / 32)
+        assert np.all(h[1:] / h[:-1] <= 1.3 + 1e-9) and np.all(h[:-1] / h[1:] <= 1.3 + 1e-9)
+
+
 def test_particle_outside_the_box_is_rejected():
     scene = get_scene("glowinski-free-fall")
     with pytest.raises(ParamError, match="not inside the 2 x 6 cm box"):

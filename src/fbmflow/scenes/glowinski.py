@@ -1,9 +1,14 @@
 """Glowinski et al.'s 2D free fall of a disk in a closed channel (CGS units).
 
 Disk of diameter 0.25 cm, rho_s = 1.25 g/cm^3, in a closed 2 x 6 cm box of fluid with rho_f = 1,
-mu = 0.1 g/(cm s), g = 980 cm/s^2, released at rest at (1, 4) cm. Level ``L`` has
-``8 2^L x 24 2^L`` cells, ``2^L`` cells across the diameter. Implicit (sub-iterated) fluid–particle
-coupling by default; ``coupling.scheme = "explicit"`` for the staggered one.
+mu = 0.1 g/(cm s), g = 980 cm/s^2, released at rest at (1, 4) cm. Level ``L`` has cells of
+``h = 0.25 / 2^L`` cm, ``2^L`` across the diameter, along the disk's path: by default
+(``domain.mesh = "graded"``) a rectilinear mesh, uniform within one diameter of the vertical line
+through the release point and from the bottom to one diameter above it, its cells growing by at
+most 1.3 per cell towards the side walls and the lid (about a third of the cells); with
+``domain.mesh = "uniform"`` the ``8 2^L x 24 2^L`` cells of size h everywhere. Implicit
+(sub-iterated) fluid–particle coupling by default; ``coupling.scheme = "explicit"`` for the
+staggered one.
 """
 from __future__ import annotations
 
@@ -12,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..flow import NoSlip
-from ..mesh import StructuredMesh
+from ..mesh import StructuredMesh, graded_axis
 from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
 from ..particles import Ball, Particles
 from ..simulation import Simulation
@@ -39,6 +44,15 @@ class GlowinskiParticle:
 
 
 @dataclass(frozen=True)
+class GlowinskiDomain:
+    """Mesh."""
+
+    mesh: str = param("graded", "graded: uniform cells along the disk's path, growing towards the "
+                      "side walls and the lid; uniform: the same cells everywhere",
+                      choices=("graded", "uniform"))
+
+
+@dataclass(frozen=True)
 class GlowinskiTime(TimeParams):
     """Time stepping."""
 
@@ -54,6 +68,7 @@ class GlowinskiParams:
 
     fluid: GlowinskiFluid = section(GlowinskiFluid)
     particle: GlowinskiParticle = section(GlowinskiParticle)
+    domain: GlowinskiDomain = section(GlowinskiDomain)
     time: GlowinskiTime = section(GlowinskiTime)
     coupling: CouplingParams = section(CouplingParams)
     repulsion: RepulsionParams = section(RepulsionParams)
@@ -74,13 +89,20 @@ class GlowinskiFreeFall(SimulationScene):
     max_level = 5
 
     @staticmethod
-    def mesh(level: int) -> StructuredMesh:
-        n = 2**level
-        return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
+    def mesh(level: int, kind: str = "graded", particle: GlowinskiParticle = GlowinskiParticle()) -> StructuredMesh:
+        """The 2 x 6 cm box with cells of ``h = 0.25 cm / 2^level`` along the disk's path
+        (``kind = "graded"``: only there, within one diameter of ``x = particle.x`` and below one
+        diameter above ``particle.y``)."""
+        n, h, d = 2**level, 0.25 / 2**level, particle.diameter
+        if kind == "uniform":
+            return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
+        fine_x = (max(particle.x - d, 0.0), min(particle.x + d, 2.0))
+        top = min(2 * h * np.ceil((particle.y + d) / (2 * h) - 1e-9), 6.0)  # an even number of cells h
+        return StructuredMesh.rectilinear([graded_axis(0.0, 2.0, fine_x, h), graded_axis(0.0, 6.0, (0.0, top), h)])
 
     def build(self, params: GlowinskiParams, level: int) -> Setup:
         f, pp = params.fluid, params.particle
-        mesh = self.mesh(level)
+        mesh = self.mesh(level, params.domain.mesh, pp)
         particles = Particles.at_rest([Ball(pp.diameter / 2, 2)], pp.density, [[pp.x, pp.y]])
         linear = params.solver.linear_solver()
         sim = Simulation(mesh, f.viscosity, {t: NoSlip() for t in mesh.tags}, particles,
