@@ -41,6 +41,29 @@ def test_pardiso_matches_superlu():
     assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f[:, 0], g[:, 0]]))
 
 
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
+    """An ill-conditioned system (condition number 1e9, |x| up to 1e9 |b|): the rounding
+    error of ``K x`` alone exceeds 1e-12 |b|. The solve stops at that floor, as accurate as the
+    conditioning allows, without FGMRES (which used to be called and could not get further) and
+    without falling back to SuperLU."""
+    import scipy.sparse as sp
+
+    import fbmflow.solvers.linear as linear
+    from fbmflow.solvers.krylov import fgmres
+
+    calls = []
+    monkeypatch.setattr(linear, "fgmres", lambda *a, **k: calls.append(1) or fgmres(*a, **k))
+    rng = np.random.default_rng(0)
+    Q = np.linalg.qr(rng.normal(size=(200, 200)))[0]
+    K = Q @ np.diag(np.logspace(0, -9, 200)) @ Q.T
+    b = rng.normal(size=200)
+    x = linear._pardiso(sp.csr_matrix(K))(b)
+    exact = np.linalg.solve(K, b)
+    assert np.abs(x - exact).max() < 1e-7 * np.abs(exact).max()
+    assert not calls and "SuperLU" not in caplog.text
+
+
 def test_backend_errors():
     with pytest.raises(ValueError, match="unknown direct backend"):
         DirectSolver(backend="mumps")

@@ -295,8 +295,7 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     larger: when ``b`` is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding
     error of ``K x`` itself, and FGMRES then ran 60 useless iterations per solve. Only if the
     residual ends above ``accept`` (same measure) is ``K`` factorised again with SuperLU, with a
-    warning.
-    The MKL memory is freed with the returned function."""
+    warning. The MKL memory is freed with the returned function."""
     import pypardiso
 
     A = sp.csr_matrix(K)
