@@ -257,3 +257,23 @@ def test_state_round_trip_with_contact_repeats_the_run():
     assert np.abs(a.x - b.x).max() <= 1e-12 * np.abs(a.x).max()
     with pytest.raises(ValueError, match="does not fit"):
         b.set_state({**state, "position": state["position"][:1]})
+
+
+def test_stop_on_failure_keeps_the_steps_done():
+    """A step that fails raises by default; with ``stop_on_failure`` the run ends at the last good
+    step and says why (benchmarks keep the curve computed before a failure near a wall)."""
+    from fbmflow.solvers import ConvergenceError
+
+    scene = get_scene("glowinski-free-fall")
+
+    def params(max_iterations):
+        return from_dict(scene.Params, {"time": {"dt": 0.005, "t_end": 0.015}, "solver": {
+            "linear": "direct", "newton_max_iterations": max_iterations, "newton_rtol": 1e-14,
+            "newton_atol": 1e-300}})
+
+    with pytest.raises(ConvergenceError, match="step 1"):
+        scene.run(params(1), 0)
+    result = scene.run(params(1), 0, stop_on_failure=True)
+    assert result.steps == 0 and "step 1" in result.extra["failure"]
+    assert result.quantities["t"] == [0.0]
+    assert "failure" not in scene.run(params(30), 0, stop_on_failure=True).extra

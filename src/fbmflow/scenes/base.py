@@ -95,7 +95,12 @@ class SimulationScene(Scene):
     def quantities(self, params, series: dict[str, list], sim) -> dict:
         raise NotImplementedError
 
-    def run(self, params, level: int, progress: Progress | None = None, files: RunFiles | None = None) -> SceneResult:
+    def run(self, params, level: int, progress: Progress | None = None, files: RunFiles | None = None,
+            stop_on_failure: bool = False) -> SceneResult:
+        """Run the time loop. A step that fails (ConvergenceError) raises, after saving the last
+        good state when writing files; with ``stop_on_failure`` the run ends at the last good step
+        instead and the result carries the error in ``extra["failure"]`` (benchmarks: a run that
+        fails in the last approach to a wall keeps the curve it computed)."""
         from pathlib import Path
 
         from ..io import FieldWriter, RunData, load_checkpoint, save_checkpoint
@@ -127,15 +132,20 @@ class SimulationScene(Scene):
             save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
                             {"series": series, "newton_iterations": newton_its})
 
+        failure = None
         for k in range(sim.step_count + 1, setup.n_steps + 1):
             try:
                 rep = sim.step(setup.dt)
             except ConvergenceError as err:
-                if out is None:
-                    raise
-                checkpoint(sim.step_count)  # the last good state, for inspection or resumption
-                raise ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
-                                       f"{out / 'checkpoint.h5'}") from None
+                if out is not None:
+                    checkpoint(sim.step_count)  # the last good state, for inspection or resumption
+                    err = ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
+                                           f"{out / 'checkpoint.h5'}")
+                if not stop_on_failure:
+                    raise err from None
+                log.warning("run stopped early: %s", err)
+                failure = str(err)
+                break
             newton_its += rep.newton_iterations
             row = self.observe(params, sim)
             for key, value in row.items():
@@ -155,7 +165,8 @@ class SimulationScene(Scene):
                 if out is not None:
                     checkpoint(k)
         return SceneResult(self.quantities(params, series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
-                           steps=sim.step_count, newton_iterations=newton_its)
+                           steps=sim.step_count, newton_iterations=newton_its,
+                           extra={} if failure is None else {"failure": failure})
 
     @staticmethod
     def _row(sim, rep) -> dict:
