@@ -61,8 +61,9 @@ def _end(row: dict) -> str:
     """How a run ended: at the stop gap, or where a step failed (and why, briefly)."""
     if not row.get("failure"):
         return f"gap/d {row['gap_over_d'][-1]:.2f}"
-    reason = "Newton" if "Newton" in row["failure"] else "coupling" if "coupling" in row["failure"] else "solver"
-    return f"{reason} failure at t = {row['t'][-1]:.2f} s, gap/d {row['gap_over_d'][-1]:.2f}"
+    reason = ("Newton failure" if "Newton" in row["failure"] else
+              "coupling failure" if "coupling" in row["failure"] else row["failure"])
+    return f"{reason} at t = {row['t'][-1]:.2f} s, gap/d {row['gap_over_d'][-1]:.2f}"
 
 
 def write_table(rows: list[dict], results: Path) -> None:
