@@ -3,7 +3,8 @@
 Run:  python benchmarks/bench_glowinski.py [--levels 2 3 4] [--dts 0.004 0.002 0.001] [--dt-level 3]
       [--mesh graded|uniform]
 
-Writes ``benchmarks/results/glowinski.md``, ``.json`` and ``.png``: per run the level, cells
+Writes ``benchmarks/results/glowinski.md``, ``.json`` and ``.png`` (``glowinski-uniform.*`` with
+``--mesh uniform``): per run the level, cells
 across the diameter, unknowns, time step, wall time (JIT excluded: a short warm-up run first),
 maximum settling velocity and Reynolds number, final height, and the relative change of the
 maximum settling velocity against the next finer run.
@@ -57,12 +58,13 @@ def main():
                     help="graded: uniform cells along the disk's path only (domain.mesh)")
     args = ap.parse_args()
     scene = get_scene("glowinski-free-fall")
+    stem = "glowinski" if args.mesh == "graded" else "glowinski-uniform"
     run(scene, 0, 0.002, 0.004)  # JIT warm-up
     RESULTS.mkdir(exist_ok=True)
     mesh_rows, time_rows = [], []
 
     def save():  # after every run, so that an interrupted study keeps what it measured
-        (RESULTS / "glowinski.json").write_text(json.dumps({"mesh": mesh_rows, "time": time_rows}))
+        (RESULTS / f"{stem}.json").write_text(json.dumps({"mesh": mesh_rows, "time": time_rows}))
 
     for lv in args.levels:
         mesh_rows.append(run(scene, lv, args.dt, args.t_end, args.mesh))
@@ -78,7 +80,7 @@ def main():
              f"Literature: Re_max about 17.3 (Glowinski et al. 2001; Wan & Turek 2006).", "",
              f"## Mesh levels (dt = {args.dt} s)", ""] + table(mesh_rows, "level") + [
              "", f"## Time steps (level {args.dt_level})", ""] + table(time_rows, "dt")
-    (RESULTS / "glowinski.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -90,7 +92,7 @@ def main():
     for ax, title in zip(axes, ("mesh", f"time step (level {args.dt_level})")):
         ax.set_xlabel("t [s]"); ax.set_ylabel("settling velocity [cm/s]"); ax.set_title(title); ax.legend()
     fig.tight_layout()
-    fig.savefig(RESULTS / "glowinski.png", dpi=120)
+    fig.savefig(RESULTS / f"{stem}.png", dpi=120)
 
 
 if __name__ == "__main__":
