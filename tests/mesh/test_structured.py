@@ -349,3 +349,17 @@ def test_graded_axis_grows_smoothly_from_the_fine_zone():
     assert all(n % 2 == 0 for n in (fine.sum(), left.size, right.size))
     with pytest.raises(ValueError, match="lower <= a < b <= upper"):
         graded_axis(0.0, 1.0, (0.5, 0.4), 0.1)
+
+
+def test_graded_axis_widens_the_fine_zone_to_whole_cells():
+    """A zone that is not a whole (even) number of cells h widens about its centre, and shifts to
+    stay inside the axis; its cells are exactly h."""
+    from fbmflow.mesh import graded_axis
+
+    x = graded_axis(0.0, 1.0, (0.4, 0.63), 0.05)  # 4.6 cells -> 6 cells over [0.365, 0.665]
+    h = np.diff(x)
+    np.testing.assert_allclose(h[np.isclose(h, 0.05)].sum(), 0.3)
+    assert np.isclose(x, 0.365).any() and np.isclose(x, 0.665).any()
+    y = graded_axis(0.0, 1.0, (0.0, 0.13), 0.05)  # at the lower end: [0, 0.2]
+    np.testing.assert_allclose(np.diff(y)[:4], 0.05)
+    assert y[0] == 0.0 and np.diff(y)[4] > 0.05

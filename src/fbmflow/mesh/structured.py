@@ -289,9 +289,10 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     Each side gets the fewest (even) number ``n`` of cells whose sizes ``h ratio^k`` (k = 1..n)
     cover it; the growth factor is then lowered (to no less than 1) until they fit it exactly, so
     side cells grow smoothly from ``h`` (they are smaller than ``h`` only when the side is shorter
-    than ``n h``). The fine zone gets ``ceil((b - a) / h)`` equal cells, rounded up to an even
-    number, so the mesh coarsens at least once (multigrid). Returns (n + 1,) float64, strictly
-    increasing.
+    than ``n h``). The fine zone gets ``ceil((b - a) / h)`` cells of size ``h``, rounded up to an
+    even number (so the mesh coarsens at least once, for multigrid): the zone widens about its
+    centre to fit them, shifted to stay inside ``[lower, upper]`` (its cells shrink only when the
+    whole axis is shorter). Returns (n + 1,) float64, strictly increasing.
     """
     a, b = fine
     if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0):
@@ -312,7 +313,12 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
         return sizes * (length / sizes.sum())
 
     n_fine = int(np.ceil((b - a) / h - 1e-9))
-    middle = np.linspace(a, b, n_fine + n_fine % 2 + 1)
+    n_fine += n_fine % 2
+    width = n_fine * h  # widen the zone about its centre to whole cells h, kept inside the axis
+    if width <= upper - lower:
+        a = min(max(0.5 * (a + b) - 0.5 * width, lower), upper - width)
+        b = a + width
+    middle = np.linspace(a, b, n_fine + 1)
     left, right = side(a - lower), side(upper - b)
     axis = np.concatenate([a - np.cumsum(left)[::-1], middle, b + np.cumsum(right)])
     axis[0], axis[-1] = lower, upper

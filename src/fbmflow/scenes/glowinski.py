@@ -97,7 +97,7 @@ class GlowinskiFreeFall(SimulationScene):
         if kind == "uniform":
             return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
         fine_x = (max(particle.x - d, 0.0), min(particle.x + d, 2.0))
-        top = min(2 * h * np.ceil((particle.y + d) / (2 * h) - 1e-9), 6.0)  # an even number of cells h
+        top = min(particle.y + d, 6.0)
         return StructuredMesh.rectilinear([graded_axis(0.0, 2.0, fine_x, h), graded_axis(0.0, 6.0, (0.0, top), h)])
 
     def build(self, params: GlowinskiParams, level: int) -> Setup:

@@ -124,7 +124,7 @@ class TenCate(SimulationScene):
                                       lower=lower, upper=tuple(BOX))
         reach = 0.05 + diameter  # the fine zone about the axis x = y = 50 mm
         side = [graded_axis(lower[a], BOX[a], (max(lower[a], 0.1 - reach), min(reach, BOX[a])), h) for a in (0, 1)]
-        top = min(2 * h * np.ceil((height + diameter) / (2 * h) - 1e-9), BOX[2])  # an even number of cells h
+        top = min(height + diameter, BOX[2])
         return StructuredMesh.rectilinear(side + [graded_axis(0.0, BOX[2], (0.0, top), h)])
 
     def build(self, params: TenCateParams, level: int) -> Setup:
