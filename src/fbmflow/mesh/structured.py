@@ -315,7 +315,7 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     n_fine = int(np.ceil((b - a) / h - 1e-9))
     n_fine += n_fine % 2
     width = n_fine * h  # widen the zone about its centre to whole cells h, kept inside the axis
-    if width <= upper - lower:
+    if b - a < width * (1 - 1e-9) and width <= upper - lower:  # (an exact zone keeps its ends)
         a = min(max(0.5 * (a + b) - 0.5 * width, lower), upper - width)
         b = a + width
     middle = np.linspace(a, b, n_fine + 1)
