@@ -9,6 +9,11 @@ most 1.3 per cell towards the side walls and the lid (about a third of the cells
 ``domain.mesh = "uniform"`` the ``8 2^L x 24 2^L`` cells of size h everywhere. Implicit
 (sub-iterated) fluid–particle coupling by default; ``coupling.scheme = "explicit"`` for the
 staggered one.
+
+References: Glowinski et al. (2001) and Wan & Turek (2006) report Re_max about 17.3; Koblitz et
+al. (2017), with a body-fitted overset grid, about 14.0 (their curve ships in
+:mod:`fbmflow.scenes.data.koblitz2017` and is drawn in the plot). fbmflow converges towards the
+latter (benchmarks/results/glowinski.md).
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, 
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
+from .data import koblitz2017
 
 
 @dataclass(frozen=True)
@@ -57,7 +63,8 @@ class GlowinskiTime(TimeParams):
     """Time stepping."""
 
     dt: float = param(0.002, "time step", "s", positive=True)
-    t_end: float = param(0.5, "final time (the peak velocity comes at about 0.4 s)", "s", positive=True)
+    t_end: float = param(0.65, "final time (the settling velocity peaks between about 0.45 and 0.6 s; "
+                         "the disk lands at about 0.75 s)", "s", positive=True)
     scheme: str = param("backward-euler", "implicit time scheme",
                         choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
 
@@ -137,8 +144,11 @@ class GlowinskiFreeFall(SimulationScene):
         ax[0].plot(q["t"], q["y"])
         ax[0].set_ylabel("y [cm]")
         ax[1].plot(q["t"], -np.array(q["v"]), label="fbmflow")
-        # Re_max about 17.3 in the literature for this set-up (Glowinski et al. 2001; Wan & Turek 2006)
-        ax[1].axhline(17.3 * f["viscosity"] / (f["density"] * d), ls=":", c="k", label="Re = 17.3 (literature)")
+        ax[0].plot(*koblitz2017.HEIGHT.T, "k.", ms=3, label="Koblitz et al. 2017 (overset grid)")
+        ax[1].plot(*koblitz2017.VELOCITY.T, "k.", ms=3, label="Koblitz et al. 2017 (overset grid)")
+        ax[1].axhline(17.3 * f["viscosity"] / (f["density"] * d), ls=":", c="k",
+                      label="Re = 17.3 (Glowinski et al. 2001)")
+        ax[0].legend()
         ax[1].set_ylabel("settling velocity [cm/s]")
         ax[1].legend()
         for a in ax:
