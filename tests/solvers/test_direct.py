@@ -70,3 +70,51 @@ def test_backend_errors():
     if not pardiso_available():
         with pytest.raises(ValueError, match="pip install"):
             DirectSolver(backend="pardiso")
+
+
+def test_incompatible_continuity_data_get_the_bordered_systems_solution():
+    """In a closed box a disk next to the wall prescribes a net flux into the cells it shares with
+    the wall (their continuity is orphaned): ``K x = b`` has no solution. The direct solver returns
+    that of the system bordered by the mean-pressure row and its multiplier, ``K x + lambda w = b``,
+    ``mean . p = 0``, solved densely here (the same up to the pressure's null space: a constant and
+    the orphaned modes): the pinned cell carries no special defect."""
+    from fbmflow.solvers.linear import balance_volume
+
+    mesh = StructuredMesh.box((8, 8))
+    centre = np.array([[0.5, 0.25]])  # gap 0.05: 0.4 cells
+
+    def obstacle(V, t):
+        return rigid_body_constraints(V, node_owner(V, centre, [Ball(0.2, 2)]), centre, np.array([[0.0, -1.0]]), np.zeros(1))
+
+    flow = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
+                               linear_solver="direct", extra_constraints=obstacle)
+    con = flow.constraints(0.0)
+    x = flow.zero_state(0.0)
+    system = flow.linear_system(x, 0.0, 1.0, con)
+    assert system.orphans is not None
+    f = np.zeros(system.n_u)
+    g = -(flow.BT @ x[:system.n_u])
+    g -= system.orphans @ g
+    npl = 3
+    q = np.zeros(system.n_p)
+    q[::npl] = 1.0
+    q -= system.orphans @ q
+    assert abs(q @ g) > 1e-3 * np.abs(g).sum()  # incompatible: a real volume defect
+    u, p = factorize(system, "superlu")(f, g)
+
+    K = system.matrix(bordered=False).toarray()
+    n = K.shape[0]
+    w = system.mean_weights - system.orphans @ system.mean_weights
+    big = np.zeros((n + 2, n + 1))
+    big[:n, :n] = K
+    big[system.n_u:n, n] = w
+    big[n, system.n_u:n] = system.mean_weights
+    sol = np.linalg.lstsq(big[:n + 1], np.concatenate([f, g, [0.0]]), rcond=None)[0]
+    np.testing.assert_allclose(u, sol[:system.n_u], atol=1e-9 * np.abs(sol[:system.n_u]).max())
+    d = p - sol[system.n_u:n]  # equal up to the null space: a constant, and the orphaned modes
+    d -= system.orphans @ d
+    d -= q * (q @ d) / (q @ q)
+    assert np.abs(d).max() < 1e-9 * np.abs(p).max()
+    lam = sol[n]
+    np.testing.assert_allclose(balance_volume(g, system.mean_weights, system.orphans, npl), g - lam * w,
+                               atol=1e-12 * np.abs(g).max())

@@ -24,7 +24,7 @@ from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
-from ..solvers.linear import orphan_pressure_modes, pardiso_available
+from ..solvers.linear import balance_volume, orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -203,17 +203,21 @@ class NavierStokesProblem:
 
     def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: sp.csr_matrix | None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
-        dropped, (n_p, k)."""
+        dropped and, in a closed box, the volume defect of the prescribed velocities taken out
+        as the linear solvers do (:func:`~fbmflow.solvers.linear.balance_volume`), (n_p, k)."""
         Fp = self.BT @ U
-        if orphans is None:
+        if orphans is not None:
+            Fp = Fp - orphans @ Fp
+        if self.mean_weights is None:
             return Fp
-        return Fp - orphans @ Fp
+        return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1)
 
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """Pressure modes that no free velocity sees under the constraints ``con``."""
         if self.extra_constraints is None:
             return None
-        return orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1)
+        return orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1,
+                                     closed=self.mean_weights is not None)
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:

@@ -150,7 +150,7 @@ class MultigridSolver:
         t0 = time.perf_counter() - setup
         self._sweeps = 0
         s = self.settings
-        b = np.concatenate([f, g])
+        b = np.concatenate([f, system.balance(g)])
         x = np.zeros_like(b)
         if system.fixed is not None:
             x[system.fixed] = f[system.fixed]  # unit rows: the solution there is the rhs
