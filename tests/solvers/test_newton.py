@@ -31,28 +31,6 @@ def test_reused_jacobian_converges_to_the_same_root_and_refreshes_when_slow():
     assert report.iterations <= 12
 
 
-def test_an_expensive_factorisation_is_kept_while_finishing_with_it_is_cheaper():
-    """The chord steps of a Jacobian taken far from the root contract only 2-5x per step: without
-    a factorisation time each such step asks for a fresh Jacobian; when a factorisation costs far
-    more than the chord steps still needed, the Jacobian is kept as long as they fit into the
-    iteration limit: the same root with fewer factorisations and more (cheap) iterations."""
-    def run(factor_s):
-        calls = {"fresh": 0}
-        slope = {}
-
-        def step(x, F, fresh=True):
-            if fresh or "d" not in slope:
-                slope["d"] = 3 * x**2
-                calls["fresh"] += 1
-            return -F / slope["d"], LinearReport("scalar", 0.0, 1, factor_time_s=factor_s)
-        x, report = solve_newton(lambda x: x**3 - 2.0, step, np.array([1.0]), NewtonSettings(reuse_jacobian=True))
-        assert abs(x[0] - 2 ** (1 / 3)) < 1e-10
-        return calls["fresh"], report.iterations
-
-    cheap, expensive = run(0.0), run(1e6)
-    assert expensive[0] < cheap[0] and expensive[1] > cheap[1], (cheap, expensive)
-
-
 def test_quadratic_convergence_on_a_scalar_equation():
     res, step = _scalar_problem(lambda x: x**3 - 2.0, lambda x: 3 * x**2)
     x, report = solve_newton(res, step, np.array([1.0]))

@@ -139,15 +139,14 @@ class MultigridSolver:
         returns ``solve(f, g) -> (u, p, LinearReport)``."""
         t0 = time.perf_counter()
         levels = self.setup(system)
-        setup_s = time.perf_counter() - t0
-        pending = [setup_s]  # the set-up time, charged to the first solve only
-        return lambda f, g: self._solve(system, levels, pending.pop() if pending else 0.0, f, g, setup_s)
+        pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
+        return lambda f, g: self._solve(system, levels, pending.pop() if pending else 0.0, f, g)
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
         """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
         return self.factor(system)(f, g)
 
-    def _solve(self, system, levels, setup, f, g, factor_s=0.0):
+    def _solve(self, system, levels, setup, f, g):
         t0 = time.perf_counter() - setup
         self._sweeps = 0
         s = self.settings
@@ -176,6 +175,5 @@ class MultigridSolver:
         log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
                   time.perf_counter() - t0)
         report = LinearReport(self.name, time.perf_counter() - t0, iterations=cycles,
-                              residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup,
-                              factor_time_s=factor_s)
+                              residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup)
         return x[:system.n_u], x[system.n_u:], report

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -20,17 +19,10 @@ class NewtonSettings:
     """Stopping rule: ``|F| <= max(atol, rtol |F_0|)`` or ``|dx| <= step_tol |x|`` (2-norms).
 
     ``reuse_jacobian``: let the linear step keep an earlier factorised Jacobian (chord / modified
-    Newton) while it contracts the residual at least ``reuse_contraction`` times per iteration, or
-    while finishing with it is cheaper than a new factorisation: at the observed contraction
-    ``rho`` it needs ``log(target / |F|) / log(rho)`` more iterations, each costing what the last
-    one did without its set-up, against the factorisation's set-up time (``factor_time_s`` of the
-    linear report; without it, a fresh one whenever the contraction is weaker), and as long as
-    those iterations fit into ``max_iterations``. A fresh
-    Jacobian is built always after a failed line search. The solution and the stopping rule are
-    the same; only the work changes. Pays off in time stepping, where the mass term dominates and
-    the Jacobian changes little from step to step, and most in 3D, where a factorisation costs
-    tens of solves (ten-cate level 0, five warm-started steps: 5 factorisations and 41-46 s
-    against 10 and 63-65 s with the contraction test alone).
+    Newton) while it contracts the residual at least ``1 / reuse_contraction`` times per
+    iteration; a fresh one is built otherwise, and always after a failed line search. The solution
+    and the stopping rule are the same; only the work changes. Pays off in time stepping, where
+    the mass term dominates and the Jacobian changes little from step to step.
     """
 
     rtol: float = 1e-10
@@ -88,7 +80,6 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     target = max(settings.atol, settings.rtol * (norm if scale is None else scale))
     fresh = not settings.reuse_jacobian
     while norm > target:
-        start = time.perf_counter()
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
             raise ConvergenceError(
                 f"Newton did not converge: residual {norm:.3e} after {report.iterations} iterations "
@@ -115,27 +106,10 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
             raise ConvergenceError(
                 f"Newton line search failed at iteration {report.iterations + 1}: residual "
                 f"{norm:.3e} did not decrease (target {target:.3e})")
-        iteration_s = time.perf_counter() - start - lin.setup_time_s
-        fresh = not settings.reuse_jacobian or _refactor(
-            norm, norm_new, target, lin.factor_time_s, iteration_s, settings.reuse_contraction,
-            settings.max_iterations - report.iterations - 1)
+        fresh = not settings.reuse_jacobian or norm_new * settings.reuse_contraction > norm
         x, F, norm = x_new, F_new, norm_new
         report.iterations += 1
         report.residuals.append(norm)
         log.debug("newton %d: |F| = %.3e (step %.3g)", report.iterations, norm, step)
     report.converged = True
     return x, report
-
-
-def _refactor(norm: float, norm_new: float, target: float, setup_s: float, iteration_s: float,
-              contraction: float, iterations_left: int) -> bool:
-    """Whether the next Newton step should get a fresh Jacobian (see :class:`NewtonSettings`):
-    the old one contracts less than ``contraction`` times per step and finishing with it would
-    cost more than a factorisation (``setup_s``) or more steps than are left."""
-    if norm_new * contraction <= norm:
-        return False
-    rho = norm_new / norm
-    if rho >= 1.0 or norm_new <= target:
-        return rho >= 1.0
-    remaining = np.log(target / norm_new) / np.log(rho)
-    return remaining * iteration_s >= setup_s or remaining >= iterations_left
