@@ -137,10 +137,8 @@ class Simulation:
                                             x[space.n_u:], self.flow.mu)
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
-    def _flow_and_forces(self, dt: float, warm: list | None = None):
-        """The step's flow (a repeated solve of a sub-iteration starts from ``warm``, see
-        :func:`~fbmflow.flow.time_schemes.advance`) and the hydrodynamic forces and torques on it."""
-        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, warm)
+    def _flow_and_forces(self, dt: float):
+        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme)
         force, torque = self._forces(self._owner(self.flow.space.V), x)
         return x, reports, force, torque
 
@@ -194,10 +192,9 @@ class Simulation:
         flow_solves = 1
         self._contact_report = None
         try:
-            warm = []
-            x, reports, force, torque = self._flow_and_forces(dt, warm)
+            x, reports, force, torque = self._flow_and_forces(dt)
             if self.coupling == "implicit":
-                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque, warm)
+                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque)
             new = self._integrate(force, torque, dt)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
@@ -213,7 +210,7 @@ class Simulation:
                           self.particles.position.copy(), self.particles.velocity.copy(),
                           flow_solves, self._contact_report)
 
-    def _subiterate(self, dt, x, reports, force, torque, warm):
+    def _subiterate(self, dt, x, reports, force, torque):
         """Newton iteration on the particles' new generalised velocities ``v``.
 
         The fixed point is ``v = Phi(v)``: integrate the particles with the forces of the flow
@@ -225,9 +222,7 @@ class Simulation:
         update corrects the Jacobian from each sub-iteration's change (the forces are not exactly
         linear in ``v``). Contact is left out of the iterated map (its non-smooth response, a
         constraint switching on and off between sub-iterations, stalls the iteration): it acts
-        once the coupling has converged, with the converged hydrodynamic force. Each flow solve
-        starts from the previous sub-iteration's flow (``warm``) and stops at the accuracy of the
-        step's first solve.
+        once the coupling has converged, with the converged hydrodynamic force.
         """
         p, space = self.particles, self.flow.space
         new = self._integrate(force, torque, dt, contact=False)
@@ -262,7 +257,7 @@ class Simulation:
             v_guess[free] += step
             unpack_velocities(guess, v_guess)
             self._constraint_state = guess
-            x, reports, force, torque = self._flow_and_forces(dt, warm)
+            x, reports, force, torque = self._flow_and_forces(dt)
             all_reports += reports
             new = self._integrate(force, torque, dt, contact=False)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "

@@ -63,35 +63,3 @@ def test_energy_decays_at_the_exact_rate():
     assert np.all(np.diff(E) < 0)
     assert np.max(np.abs(E - Eex) / Eex) < 2e-3
     assert q["velocity_l2_error"] < 1e-3
-
-
-@pytest.mark.parametrize("scheme", ["backward-euler", "fractional-step-theta"])
-def test_warm_started_repeat_of_a_step_needs_fewer_newton_iterations(scheme):
-    """A step repeated with slightly changed constraint values (as in the fluid–particle
-    sub-iterations) starts from the stored substep solutions: same solution to Newton's tolerance
-    at the cold start's accuracy, fewer iterations."""
-    from fbmflow.fem.constraints import DirichletConstraints
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.flow import NoSlip
-
-    mesh = StructuredMesh.box((8, 8))
-    lid = {"speed": 1.0}
-
-    def moving_block(V, t):  # a block of nodes pushed sideways at a speed we change
-        x = V.coordinates
-        nodes = np.flatnonzero((np.abs(x[:, 0] - 0.5) < 0.2) & (np.abs(x[:, 1] - 0.5) < 0.2))
-        return DirichletConstraints(np.sort(np.concatenate([nodes, V.n_dofs + nodes])),
-                                    np.concatenate([np.full(nodes.size, lid["speed"]), np.zeros(nodes.size)]))
-
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, linear_solver="direct",
-                               extra_constraints=moving_block)
-    x0 = prob.zero_state()
-    warm = []
-    advance(prob, x0, 0.0, 0.1, scheme, warm)
-    assert len(warm) == len(get_scheme(scheme))
-    lid["speed"] = 1.01
-    x_cold, cold = advance(prob, x0, 0.0, 0.1, scheme)
-    x_warm, hot = advance(prob, x0, 0.0, 0.1, scheme, warm)
-    assert sum(r.iterations for r in hot) < sum(r.iterations for r in cold)
-    assert np.linalg.norm(x_warm - x_cold) <= 1e-8 * np.linalg.norm(x_cold)
-    assert np.array_equal(warm[-1][0], x_warm)

@@ -261,11 +261,8 @@ class NavierStokesProblem:
         return levels
 
     # -- solves -------------------------------------------------------------------------------
-    def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
-              scale: float | None = None):
-        """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``; ``scale``:
-        the residual norm Newton's relative tolerance refers to (default: that of ``x0``, see
-        :func:`~fbmflow.solvers.solve_newton`).
+    def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float):
+        """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         Returns x (n_dofs,) and the NewtonReport.
         """
@@ -280,7 +277,7 @@ class NavierStokesProblem:
 
         orphans = self.orphans(con)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
-                                 self.newton, scale)
+                                 self.newton)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
         return x, report
 

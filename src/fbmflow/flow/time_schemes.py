@@ -52,14 +52,8 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
         raise ValueError(f"unknown time scheme {name!r}; choose one of {sorted(TIME_SCHEMES)}") from None
 
 
-def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, warm: list | None = None):
+def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
-
-    ``warm``: memory for a step that is repeated with changed constraint values (the fluid–particle
-    sub-iterations). An empty list receives ``(x_k, |F_0|)`` of every substep ``k``: its solution
-    and the residual norm its Newton iteration started from. A filled one makes every substep start
-    from the stored ``x_k`` (instead of from the previous substep's solution) and stop at Newton's
-    ``rtol |F_0|`` of the stored cold start; its entries are then replaced by the new solutions.
 
     Returns
     -------
@@ -70,7 +64,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, warm: list
         raise ValueError(f"time step must be positive, got {dt}")
     reports = []
     s = problem.space
-    for i, sub in enumerate(get_scheme(scheme)):
+    for sub in get_scheme(scheme):
         k = sub.fraction * dt
         t_new = t + k
         u_old = x[:s.n_u]
@@ -79,14 +73,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, warm: list
             rhs += sub.implicit * problem.load(t_new)
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
-        if warm is not None and len(warm) > i:
-            guess, scale = warm[i]
-            x, report = problem.solve(guess, 1.0 / k, sub.implicit, rhs, t_new, scale)
-            warm[i] = (x, scale)
-        else:
-            x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new)
-            if warm is not None:
-                warm.append((x, report.residuals[0]))
+        x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new)
         reports.append(report)
         t = t_new
     return x, reports

@@ -48,7 +48,7 @@ class NewtonReport:
 
 def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
                  linear_step: Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, object]],
-                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings(), scale: float | None = None):
+                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings()):
     """Solve ``F(x) = 0``.
 
     Parameters
@@ -57,10 +57,6 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     linear_step : (x, F, fresh) -> (dx, LinearReport) solving ``J dx = -F``; with ``fresh`` False
         it may use an earlier Jacobian (``settings.reuse_jacobian``)
     x0 : (n,) float64, first iterate (constraints already applied)
-    scale : float, optional
-        Residual norm the relative tolerance refers to (default ``|F(x0)|``). A warm start close
-        to the solution passes the cold start's residual, so that it stops at the same accuracy
-        instead of reducing its own, smaller residual ``1 / rtol`` times.
 
     Returns
     -------
@@ -77,7 +73,7 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     F = residual(x)
     norm = float(np.linalg.norm(F))
     report.residuals.append(norm)
-    target = max(settings.atol, settings.rtol * (norm if scale is None else scale))
+    target = max(settings.atol, settings.rtol * norm)
     fresh = not settings.reuse_jacobian
     while norm > target:
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
