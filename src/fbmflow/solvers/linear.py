@@ -83,8 +83,7 @@ class SaddlePointSystem:
         the pressure is determined."""
         if self.mean_weights is None:
             return g
-        npl = self.space.dim + 1 if self.space is not None else 1
-        return balance_volume(g, self.mean_weights, self.orphans, npl)
+        return balance_volume(g, self.mean_weights, self.orphans, self.space.dim + 1)
 
     def remove_pressure_mean(self, x: np.ndarray) -> None:
         """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
