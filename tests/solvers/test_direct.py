@@ -64,6 +64,26 @@ def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
     assert not calls and "SuperLU" not in caplog.text
 
 
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_pardiso_finds_mkl_once(monkeypatch):
+    """pypardiso searches site-packages for MKL (a recursive glob) on every solver it makes unless
+    told where MKL is; after the first factorisation, later ones must not search again (it cost
+    0.6-3.9 s per factorisation, measured)."""
+    import glob
+
+    import scipy.sparse as sp
+
+    import fbmflow.solvers.linear as linear
+
+    K = sp.csr_matrix(np.diag(np.arange(1.0, 6.0)))
+    b = np.ones(5)
+    np.testing.assert_allclose(linear._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
+    searches = []
+    monkeypatch.setattr(glob, "glob", lambda *a, **k: searches.append(a) or [])
+    np.testing.assert_allclose(linear._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
+    assert not searches
+
+
 def test_backend_errors():
     with pytest.raises(ValueError, match="unknown direct backend"):
         DirectSolver(backend="mumps")
