@@ -176,7 +176,7 @@ class CouplingParams:
 
     scheme: str = param("implicit", "coupling: explicit (staggered) or implicit (sub-iterated)",
                         choices=("explicit", "implicit"))
-    tol: float = param(1e-6, "implicit coupling: relative change of the particle velocities",
+    tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
     max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
 
