@@ -116,16 +116,17 @@ def test_half_domain_with_a_symmetry_plane_equals_the_full_domain(coupling):
     np.testing.assert_allclose(half, full, rtol=1e-6, atol=1e-8 * np.abs(full).max())
 
 
-@pytest.mark.parametrize("ratio", [1.01, 1.5])
-def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_tolerance(ratio):
+@pytest.mark.parametrize("ratio, solves", [(1.01, 2), (1.1, 2), (2.0, 3)])
+def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_tolerance(ratio, solves):
     """Implicit coupling: the Newton iteration on the particle velocity contracts about 1e-4 times
     per sub-iteration, so after the second flow solve the error left after the next step is far
-    below the tolerance; that step is taken with the flow following it linearly. Two flow solves
-    per step, and the result is what a further solve gives: the flow solved afresh with the
-    returned particle velocity equals the returned flow, and its forces (pressure included) give
-    back that velocity (the fixed point), both to the tolerance. (The shortcut's flow error is the
-    step times the error of the linear responses, about 3 % here with the Jacobian a few Newton
-    iterations old; the contraction rate measures the same error, so the estimate covers it.)"""
+    below the tolerance; that step is taken with the flow following it linearly, when the flow's
+    error in doing so (estimated from how much its response bent over the previous step) is
+    below the tolerance too: two flow solves per step at density ratios near 1, three at 2 on
+    this coarse mesh, where the disk moves faster. Either way the result is what a further
+    solve gives: the flow solved afresh with the returned particle velocity equals the returned
+    flow, and its forces (pressure included) give back that velocity (the fixed point), both to
+    the tolerance."""
     from fbmflow.flow import NoSlip
     from fbmflow.mesh import StructuredMesh
     from fbmflow.particles import Ball, Particles
@@ -136,11 +137,11 @@ def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_toleran
                      Particles.at_rest([Ball(0.25, 2)], ratio, [[0.9, 2.0]]), [0.0, -980.0],
                      coupling="implicit", coupling_tol=1e-6)
     dt = 0.005
-    solves = [sim.step(dt).flow_solves for _ in range(3)]
+    counts = [sim.step(dt).flow_solves for _ in range(3)]
     before = sim.state()
-    solves.append(sim.step(dt).flow_solves)
+    counts.append(sim.step(dt).flow_solves)
     x, v, w = sim.x.copy(), sim.particles.velocity.copy(), sim.particles.angular_velocity.copy()
-    assert solves == [2, 2, 2, 2] and v[0, 1] < 0.0 and w[0] != 0.0  # falls and turns (off-centre)
+    assert counts == [solves] * 4 and v[0, 1] < 0.0 and w[0] != 0.0  # falls and turns (off-centre)
     sim.set_state(before)
     state = sim.particles.copy()
     state.velocity[:], state.angular_velocity[:] = v, w
