@@ -11,6 +11,11 @@ ten Cate's Table II, and the largest deviation of the gap curve from the experim
 gap/d = 1. Runs already in the JSON file (same case, level, time step and settings) are kept
 and not repeated, so a long study can be continued after an interruption (and the table and plot
 redrawn from it); runs of concurrent studies writing to the same file are merged.
+
+A run itself survives an interruption too: it checkpoints every ``--checkpoint-every`` steps into
+its own folder under ``--runs`` (``run.h5`` with every step, ``checkpoint.h5``, ``wall.json`` with
+the wall time so far), and the same command continues it from there. A level-1 case takes one
+to two hours here; this lets it span sessions. The reported wall time is the sum over the pieces.
 """
 from __future__ import annotations
 
@@ -19,8 +24,10 @@ import json
 import time
 from pathlib import Path
 
-from fbmflow.params import from_dict, parse_value, set_dotted
+from fbmflow import __version__
+from fbmflow.params import from_dict, parse_value, set_dotted, to_dict
 from fbmflow.scenes import get_scene
+from fbmflow.scenes.base import RunFiles
 from fbmflow.scenes.data import tencate2002
 from fbmflow.solvers.linear import pardiso_available
 
@@ -31,21 +38,35 @@ def load(path: Path) -> list[dict]:
     return json.loads(path.read_text()) if path.is_file() else []
 
 
-def run(scene, case: str, level: int, dt: float, settings: dict) -> dict:
+def run(scene, case: str, level: int, dt: float, settings: dict, folder: Path, checkpoint_every: int) -> dict:
+    """One run, checkpointed into ``folder`` and continued from there if it holds a checkpoint of
+    the same run."""
     data = {"fluid": {"case": case}, "time": {"dt": dt}}
     for key, value in settings.items():
         set_dotted(data, key, value)
     params = from_dict(scene.Params, data)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
+    resume = (folder / "checkpoint.h5").is_file()
+    wall_file = folder / "wall.json"
+    before = json.loads(wall_file.read_text())["wall_s"] if resume and wall_file.is_file() else 0.0
+    if resume:
+        print(f"  continuing from {folder / 'checkpoint.h5'} ({before:.0f} s spent before)", flush=True)
     t0 = time.perf_counter()
 
     def progress(k, n, t, info):  # one line per step: a long run shows where it is
-        print(f"  step {k}/{n}  t = {t:.3f} s  {time.perf_counter() - t0:.0f} s  newton {info['newton']}  "
+        wall = before + time.perf_counter() - t0
+        if k % checkpoint_every == 0:  # the wall time of the state the checkpoint after it keeps
+            wall_file.write_text(json.dumps({"wall_s": wall}))
+        print(f"  step {k}/{n}  t = {t:.3f} s  {wall:.0f} s  newton {info['newton']}  "
               f"|U| {info['max|U|']:.5f} m/s", flush=True)
 
-    result = scene.run(params, level, progress, stop_on_failure=True)
+    files = RunFiles(folder, checkpoint_every, resume, meta=meta)
+    result = scene.run(params, level, progress, files, stop_on_failure=True)
+    wall = before + time.perf_counter() - t0
     q = result.quantities
     row = dict(case=case, level=level, settings=settings, cells_per_diameter=q["cells_per_diameter"],
-               n_dofs=result.n_dofs, dt=dt, steps=result.steps, wall_s=time.perf_counter() - t0,
+               n_dofs=result.n_dofs, dt=dt, steps=result.steps, wall_s=wall,
                newton=result.newton_iterations, u_max=q["max_settling_velocity"],
                u_max_error=q["max_settling_velocity_error"], gap_deviation=q["gap_max_deviation"],
                t=q["t"], gap_over_d=q["gap_over_d"], settling_velocity=q["settling_velocity"],
@@ -122,6 +143,9 @@ def main():
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="further scene parameters, e.g. domain.mesh=uniform")
     ap.add_argument("--results", type=Path, default=RESULTS, help="output directory")
+    ap.add_argument("--runs", type=Path, default=Path("out/bench-tencate"),
+                    help="where the runs keep their checkpoints and per-step data")
+    ap.add_argument("--checkpoint-every", type=int, default=10, help="steps between checkpoints (>= 1)")
     args = ap.parse_args()
     settings = dict(kv.split("=", 1) for kv in args.set)
     settings = {k: parse_value(v) for k, v in settings.items()}
@@ -138,7 +162,8 @@ def main():
             if not warm:  # JIT compilation, not timed
                 scene.run(from_dict(scene.Params, {"time": {"t_end": 2 * args.dt, "dt": args.dt}}), 0)
                 warm = True
-            row = run(scene, case, level, args.dt, settings)
+            name = f"{case}-level{level}-dt{args.dt:g}" + "".join(f"-{k}={v}" for k, v in sorted(settings.items()))
+            row = run(scene, case, level, args.dt, settings, args.runs / name, args.checkpoint_every)
             rows = load(path) + [row]  # re-read: another study may have added runs meanwhile
             path.write_text(json.dumps(rows))  # after every run: an interrupted study keeps its runs
             write_table(rows, args.results)
