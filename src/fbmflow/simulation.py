@@ -255,14 +255,14 @@ class Simulation:
         # velocity scale of the convergence test: the step's velocities, at least what gravity adds
         floor = max(float(np.linalg.norm(v_guess)), float(np.linalg.norm(self.gravity)) * dt, 1e-30)
         all_reports = list(reports)
-        res_old = step = size_old = x_old = None
-        drift = np.inf  # second-order part of the flow's response to the last step
+        res_old = step = size_old = x_old = drift = None
         for k in range(self.max_subiterations):
             res = (pack_velocities(new) - v_guess)[free]
             scale = max(float(np.linalg.norm(pack_velocities(new))), floor)
             if step is not None:  # Broyden's update: contact and nonlinearity bend the map
                 dG = res_old - res
                 J += np.outer(dG - J @ step, step) / (step @ step)
+                # the flow's change over the last step that the responses do not explain
                 drift = float(np.abs(x - x_old - step @ dX)[:space.n_u].max())
             step = np.linalg.solve(J, res)
             size = float(np.linalg.norm(step))
