@@ -147,6 +147,8 @@ def main():
                     help="where the runs keep their checkpoints and per-step data")
     ap.add_argument("--checkpoint-every", type=int, default=10, help="steps between checkpoints (>= 1)")
     args = ap.parse_args()
+    if args.checkpoint_every < 1:
+        ap.error(f"--checkpoint-every must be at least 1, got {args.checkpoint_every}")
     settings = dict(kv.split("=", 1) for kv in args.set)
     settings = {k: parse_value(v) for k, v in settings.items()}
     scene = get_scene("ten-cate")
