@@ -10,13 +10,13 @@ from fbmflow.solvers import DirectSolver
 from fbmflow.solvers.linear import factorize, pardiso_available
 
 
-def fbm_system():
+def fbm_system(x_centre=0.45, radius=0.3):
     """A 3D channel with a sphere held still: orphaned pressure modes inside it, do-nothing outflow."""
     mesh = StructuredMesh.box((6, 4, 4))
-    centres = np.array([[0.45, 0.5, 0.5]])
+    centres = np.array([[x_centre, 0.5, 0.5]])
 
     def obstacle(V, t):
-        return rigid_body_constraints(V, node_owner(V, centres, [Ball(0.3, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+        return rigid_body_constraints(V, node_owner(V, centres, [Ball(radius, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
 
     bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
     flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
@@ -82,6 +82,98 @@ def test_pardiso_finds_mkl_once(monkeypatch):
     monkeypatch.setattr(glob, "glob", lambda *a, **k: searches.append(a) or [])
     np.testing.assert_allclose(linear._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
     assert not searches
+
+
+def test_scatter_into_pattern_matches_numpy():
+    """The kernel that writes a matrix into a wider pattern, against a NumPy reference (entry keys
+    looked up by binary search), on a random matrix; an entry outside the pattern is reported."""
+    import scipy.sparse as sp
+
+    from fbmflow.solvers._kernels import scatter_into_pattern
+
+    rng = np.random.default_rng(3)
+    K = sp.random(40, 40, density=0.1, random_state=4, format="csr")
+    K.sort_indices()
+    P = (abs(K).sign() + sp.random(40, 40, density=0.1, random_state=5, format="csr")).tocsr()
+    P.sort_indices()
+    out = rng.normal(size=P.nnz)  # overwritten
+    assert scatter_into_pattern(K.indptr, K.indices, K.data, P.indptr, P.indices, out)
+    key = np.repeat(np.arange(40), np.diff(P.indptr)) * 40 + P.indices
+    Kc = K.tocoo()
+    ref = np.zeros(P.nnz)
+    ref[np.searchsorted(key, Kc.row * 40 + Kc.col)] = Kc.data
+    np.testing.assert_array_equal(out, ref)
+    np.testing.assert_array_equal(sp.csr_matrix((out, P.indices, P.indptr), shape=P.shape).toarray(), K.toarray())
+    missing = np.setdiff1d(np.arange(40), P.indices[P.indptr[0]:P.indptr[1]])[0]  # in row 0
+    outside = (K + sp.csr_matrix(([1.0], ([0], [missing])), shape=K.shape)).tocsr()
+    outside.sort_indices()
+    assert not scatter_into_pattern(outside.indptr, outside.indices, outside.data, P.indptr, P.indices, out)
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_pardiso_reuses_its_analysis_as_the_sphere_moves():
+    """The sphere moves: other velocity DOFs are constrained (2037, then 2013), other pressure
+    modes orphaned (80 entries, then 32). The second factorisation reuses the first one's
+    analysis (the particle's DOFs stay in the matrix as unit rows) and solves as accurately as
+    SuperLU; the superseded first factorisation still solves its own system; after ``forget``
+    the next one analyses afresh."""
+    first, second = fbm_system(0.45, 0.4), fbm_system(0.48, 0.4)
+    assert not np.array_equal(first.fixed, second.fixed)
+    assert first.orphans.nnz != second.orphans.nnz
+    solver = DirectSolver("pardiso")
+    rng = np.random.default_rng(1)
+
+    def check(system, solve):
+        f, g = rng.normal(size=(system.n_u, 2)), rng.normal(size=(system.n_p, 2))
+        f[system.fixed] = rng.normal(size=(system.fixed.size, 2))  # values prescribed there
+        u, p, _ = solve(f, g)
+        u_ref, p_ref = factorize(system, "superlu")(f, g)
+        np.testing.assert_allclose(u, u_ref, atol=1e-10 * np.abs(u_ref).max())
+        np.testing.assert_allclose(p, p_ref, atol=1e-10 * np.abs(p_ref).max())
+
+    solve_first = solver.factor(first)
+    check(first, solve_first)
+    check(second, solver.factor(second))
+    assert (solver.analysis.analyses, solver.analysis.generation) == (1, 2)
+    check(first, solve_first)  # superseded: factorises its own matrix again, privately
+    assert (solver.analysis.analyses, solver.analysis.generation) == (1, 2)
+    solver.forget()
+    check(second, solver.factor(second))
+    assert solver.analysis.analyses == 2
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.parametrize("spread, analyses", [(0.5, 1), (20.0, 2)])
+def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, analyses):
+    """The reused analysis is made to give the factors of a perturbed matrix, its entries scaled
+    by ``1 + spread * uniform(-1, 1)``. Off by up to 50 %, the solve still gets there (FGMRES)
+    and marks the analysis stale for the next factorisation; scaled by up to 21 and flipped in
+    sign, it fails and analyses afresh at once. Both are accurate, without the SuperLU
+    fallback."""
+    import fbmflow.solvers.linear as linear
+
+    numeric = linear._numeric_factorisation
+
+    def perturbed(solver, M):
+        wrong = M.copy()
+        wrong.data *= 1.0 + spread * np.random.default_rng(2).uniform(-1.0, 1.0, M.nnz)
+        numeric(solver, wrong)
+        solver.factorized_A = M.copy()  # solves with M use the wrong factors
+
+    monkeypatch.setattr(linear, "_numeric_factorisation", perturbed)
+    monkeypatch.setattr(linear, "_superlu", lambda K: pytest.fail("fell back to SuperLU"))
+    first, second = fbm_system(0.45, 0.4), fbm_system(0.48, 0.4)
+    solver = DirectSolver("pardiso")
+    solver.factor(first)
+    f, g = np.random.default_rng(1).normal(size=second.n_u), np.random.default_rng(2).normal(size=second.n_p)
+    f[second.fixed] = 0.0
+    u, p, _ = solver.factor(second)(f, g)
+    r = second.apply(np.concatenate([u, p])) - np.concatenate([f, second.balance(g)])
+    assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f, g]))
+    assert solver.analysis.analyses == analyses
+    assert solver.analysis.stale == (analyses == 1)
+    solver.factor(first)
+    assert solver.analysis.analyses == analyses + (analyses == 1)
 
 
 def test_backend_errors():

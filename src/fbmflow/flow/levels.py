@@ -77,7 +77,8 @@ class FlowLevel:
                 J[i * s.nnz:(i + 1) * s.nnz] = S
         A = s.coupled_matrix(J)
         con.zero_rows(A)
-        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s)
+        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
+                                 fixed_always=self.boundary_constraints.dofs)
 
 
 def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cells: int,

@@ -293,8 +293,13 @@ class NavierStokesProblem:
 
     def forget_linearisation(self) -> None:
         """Drop the stored factorisation: the next solve starts with a fresh Jacobian, as after
-        a restart (checkpoints call this so that a resumed run repeats the same iterations)."""
+        a restart (checkpoints call this so that a resumed run repeats the same iterations).
+        A linear solver that keeps more between factorisations (PARDISO's analysis) forgets it
+        too."""
         self._linearisation = None
+        forget = getattr(self.linear_solver, "forget", None)
+        if forget is not None:
+            forget()
 
     def lifting_response(self, x: np.ndarray, liftings: np.ndarray) -> np.ndarray:
         """How the solution of the last :meth:`solve` responds to changed constraint values.

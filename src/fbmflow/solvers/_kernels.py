@@ -1,4 +1,5 @@
-"""Numba kernels of the Vanka smoothers: cell-wise local saddle-point corrections.
+"""Numba kernels of the Vanka smoothers (cell-wise local saddle-point corrections) and of the
+direct solver (a matrix scattered into a wider sparsity pattern).
 
 Layout (see :mod:`fbmflow.fem.space`): ``n_v`` scalar Q2 DOFs, velocity unknown ``(i, r)`` at
 ``i n_v + r``, pressure DOF ``(c, m)`` at ``n_u + c (d + 1) + m``. The velocity block ``A`` is
@@ -205,3 +206,22 @@ def schur_diagonal(bt, rank, cell_dofs, diag_inv, d, n_v):
                               * bt[(c * npl + q) * d * nl + pos])
                 S[c, m, q] = s
     return S
+
+
+@njit
+def scatter_into_pattern(indptr, indices, data, p_indptr, p_indices, out):
+    """Write CSR matrix ``(indptr, indices, data)`` into ``out``, the data array of the CSR
+    pattern ``(p_indptr, p_indices)`` of the same shape (zero where the matrix has no entry;
+    duplicate entries are summed). Column indices sorted within rows in both. Returns False,
+    leaving ``out`` partly written, when an entry of the matrix is not in the pattern."""
+    out[:] = 0.0
+    for i in range(len(indptr) - 1):
+        q, end = p_indptr[i], p_indptr[i + 1]
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            while q < end and p_indices[q] < j:
+                q += 1
+            if q == end or p_indices[q] != j:
+                return False
+            out[q] += data[k]
+    return True

@@ -5,7 +5,9 @@ A :class:`SaddlePointSystem` holds the blocks of
     [ A   B ] [du]   [f]
     [ B^T 0 ] [dp] = [g]      (+ the border  w . dp = 0  when the pressure is fixed by its mean)
 
-and a linear solver is any object with ``solve(system, f, g) -> (du, dp, LinearReport)``.
+and a linear solver is any object with ``solve(system, f, g) -> (du, dp, LinearReport)`` (and
+``factor(system)``, returning such a solve for one system); one that keeps state between
+factorisations offers ``forget()`` to drop it.
 Solvers are registered by name in :data:`LINEAR_SOLVERS`; the multigrid solver plugs in here.
 """
 from __future__ import annotations
@@ -22,6 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
 
+from . import _kernels
 from .krylov import fgmres
 
 log = logging.getLogger(__name__)
@@ -38,6 +41,11 @@ class SaddlePointSystem:
     mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
     fixed : (n_c,) int64 or None, the constrained velocity DOFs (unit rows of ``A``); solvers
         may eliminate them (their solution is the right-hand side there)
+    fixed_always : (n_a,) int64 or None, the constrained DOFs that stay constrained in every
+        system of the problem (the domain's walls; the particles' DOFs come and go). A
+        factorisation that reuses its analysis (:class:`PardisoAnalysis`) eliminates only the
+        ones of them in ``fixed`` and keeps the other constrained DOFs as unit rows, so that the
+        matrix keeps its sparsity pattern while particles move.
     space : FlowSpace or None, the discretisation (cell structure for cell-wise smoothers)
     coarser : SaddlePointSystem or None, the same operator re-discretised on the next coarser mesh
     prolongation : (P_v, P_p) or None, scalar Q2 (n_v x n_v_coarse) and P1disc (n_p x n_p_coarse)
@@ -55,6 +63,7 @@ class SaddlePointSystem:
     mean_weights: np.ndarray | None = None
     fixed: np.ndarray | None = None
     space: object = None
+    fixed_always: np.ndarray | None = None
     coarser: "SaddlePointSystem | None" = None
     prolongation: tuple | None = None
     orphans: sp.csr_matrix | None = None
@@ -266,7 +275,7 @@ def pardiso_available() -> bool:
     return importlib.util.find_spec("pypardiso") is not None
 
 
-def factorize(system: SaddlePointSystem, backend: str = "auto"):
+def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "PardisoAnalysis | None" = None):
     """Sparse LU of the saddle-point matrix with the constrained velocity DOFs eliminated; returns
     ``solve(f, g) -> (u, p)``.
 
@@ -274,6 +283,11 @@ def factorize(system: SaddlePointSystem, backend: str = "auto"):
     PARDISO through the optional ``pypardiso``: nested-dissection ordering, two threads; in 3D it
     factorises 200 000 unknowns in about 30 s where SuperLU runs out of memory) or ``"auto"``
     (PARDISO for 3D systems when installed, else SuperLU).
+
+    ``analysis``: with PARDISO, factorise with this :class:`PardisoAnalysis`, which keeps the
+    symbolic analysis between factorisations. Only the constrained DOFs in
+    ``system.fixed_always`` are then eliminated; the others (a particle's) stay in the matrix as
+    unit rows, so that the pattern does not change as they come and go.
 
     When the pressure is determined only up to a constant (``mean_weights`` given), the constant
     mode of one cell is pinned to zero instead of bordering the matrix with the dense row
@@ -288,11 +302,16 @@ def factorize(system: SaddlePointSystem, backend: str = "auto"):
     if backend == "auto":  # SuperLU is fast in 2D; PARDISO is what makes 3D feasible
         dim = system.space.dim if system.space is not None else 2
         backend = "pardiso" if dim == 3 and pardiso_available() else "superlu"
+    if backend != "pardiso":
+        analysis = None
     K = system.matrix(bordered=False).tocsr()
     n = K.shape[0]
+    eliminated = system.fixed
+    if analysis is not None and system.fixed is not None and system.fixed_always is not None:
+        eliminated = np.intersect1d(system.fixed, system.fixed_always)
     free = np.ones(n, dtype=bool)
-    if system.fixed is not None:
-        free[system.fixed] = False
+    if eliminated is not None:
+        free[eliminated] = False
     pinned = _pinned_pressure(system)
     if pinned is not None:
         pinned += system.n_u
@@ -300,7 +319,14 @@ def factorize(system: SaddlePointSystem, backend: str = "auto"):
         free[pinned] = False
     K_free = K[free]
     coupling = K_free[:, ~free]
-    lu_solve = (_pardiso if backend == "pardiso" else _superlu)(K_free[:, free])
+    if backend == "pardiso":
+        reserve = None
+        if analysis is not None:
+            npl = system.space.dim + 1 if system.space is not None else 1
+            reserve = lambda: _pressure_cell_pattern(system.n_u, system.n_p, npl, free)  # noqa: E731
+        lu_solve = _pardiso(K_free[:, free], analysis=analysis, reserve=reserve)
+    else:
+        lu_solve = _superlu(K_free[:, free])
 
     def solve(f, g):  # (n_u,), (n_p,) or, for k right-hand sides at once, (n_u, k), (n_p, k)
         x = np.concatenate([f, system.balance(g)])
@@ -315,12 +341,159 @@ def factorize(system: SaddlePointSystem, backend: str = "auto"):
     return solve
 
 
+def _pressure_cell_pattern(n_u: int, n_p: int, npl: int, free: np.ndarray) -> sp.csr_matrix:
+    """Every cell's ``npl x npl`` pressure block (ones) among the unknowns ``free`` (n,) bool of
+    the saddle-point system, numbered as in the system reduced to them: where orphaned pressure
+    modes of single cells put their entries."""
+    position = np.cumsum(free) - 1
+    first = n_u + np.arange(n_p // npl) * npl
+    rows, cols = [], []
+    for a in range(npl):
+        for b in range(npl):
+            keep = free[first + a] & free[first + b]
+            rows.append(position[first[keep] + a])
+            cols.append(position[first[keep] + b])
+    rows = np.concatenate(rows)
+    m = int(free.sum())
+    return sp.csr_matrix((np.ones(rows.size), (rows, np.concatenate(cols))), shape=(m, m))
+
+
 def _superlu(K: sp.spmatrix):
     """SuperLU with COLAMD and threshold pivoting 0.01 (so that the ordering survives)."""
     return spla.splu(K.tocsc(), permc_spec="COLAMD", diag_pivot_thresh=0.01).solve
 
 
-def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, accept: float = 1e-8):
+def _ones(P: sp.csr_matrix) -> sp.csr_matrix:
+    """The pattern of ``P`` (explicit zeros included) with all entries one."""
+    return sp.csr_matrix((np.ones(P.nnz), P.indices, P.indptr), shape=P.shape)
+
+
+class PardisoAnalysis:
+    """PARDISO factorisations that share one symbolic analysis while their pattern allows.
+
+    PARDISO's analysis (phase 11: nested-dissection ordering, symbolic factorisation, scaling
+    and weighted matching) is about 40 % of a factorisation of the ten-cate Jacobians (level 0,
+    54 468 unknowns, 8.7 M non-zeros: analysis and factorisation 6.2-7.8 s, factorisation alone
+    3.4-4.4 s). A matrix whose entries all lie in the *reserved pattern* of the last analysis is
+    only factorised numerically (phase 22) with that analysis. The reserved pattern is the union
+    of the analysed matrix, the pattern reserved before (same size) and the caller's ``reserve``
+    (the cells' pressure blocks, where orphaned pressure modes come and go).
+
+    The scaling and matching stay those of the analysed values, so solves need a refinement step
+    or two more (measured: 2 instead of 1 to 1e-12). A first solve that needs more than
+    ``REUSE_REFINEMENTS`` steps, or FGMRES, marks the analysis stale, and the next factorisation
+    analyses again; a solve that fails with a reused analysis is repeated after a fresh one.
+
+    One factorisation is live at a time: the next one overwrites its factors, and a solve
+    function of an older one then factorises its own matrix again (in a private analysis).
+    """
+
+    def __init__(self):
+        self._solvers: list = []  # the live pypardiso solver (0 or 1); freed with this object
+        weakref.finalize(self, _free_solvers, self._solvers)
+        self._pattern: sp.csr_matrix | None = None
+        self._diagonal: np.ndarray | None = None  # positions of the diagonal in the pattern
+        self.stale = False
+        self.generation = 0  # factorisations made so far
+        self.analyses = 0    # of which with a new analysis
+
+    def factor(self, K: sp.csr_matrix, reserve=None) -> tuple[sp.csr_matrix, bool]:
+        """Factorise ``K`` (CSR, sorted indices) with its zero diagonal entries (the pressure
+        block) shifted by ``-REGULARISE max|diag K|`` (see :func:`_pardiso`). ``reserve``:
+        callable returning a CSR pattern to reserve as well, called only for a new analysis.
+        Returns the factorised matrix (``K`` shifted, in the reserved pattern) and whether the
+        analysis was reused."""
+        M = None
+        if not self.stale and self._pattern is not None and self._pattern.shape == K.shape:
+            data = np.empty(self._pattern.nnz)
+            if _kernels.scatter_into_pattern(K.indptr, K.indices, K.data, self._pattern.indptr,
+                                             self._pattern.indices, data):
+                M = self._shifted(data)
+        reused = M is not None
+        if reused:
+            _numeric_factorisation(self._solvers[0], M)
+        else:
+            P = _ones(K) + sp.identity(K.shape[0], format="csr")
+            if self._pattern is not None and self._pattern.shape == K.shape:
+                P = P + _ones(self._pattern)
+            if reserve is not None:
+                P = P + _ones(sp.csr_matrix(reserve()))
+            P = P.tocsr()
+            P.sort_indices()
+            self._pattern = P
+            rows = np.repeat(np.arange(P.shape[0]), np.diff(P.indptr))
+            self._diagonal = np.flatnonzero(P.indices == rows)
+            data = np.empty(P.nnz)
+            _kernels.scatter_into_pattern(K.indptr, K.indices, K.data, P.indptr, P.indices, data)
+            M = self._shifted(data)
+            self.release()
+            solver = _new_pardiso_solver()
+            self._solvers.append(solver)
+            solver.factorize(M)
+            self.analyses += 1
+            self.stale = False
+        self.generation += 1
+        return M, reused
+
+    def solve(self, M: sp.csr_matrix, B: np.ndarray) -> np.ndarray:
+        """``M^-1 B`` with the live factors (``M`` as returned by :meth:`factor`)."""
+        return self._solvers[0].solve(M, np.asfortranarray(B))
+
+    def release(self) -> None:
+        """Free the factors (MKL memory)."""
+        _free_solvers(self._solvers)
+
+    def forget(self) -> None:
+        """Free the factors and drop the analysis: the next factorisation analyses afresh (what a
+        run resumed from a checkpoint does, so that both repeat the same iterations)."""
+        self.release()
+        self._pattern = self._diagonal = None
+        self.stale = False
+
+    def _shifted(self, data: np.ndarray) -> sp.csr_matrix:
+        d = data[self._diagonal]
+        data[self._diagonal] = np.where(d == 0.0, -REGULARISE * np.abs(d).max(), d)
+        return sp.csr_matrix((data, self._pattern.indices, self._pattern.indptr), shape=self._pattern.shape)
+
+
+REUSE_REFINEMENTS = 3  # refinement steps of a first solve above which a reused analysis is stale
+
+
+def _new_pardiso_solver():
+    """A pypardiso solver with :data:`PARDISO_IPARM`."""
+    import pypardiso
+
+    solver = pypardiso.PyPardisoSolver()
+    # pypardiso looks for MKL's runtime on every solver it makes, by a recursive glob over
+    # sys.prefix unless PYPARDISO_MKL_RT names it (measured 0.6-3.9 s per factorisation, 12 % of a
+    # ten-cate level-0 step); the first solver's find is handed on to all later ones
+    os.environ.setdefault("PYPARDISO_MKL_RT", solver.libmkl._name)
+    for key, value in PARDISO_IPARM.items():  # 1-based, as in the MKL documentation
+        solver.iparm[key - 1] = value
+    return solver
+
+
+def _numeric_factorisation(solver, M: sp.csr_matrix) -> None:
+    """PARDISO phase 22 (numerical factorisation with the stored analysis) of ``M``, which has
+    the analysed pattern. pypardiso only offers analysis and factorisation together (phase 12),
+    so this goes through its internals the way its ``factorize`` does; ``tests/solvers`` checks
+    the result against a fresh factorisation."""
+    solver._check_A(M)
+    solver.factorized_A = (solver._hash_csr_matrix(M) if M.nnz > solver.size_limit_storage
+                           else M.copy())
+    solver.set_phase(22)
+    solver._call_pardiso(M, np.zeros((M.shape[0], 1)))
+
+
+def _free_solvers(solvers: list) -> None:
+    """Free the MKL memory of the pypardiso solvers in ``solvers`` and empty the list (phase -1:
+    phase 0 leaked 17 MB per factorisation)."""
+    while solvers:
+        solvers.pop().free_memory(True)
+
+
+def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, accept: float = 1e-8,
+             analysis: PardisoAnalysis | None = None, reserve=None):
     """MKL PARDISO (real unsymmetric, METIS ordering, scaling and weighted matching) of ``K``
     with its zero diagonal entries (the pressure block) shifted by ``-1e-12 max|diag K|``: on the
     unshifted saddle point PARDISO perturbs tiny pivots (5-18 of them in the 3D FBM Jacobians
@@ -334,27 +507,26 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     round-off floor ``ROUNDOFF | |K| |x| + |b| |`` (entrywise absolute values) where that is
     larger: when ``b`` is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding
     error of ``K x`` itself, and FGMRES then ran 60 useless iterations per solve. Only if the
-    residual ends above ``accept`` (same measure) is ``K`` factorised again with SuperLU, with a
-    warning. The MKL memory is freed with the returned function."""
-    import pypardiso
-
+    residual ends above ``accept`` (same measure) is ``K`` factorised again, after a fresh
+    analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
+    with SuperLU, with a warning."""
     A = sp.csr_matrix(K)
     A.sort_indices()
-    solver = pypardiso.PyPardisoSolver()
-    # pypardiso looks for MKL's runtime on every solver it makes, by a recursive glob over
-    # sys.prefix unless PYPARDISO_MKL_RT names it (measured 0.6-3.9 s per factorisation, 12 % of a
-    # ten-cate level-0 step); the first solver's find is handed on to all later ones
-    os.environ.setdefault("PYPARDISO_MKL_RT", solver.libmkl._name)
-    for key, value in PARDISO_IPARM.items():  # 1-based, as in the MKL documentation
-        solver.iparm[key - 1] = value
-    diag = A.diagonal()  # the factorised matrix: zero (pressure) diagonal shifted by -1e-12 max|diag|
-    factored = (A + sp.diags(np.where(diag == 0.0, -REGULARISE * np.abs(diag).max(), 0.0))).tocsr()
-    factored.sort_indices()
-    solver.factorize(factored)
+    live = {"analysis": analysis if analysis is not None else PardisoAnalysis()}
+
+    def factor():
+        M, reused = live["analysis"].factor(A, reserve)
+        live.update(M=M, reused=reused, generation=live["analysis"].generation, first=True)
+
+    factor()
     fallback = []
 
-    def precondition(r):
-        return solver.solve(factored, r)
+    def lu(B):  # the factors' solve; refactorise privately when a later factorisation took them
+        if live["analysis"].generation != live["generation"]:
+            log.debug("PARDISO factors superseded by a later factorisation; factorising again")
+            live["analysis"] = PardisoAnalysis()
+            factor()
+        return live["analysis"].solve(live["M"], B).reshape(B.shape)
 
     abs_A = abs(A)
 
@@ -363,34 +535,47 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
         floor = ROUNDOFF * np.linalg.norm(abs_A @ abs(X) + abs(B), axis=0) / rtol
         return np.linalg.norm(R, axis=0) / np.maximum(np.maximum(np.linalg.norm(B, axis=0), floor), 1e-300), R
 
+    def refined(B):  # X, its error per column, refinement steps, whether FGMRES was needed
+        X = lu(B)
+        err, R = error(B, X)
+        previous, steps = np.inf, 0
+        for steps in range(max_refinements + 1):
+            size = np.max(err)
+            if size <= rtol or size > 0.5 * previous or steps == max_refinements:
+                break
+            previous = size
+            X += lu(R)
+            err, R = error(B, X)
+        stalled = np.flatnonzero(err > rtol)
+        for c in stalled:  # refinement stalled: FGMRES
+            r0 = np.linalg.norm(R[:, c])
+            target = rtol * r0 / err[c]
+            X[:, c] = fgmres(lambda v: A @ v, lambda r: lu(r[:, None])[:, 0], B[:, c], X[:, c].copy(),
+                             target / r0, 60, 30)[0]
+            err[c] = error(B[:, c:c + 1], X[:, c:c + 1])[0][0]
+        return X, np.max(err), steps, stalled.size > 0
+
     def solve(b):
         b = np.asarray(b, dtype=float)
         if fallback:
             return fallback[0](b)
         B = b.reshape(b.shape[0], -1)
-        X = solver.solve(factored, np.asfortranarray(B)).reshape(B.shape)
-        err, R = error(B, X)
-        previous = np.inf
-        for _ in range(max_refinements):
-            size = np.max(err)
-            if size <= rtol or size > 0.5 * previous:
-                break
-            previous = size
-            X += solver.solve(factored, np.asfortranarray(R)).reshape(B.shape)
-            err, R = error(B, X)
-        for c in np.flatnonzero(err > rtol):  # refinement stalled: FGMRES
-            r0 = np.linalg.norm(R[:, c])
-            target = rtol * r0 / err[c]
-            X[:, c] = fgmres(lambda v: A @ v, precondition, B[:, c], X[:, c].copy(), target / r0, 60, 30)[0]
-            err[c] = error(B[:, c:c + 1], X[:, c:c + 1])[0][0]
-        size = np.max(err)
+        X, size, steps, stalled = refined(B)
+        if live["reused"] and live["first"] and (steps > REUSE_REFINEMENTS or stalled):
+            live["analysis"].stale = True  # the next factorisation analyses again
+        live["first"] = False
+        if size > accept and live["reused"]:
+            log.info("PARDISO solve with a reused analysis inaccurate (relative residual %.1e); "
+                     "analysing again", size)
+            live["analysis"].stale = True
+            factor()
+            X, size, _, _ = refined(B)
         if size > accept:
             log.warning("PARDISO solve inaccurate (relative residual %.1e); factorising with SuperLU instead", size)
             fallback.append(_superlu(A))
             return fallback[0](b)
         return X.reshape(b.shape)
 
-    weakref.finalize(solve, solver.free_memory, True)  # phase -1: phase 0 leaked 17 MB per factorisation
     return solve
 
 
@@ -423,11 +608,14 @@ class DirectSolver:
         if backend == "pardiso" and not pardiso_available():
             raise ValueError("the PARDISO backend needs pypardiso: pip install 'fbmflow[pardiso]'")
         self.backend = backend
+        self.analysis = PardisoAnalysis()  # kept between PARDISO factorisations; unused by SuperLU
 
     def factor(self, system: SaddlePointSystem):
-        """Factorise ``system`` once; returns ``solve(f, g) -> (u, p, LinearReport)``."""
+        """Factorise ``system``; returns ``solve(f, g) -> (u, p, LinearReport)``. With PARDISO the
+        factorisation reuses the last one's analysis where the pattern allows
+        (:class:`PardisoAnalysis`) and replaces its factors: solve with the latest only."""
         t0 = time.perf_counter()
-        direct = factorize(system, self.backend)
+        direct = factorize(system, self.backend, self.analysis)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
 
         def solve(f, g):
@@ -441,3 +629,7 @@ class DirectSolver:
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
         return self.factor(system)(f, g)
+
+    def forget(self) -> None:
+        """Drop the stored analysis: the next factorisation starts afresh, as after a restart."""
+        self.analysis.forget()
