@@ -379,10 +379,11 @@ class PardisoAnalysis:
     of the analysed matrix, the pattern reserved before (same size) and the caller's ``reserve``
     (the cells' pressure blocks, where orphaned pressure modes come and go).
 
-    The scaling and matching stay those of the analysed values, so solves need a refinement step
-    or two more (measured: 2 instead of 1 to 1e-12). A first solve that needs more than
-    ``REUSE_REFINEMENTS`` steps, or FGMRES, marks the analysis stale, and the next factorisation
-    analyses again; a solve that fails with a reused analysis is repeated after a fresh one.
+    The scaling and matching stay those of the analysed values. Measured, that did not cost
+    refinement steps: 0-2 against 0-1 at ten-cate level 0, 2-4 against 2-4 at level 1. A first
+    solve that needs more than ``REUSE_REFINEMENTS`` steps, or FGMRES (refinement no longer
+    halves the error), marks the analysis stale, and the next factorisation analyses again; a
+    solve that fails with a reused analysis is repeated after a fresh one.
 
     One factorisation is live at a time: the next one overwrites its factors, and a solve
     function of an older one then factorises its own matrix again (in a private analysis).
@@ -409,10 +410,13 @@ class PardisoAnalysis:
             if _kernels.scatter_into_pattern(K.indptr, K.indices, K.data, self._pattern.indptr,
                                              self._pattern.indices, data):
                 M = self._shifted(data)
+            else:
+                log.debug("PARDISO: the matrix leaves the reserved pattern; analysing again")
         reused = M is not None
         if reused:
             _numeric_factorisation(self._solvers[0], M)
         else:
+            t0 = time.perf_counter()
             P = _ones(K) + sp.identity(K.shape[0], format="csr")
             if self._pattern is not None and self._pattern.shape == K.shape:
                 P = P + _ones(self._pattern)
@@ -429,7 +433,10 @@ class PardisoAnalysis:
             self.release()
             solver = _new_pardiso_solver()
             self._solvers.append(solver)
+            t1 = time.perf_counter()
             solver.factorize(M)
+            log.debug("PARDISO analysis: pattern %.1f s, analysis and factorisation %.1f s",
+                      t1 - t0, time.perf_counter() - t1)
             self.analyses += 1
             self.stale = False
         self.generation += 1
@@ -456,7 +463,9 @@ class PardisoAnalysis:
         return sp.csr_matrix((data, self._pattern.indices, self._pattern.indptr), shape=self._pattern.shape)
 
 
-REUSE_REFINEMENTS = 3  # refinement steps of a first solve above which a reused analysis is stale
+# refinement steps of a first solve above which a reused analysis is stale (measured at ten-cate
+# level 1: 2-4 steps with fresh and with reused analyses alike)
+REUSE_REFINEMENTS = 6
 
 
 def _new_pardiso_solver():
@@ -561,8 +570,12 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
             return fallback[0](b)
         B = b.reshape(b.shape[0], -1)
         X, size, steps, stalled = refined(B)
+        log.debug("PARDISO solve: %d refinement steps%s (%s analysis)", steps, ", FGMRES" if stalled else "",
+                  "reused" if live["reused"] else "fresh")
         if live["reused"] and live["first"] and (steps > REUSE_REFINEMENTS or stalled):
-            live["analysis"].stale = True  # the next factorisation analyses again
+            log.debug("PARDISO: %d refinement steps%s with a reused analysis; the next factorisation "
+                      "analyses again", steps, " and FGMRES" if stalled else "")
+            live["analysis"].stale = True
         live["first"] = False
         if size > accept and live["reused"]:
             log.info("PARDISO solve with a reused analysis inaccurate (relative residual %.1e); "
