@@ -152,15 +152,15 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     fallback."""
     import fbmflow.solvers.linear as linear
 
-    numeric = linear._numeric_factorisation
+    factorise = linear.PardisoAnalysis._factorise
 
-    def perturbed(solver, M):
-        wrong = M.copy()
-        wrong.data *= 1.0 + spread * np.random.default_rng(2).uniform(-1.0, 1.0, M.nnz)
-        numeric(solver, wrong)
-        solver.factorized_A = M.copy()  # solves with M use the wrong factors
+    def perturbed(self, phase, M):  # the solves with M then use the factors of another matrix
+        if phase == 22:
+            M = M.copy()
+            M.data *= 1.0 + spread * np.random.default_rng(2).uniform(-1.0, 1.0, M.nnz)
+        factorise(self, phase, M)
 
-    monkeypatch.setattr(linear, "_numeric_factorisation", perturbed)
+    monkeypatch.setattr(linear.PardisoAnalysis, "_factorise", perturbed)
     monkeypatch.setattr(linear, "_superlu", lambda K: pytest.fail("fell back to SuperLU"))
     first, second = fbm_system(0.45, 0.4), fbm_system(0.48, 0.4)
     solver = DirectSolver("pardiso")
