@@ -84,6 +84,22 @@ def test_pardiso_finds_mkl_once(monkeypatch):
     assert not searches
 
 
+def test_unbordered_matrix_equals_the_block_matrix():
+    """The row-wise stacked saddle-point matrix is scipy's ``bmat`` of the blocks, entry for entry
+    and in structure (explicit zeros of the constrained columns kept, indices sorted)."""
+    import scipy.sparse as sp
+
+    system = fbm_system(0.45, 0.4)
+    assert system.orphans is not None
+    K = system.matrix(bordered=False)
+    ref = sp.bmat([[system.A, system.BT.T], [system.BT, system.orphans]], format="csr")
+    ref.sort_indices()
+    assert K.format == "csr" and K.has_sorted_indices
+    for a, b in ((K.indptr, ref.indptr), (K.indices, ref.indices), (K.data, ref.data)):
+        np.testing.assert_array_equal(a, b)
+    assert (K.data == 0.0).any()  # the zeroed columns of B^T are still there
+
+
 def test_scatter_into_pattern_matches_numpy():
     """The kernel that writes a matrix into a wider pattern, against a NumPy reference (entry keys
     looked up by binary search), on a random matrix; an entry outside the pattern is reported."""
