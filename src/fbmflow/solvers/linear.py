@@ -380,8 +380,8 @@ class PardisoAnalysis:
 
     PARDISO's analysis (phase 11: nested-dissection ordering, symbolic factorisation, scaling
     and weighted matching) is about 40 % of a factorisation of the ten-cate Jacobians (level 0,
-    54 468 unknowns, 8.7 M non-zeros: analysis and factorisation 6.2-7.8 s, factorisation alone
-    3.4-4.4 s). A matrix whose entries all lie in the *reserved pattern* of the last analysis is
+    54 468 unknowns, 8.7 M non-zeros: analysis and factorisation 2.8 s, factorisation alone
+    1.5-1.7 s). A matrix whose entries all lie in the *reserved pattern* of the last analysis is
     only factorised numerically (phase 22) with that analysis. The reserved pattern is the union
     of the analysed matrix, the pattern reserved before (same size) and the caller's ``reserve``
     (the cells' pressure blocks, where orphaned pressure modes come and go).
