@@ -1,7 +1,7 @@
 """Glowinski's free fall of a disk: convergence in the mesh level and in the time step.
 
 Run:  python benchmarks/bench_glowinski.py [--levels 2 3 4] [--dts 0.004 0.002 0.001] [--dt-level 3]
-      [--mesh graded|uniform] [--t-end 0.65]
+      [--mesh graded|uniform] [--t-end 0.65] [--reuse]
 
 Writes ``benchmarks/results/glowinski.md``, ``.json`` and ``.png`` (``glowinski-uniform.*`` with
 ``--mesh uniform``): per run the level, cells
@@ -10,7 +10,9 @@ maximum settling velocity and Reynolds number, final height, the relative change
 maximum settling velocity against the next finer run, its deviation from Koblitz et al.'s (2017)
 overset-grid peak and the largest deviation of the velocity curve from theirs (relative to their
 peak, after the first 0.05 s where the digitised points scatter). A run that fails (the disk
-reaching the bottom before ``t_end``) keeps its curve up to its last good step.
+reaching the bottom before ``t_end``) keeps its curve up to its last good step. With ``--reuse``
+a run already in the results file (same mesh kind, level, time step and end time) is taken from
+there with the wall time and direct backend it was measured with, instead of being run again.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import numpy as np
 from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.data import koblitz2017
+from fbmflow.solvers.linear import BACKEND_NAMES, auto_backend
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -34,7 +37,7 @@ def run(scene, level, dt, t_end, mesh="graded"):
     result = scene.run(params, level, stop_on_failure=True)
     q = result.quantities
     row = dict(level=level, cells_per_diameter=2**level, n_dofs=result.n_dofs, dt=dt,
-               wall_s=time.perf_counter() - t0, newton=result.newton_iterations,
+               wall_s=time.perf_counter() - t0, backend=BACKEND_NAMES[auto_backend(2, result.n_dofs)], newton=result.newton_iterations,
                max_settling_velocity=q["max_settling_velocity"], max_reynolds_number=q["max_reynolds_number"],
                final_y=q["final_position"][1], t=q["t"], v=q["v"],
                vs_koblitz=q["max_settling_velocity"] / koblitz2017.V_MAX - 1,
@@ -56,13 +59,15 @@ def curve_deviation(t, v) -> float:
 
 
 def table(rows, key):
-    lines = [f"| level | cells/D | unknowns | dt s | wall s | v_max cm/s | Re_max | y(t_end) cm | change of v_max vs finer {key} "
-             "| v_max vs Koblitz | curve vs Koblitz |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [f"| level | cells/D | unknowns | dt s | direct backend | wall s | v_max cm/s | Re_max | y(t_end) cm "
+             f"| change of v_max vs finer {key} | v_max vs Koblitz | curve vs Koblitz |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for a, b in zip(rows, rows[1:] + [None]):
         change = "" if b is None else f"{100 * abs(a['max_settling_velocity'] / b['max_settling_velocity'] - 1):.2f} %"
         end = f"{a['final_y']:.4f}" + (" (failed)" if a.get("failure") else "")
-        lines.append(f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | {a['wall_s']:.1f} | "
+        # rows measured before the backend was recorded ran on SuperLU (then the only 2D backend)
+        lines.append(f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | "
+                     f"{a.get('backend', 'SuperLU')} | {a['wall_s']:.1f} | "
                      f"{a['max_settling_velocity']:.4f} | {a['max_reynolds_number']:.3f} | {end} | {change} | "
                      f"{100 * a['vs_koblitz']:+.2f} % | {100 * a['curve_deviation']:.2f} % |")
     return lines
@@ -77,24 +82,38 @@ def main():
     ap.add_argument("--t-end", type=float, default=0.65, help="past the peak, before the landing")
     ap.add_argument("--mesh", default="graded", choices=("graded", "uniform"),
                     help="graded: uniform cells along the disk's path only (domain.mesh)")
+    ap.add_argument("--reuse", action="store_true",
+                    help="take runs already in the results file instead of running them again")
     args = ap.parse_args()
     scene = get_scene("glowinski-free-fall")
     stem = "glowinski" if args.mesh == "graded" else "glowinski-uniform"
     run(scene, 0, 0.002, 0.004)  # JIT warm-up
     RESULTS.mkdir(exist_ok=True)
     mesh_rows, time_rows = [], []
+    done = []
+    if args.reuse and (RESULTS / f"{stem}.json").exists():
+        old = json.loads((RESULTS / f"{stem}.json").read_text())
+        done = [r for r in old["mesh"] + old["time"] if r.get("failure") or abs(r["t"][-1] - args.t_end) < r["dt"] / 2]
+
+    def measured(level, dt):
+        """The row of ``level`` and ``dt``: from this invocation, ``--reuse``'d, or run now."""
+        for r in mesh_rows + time_rows + done:
+            if r["level"] == level and r["dt"] == dt:
+                if r in done:
+                    print(f"level {level} dt {dt}: reused ({r['wall_s']:.1f} s, v_max {r['max_settling_velocity']:.4f} cm/s)")
+                return r
+        return run(scene, level, dt, args.t_end, args.mesh)
 
     def save():  # after every run, so that an interrupted study keeps what it measured
         (RESULTS / f"{stem}.json").write_text(json.dumps({"mesh": mesh_rows, "time": time_rows}))
 
     def time_study():
         for dt in args.dts:
-            same = [r for r in mesh_rows if r["level"] == args.dt_level and r["dt"] == dt]
-            time_rows.append(same[0] if same else run(scene, args.dt_level, dt, args.t_end, args.mesh))
+            time_rows.append(measured(args.dt_level, dt))
             save()
 
     for lv in args.levels:  # cheapest first: the time-step study right after its level
-        mesh_rows.append(run(scene, lv, args.dt, args.t_end, args.mesh))
+        mesh_rows.append(measured(lv, args.dt))
         save()
         if lv == args.dt_level:
             time_study()

@@ -7,7 +7,8 @@ from fbmflow.flow import DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
 from fbmflow.solvers import DirectSolver
-from fbmflow.solvers.linear import factorize, pardiso_available
+from fbmflow.solvers import linear
+from fbmflow.solvers.linear import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
 
 
 def fbm_system(x_centre=0.45, radius=0.3):
@@ -25,6 +26,17 @@ def fbm_system(x_centre=0.45, radius=0.3):
     x[:flow.space.n_u] = np.random.default_rng(0).normal(size=flow.space.n_u)
     con.apply_to_vector(x[:flow.space.n_u])
     return flow.linear_system(x, 1.0, 1.0, con)
+
+
+@pytest.mark.parametrize("installed", [True, False])
+def test_auto_backend(monkeypatch, installed):
+    """``auto``: PARDISO, when installed, for every 3D system and for 2D ones from
+    PARDISO_MIN_UNKNOWNS_2D unknowns; SuperLU otherwise."""
+    monkeypatch.setattr(linear, "pardiso_available", lambda: installed)
+    large = "pardiso" if installed else "superlu"
+    assert auto_backend(2, PARDISO_MIN_UNKNOWNS_2D - 1) == "superlu"
+    assert auto_backend(2, PARDISO_MIN_UNKNOWNS_2D) == large
+    assert auto_backend(3, 1000) == large
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
@@ -49,7 +61,6 @@ def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
     without falling back to SuperLU."""
     import scipy.sparse as sp
 
-    import fbmflow.solvers.linear as linear
     from fbmflow.solvers.krylov import fgmres
 
     calls = []
@@ -73,7 +84,6 @@ def test_pardiso_finds_mkl_once(monkeypatch):
 
     import scipy.sparse as sp
 
-    import fbmflow.solvers.linear as linear
 
     K = sp.csr_matrix(np.diag(np.arange(1.0, 6.0)))
     b = np.ones(5)
@@ -166,7 +176,6 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     and marks the analysis stale for the next factorisation; scaled by up to 21 and flipped in
     sign, it fails and analyses afresh at once. Both are accurate, without the SuperLU
     fallback."""
-    import fbmflow.solvers.linear as linear
 
     factorise = linear.PardisoAnalysis._factorise
 
