@@ -37,7 +37,8 @@ def run(scene, level, dt, t_end, mesh="graded"):
     result = scene.run(params, level, stop_on_failure=True)
     q = result.quantities
     row = dict(level=level, cells_per_diameter=2**level, n_dofs=result.n_dofs, dt=dt,
-               wall_s=time.perf_counter() - t0, backend=BACKEND_NAMES[auto_backend(2, result.n_dofs)], newton=result.newton_iterations,
+               wall_s=time.perf_counter() - t0, backend=BACKEND_NAMES[auto_backend(2, result.n_dofs)],
+               newton=result.newton_iterations,
                max_settling_velocity=q["max_settling_velocity"], max_reynolds_number=q["max_reynolds_number"],
                final_y=q["final_position"][1], t=q["t"], v=q["v"],
                vs_koblitz=q["max_settling_velocity"] / koblitz2017.V_MAX - 1,
@@ -93,7 +94,8 @@ def main():
     done = []
     if args.reuse and (RESULTS / f"{stem}.json").exists():
         old = json.loads((RESULTS / f"{stem}.json").read_text())
-        done = [r for r in old["mesh"] + old["time"] if r.get("failure") or abs(r["t"][-1] - args.t_end) < r["dt"] / 2]
+        done = [r for r in old["mesh"] + old["time"]  # runs to this t_end, or failed before it
+                if abs(r["t"][-1] - args.t_end) < r["dt"] / 2 or (r.get("failure") and r["t"][-1] < args.t_end)]
 
     def measured(level, dt):
         """The row of ``level`` and ``dt``: from this invocation, ``--reuse``'d, or run now."""
