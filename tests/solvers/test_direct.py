@@ -201,9 +201,31 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     assert solver.analysis.analyses == analyses + (analyses == 1)
 
 
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
+    """``rtol`` is the relative residual PARDISO's solves are refined to: the answer meets it,
+    and a loose one saves refinement steps (triangular solves) over the default 1e-12."""
+    system = fbm_system()
+    rng = np.random.default_rng(3)
+    f, g = rng.normal(size=system.n_u), rng.normal(size=system.n_p)
+    calls = []
+    original = linear.PardisoAnalysis.solve
+    monkeypatch.setattr(linear.PardisoAnalysis, "solve", lambda self, M, B: calls.append(1) or original(self, M, B))
+    lu_solves = {}
+    for rtol in (1e-12, 1e-4):
+        calls.clear()
+        u, p, _ = DirectSolver("pardiso", rtol=rtol).factor(system)(f, g)
+        lu_solves[rtol] = len(calls)
+        r = system.apply(np.concatenate([u, p])) - np.concatenate([f, system.balance(g)])
+        assert np.linalg.norm(r) <= rtol * np.linalg.norm(np.concatenate([f, system.balance(g)]))
+    assert lu_solves[1e-4] < lu_solves[1e-12]
+
+
 def test_backend_errors():
     with pytest.raises(ValueError, match="unknown direct backend"):
         DirectSolver(backend="mumps")
+    with pytest.raises(ValueError, match="rtol"):
+        DirectSolver(rtol=0.0)
     if not pardiso_available():
         with pytest.raises(ValueError, match="pip install"):
             DirectSolver(backend="pardiso")

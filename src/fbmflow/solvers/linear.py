@@ -295,7 +295,8 @@ def auto_backend(dim: int, n_unknowns: int) -> str:
     return "pardiso" if large and pardiso_available() else "superlu"
 
 
-def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "PardisoAnalysis | None" = None):
+def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "PardisoAnalysis | None" = None,
+              rtol: float = 1e-12):
     """Sparse LU of the saddle-point matrix with the constrained velocity DOFs eliminated; returns
     ``solve(f, g) -> (u, p)``.
 
@@ -308,6 +309,9 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     symbolic analysis between factorisations. Only the constrained DOFs in
     ``system.fixed_always`` are then eliminated; the others (a particle's) stay in the matrix as
     unit rows, so that the pattern does not change as they come and go.
+
+    ``rtol``: with PARDISO, the relative residual to which each solve is refined
+    (:func:`_pardiso`); SuperLU's solves are not refined.
 
     When the pressure is determined only up to a constant (``mean_weights`` given), the constant
     mode of one cell is pinned to zero instead of bordering the matrix with the dense row
@@ -343,7 +347,7 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
         if analysis is not None:
             npl = system.space.dim + 1 if system.space is not None else 1
             reserve = lambda: _pressure_cell_pattern(system.n_u, system.n_p, npl, free)  # noqa: E731
-        lu_solve = _pardiso(K_free[:, free], analysis=analysis, reserve=reserve)
+        lu_solve = _pardiso(K_free[:, free], rtol=rtol, analysis=analysis, reserve=reserve)
     else:
         lu_solve = _superlu(K_free[:, free])
 
@@ -554,9 +558,10 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     round-off floor ``ROUNDOFF | |K| |x| + |b| |`` (entrywise absolute values) where that is
     larger: when ``b`` is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding
     error of ``K x`` itself, and FGMRES then ran 60 useless iterations per solve. Only if the
-    residual ends above ``accept`` (same measure) is ``K`` factorised again, after a fresh
+    residual ends above ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh
     analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
     with SuperLU, with a warning."""
+    accept = max(accept, rtol)
     A = sp.csr_matrix(K)
     A.sort_indices()
     live = {"analysis": analysis if analysis is not None else PardisoAnalysis()}
@@ -648,14 +653,17 @@ class DirectSolver:
     """Sparse LU of the saddle-point matrix with the constrained velocity DOFs eliminated
     (:func:`factorize`; ``backend`` ``"auto"``, ``"superlu"`` or ``"pardiso"``); for small and
     medium problems (2D: up to a few 10^5 unknowns; 3D: a few 10^4 with SuperLU, a few 10^5 with
-    PARDISO)."""
+    PARDISO). ``rtol``: PARDISO's solves are refined to this relative residual."""
 
     name = "direct"
     needs_hierarchy = False
 
-    def __init__(self, backend: str = "auto"):
+    def __init__(self, backend: str = "auto", rtol: float = 1e-12):
         if backend not in DIRECT_BACKENDS:
             raise ValueError(f"unknown direct backend {backend!r}; choose one of {DIRECT_BACKENDS}")
+        if not 0.0 < rtol < 1.0:
+            raise ValueError(f"rtol (PARDISO's refinement target per solve) must lie in (0, 1), got {rtol}")
+        self.rtol = rtol
         if backend == "pardiso" and not pardiso_available():
             raise ValueError("the PARDISO backend needs pypardiso: pip install 'fbmflow[pardiso]'")
         self.backend = backend
@@ -666,7 +674,7 @@ class DirectSolver:
         factorisation reuses the last one's analysis where the pattern allows
         (:class:`PardisoAnalysis`) and replaces its factors: solve with the latest only."""
         t0 = time.perf_counter()
-        direct = factorize(system, self.backend, self.analysis)
+        direct = factorize(system, self.backend, self.analysis, self.rtol)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
 
         def solve(f, g):
