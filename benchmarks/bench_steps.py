@@ -1,6 +1,6 @@
 """Wall time of a few time steps continued from a run's checkpoint.
 
-Run:  python benchmarks/bench_steps.py RUN_DIR [--steps 3]
+Run:  python benchmarks/bench_steps.py RUN_DIR [--steps 3] [--direct-rtol R]
 
 For comparing two versions of the code on the same state, mid-run, where the first steps from
 rest are not representative: run the same command from each checkout (one at a time; a level-1
@@ -9,9 +9,11 @@ written by ``fbmflow run ... --checkpoint-every N`` or by ``bench_tencate.py`` (
 folders). Both files are copied to a temporary folder; ``RUN_DIR`` is left as it is. The JIT
 compilation is done first by a two-step run of the scene at level 0 and not timed.
 
-Prints the steps, wall time, Newton iterations, linear factorisations, the peak memory of the
-process and the scene's quantities (the time series' last values; full precision, to check
-that two versions compute the same).
+Prints the steps, wall time, Newton iterations, linear factorisations, PARDISO's triangular
+solves (refinement steps included), the peak memory of the process and the scene's quantities
+(the time series' last values; full precision, to check that two versions compute the same).
+``--direct-rtol`` sets the direct solver's refinement target (``DirectSolver.rtol``) for the
+timed steps.
 """
 from __future__ import annotations
 
@@ -28,12 +30,15 @@ from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.base import RunFiles
 from fbmflow.solvers import DirectSolver
+from fbmflow.solvers.linear import PardisoAnalysis
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="folder with checkpoint.h5 and run.h5")
     ap.add_argument("--steps", type=int, default=3, help="steps to run from the checkpoint (>= 1)")
+    ap.add_argument("--direct-rtol", type=float, default=None,
+                    help="the direct solver's refinement target per solve (default: the solver's own)")
     args = ap.parse_args()
     if args.steps < 1:
         ap.error(f"--steps must be at least 1, got {args.steps}")
@@ -49,19 +54,28 @@ def main() -> None:
     params = with_end((step + args.steps) * dt)
     scene.run(with_end(2 * dt), 0)  # JIT compilation, not timed
 
-    factorisations = []
-    factor = DirectSolver.factor
-    DirectSolver.factor = lambda self, system: factorisations.append(1) or factor(self, system)
+    factorisations, lu_solves = [], []
+    factor, lu_solve = DirectSolver.factor, PardisoAnalysis.solve
+
+    def counted_factor(self, system):
+        factorisations.append(1)
+        if args.direct_rtol is not None:
+            self.rtol = args.direct_rtol
+        return factor(self, system)
+
+    DirectSolver.factor = counted_factor
+    PardisoAnalysis.solve = lambda self, M, B: lu_solves.append(1) or lu_solve(self, M, B)
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("checkpoint.h5", "run.h5"):
             shutil.copy(args.run_dir / name, Path(tmp) / name)
         t0 = time.perf_counter()
         result = scene.run(params, meta["level"], None, RunFiles(tmp, 10**9, True, meta=meta))
         wall = time.perf_counter() - t0
-    DirectSolver.factor = factor
+    DirectSolver.factor, PardisoAnalysis.solve = factor, lu_solve
     print(f"{meta['scene']} level {meta['level']}: steps {step} -> {result.steps} (dt {dt:g} s), "
           f"{wall:.1f} s ({wall / args.steps:.1f} s per step), Newton iterations "
           f"{result.newton_iterations} (whole run), factorisations {len(factorisations)}, "
+          f"PARDISO triangular solves {len(lu_solves)}, direct rtol {args.direct_rtol or 'default'}, "
           f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.1f} GB")
     last = {k: (v[-1] if isinstance(v, list) else v) for k, v in result.quantities.items()
             if isinstance(v, (int, float)) or (isinstance(v, list) and v and isinstance(v[-1], (int, float)))}
