@@ -1,6 +1,6 @@
 """Wall time of a few time steps continued from a run's checkpoint.
 
-Run:  python benchmarks/bench_steps.py RUN_DIR [--steps 3] [--direct-rtol R]
+Run:  python benchmarks/bench_steps.py RUN_DIR [--steps 3] [--set KEY=VALUE ...]
 
 For comparing two versions of the code on the same state, mid-run, where the first steps from
 rest are not representative: run the same command from each checkout (one at a time; a level-1
@@ -12,8 +12,8 @@ compilation is done first by a two-step run of the scene at level 0 and not time
 Prints the steps, wall time, Newton iterations, linear factorisations, PARDISO's triangular
 solves (refinement steps included), the peak memory of the process and the scene's quantities
 (the time series' last values; full precision, to check that two versions compute the same).
-``--direct-rtol`` sets the direct solver's refinement target (``DirectSolver.rtol``) for the
-timed steps.
+``--set`` overrides a scene parameter for the timed steps, as ``fbmflow run --set`` does (e.g.
+``solver.linear_rtol=1e-12``, PARDISO's refinement target in Newton steps).
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict
+from fbmflow.params import from_dict, parse_value, set_dotted
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.base import RunFiles
 from fbmflow.solvers import DirectSolver
@@ -37,8 +37,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="folder with checkpoint.h5 and run.h5")
     ap.add_argument("--steps", type=int, default=3, help="steps to run from the checkpoint (>= 1)")
-    ap.add_argument("--direct-rtol", type=float, default=None,
-                    help="the direct solver's refinement target per solve (default: the solver's own)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scene parameter for the timed steps, e.g. solver.linear_rtol=1e-12")
     args = ap.parse_args()
     if args.steps < 1:
         ap.error(f"--steps must be at least 1, got {args.steps}")
@@ -48,6 +48,9 @@ def main() -> None:
 
     def with_end(t_end: float):
         data = json.loads(json.dumps(meta["params"]))
+        for item in args.overrides:
+            key, _, value = item.partition("=")
+            set_dotted(data, key.strip(), parse_value(value.strip()))
         data["time"]["t_end"] = t_end
         return from_dict(scene.Params, data)
 
@@ -57,13 +60,7 @@ def main() -> None:
     factorisations, lu_solves = [], []
     factor, lu_solve = DirectSolver.factor, PardisoAnalysis.solve
 
-    def counted_factor(self, system):
-        factorisations.append(1)
-        if args.direct_rtol is not None:
-            self.rtol = args.direct_rtol
-        return factor(self, system)
-
-    DirectSolver.factor = counted_factor
+    DirectSolver.factor = lambda self, system: factorisations.append(1) or factor(self, system)
     PardisoAnalysis.solve = lambda self, M, B: lu_solves.append(1) or lu_solve(self, M, B)
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("checkpoint.h5", "run.h5"):
@@ -75,7 +72,7 @@ def main() -> None:
     print(f"{meta['scene']} level {meta['level']}: steps {step} -> {result.steps} (dt {dt:g} s), "
           f"{wall:.1f} s ({wall / args.steps:.1f} s per step), Newton iterations "
           f"{result.newton_iterations} (whole run), factorisations {len(factorisations)}, "
-          f"PARDISO triangular solves {len(lu_solves)}, direct rtol {args.direct_rtol or 'default'}, "
+          f"PARDISO triangular solves {len(lu_solves)}, overrides {args.overrides}, "
           f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.1f} GB")
     last = {k: (v[-1] if isinstance(v, list) else v) for k, v in result.quantities.items()
             if isinstance(v, (int, float)) or (isinstance(v, list) and v and isinstance(v[-1], (int, float)))}

@@ -144,7 +144,8 @@ class SolverParams:
     linear: str = param("auto", "linear solver for the Newton systems ('auto': multigrid above "
                         "20 000 unknowns in 2D / 15 000 in 3D (300 000 with PARDISO), else direct)",
                         choices=("auto", "direct", "multigrid"))
-    linear_rtol: float = param(1e-8, "multigrid: relative residual reduction per linear solve",
+    linear_rtol: float = param(1e-8, "relative residual per linear solve (multigrid: its stopping "
+                               "rule; direct with PARDISO: its refinement target in Newton steps)",
                                positive=True, maximum=0.1)
     mg_cycle: str = param("V", "multigrid cycle", choices=("V", "W", "F"))
     mg_smoother: str = param("vanka-full", "multigrid smoother", choices=("vanka-full", "vanka-diagonal"))
@@ -167,7 +168,7 @@ class SolverParams:
     def newton_settings(self) -> NewtonSettings:
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,
                               max_iterations=self.newton_max_iterations,
-                              reuse_jacobian=self.newton_reuse_jacobian)
+                              reuse_jacobian=self.newton_reuse_jacobian, linear_rtol=self.linear_rtol)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from fbmflow.coupling import node_owner, rigid_body_constraints
-from fbmflow.flow import DoNothing, NavierStokesProblem, NoSlip
+from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
 from fbmflow.solvers import DirectSolver
@@ -219,6 +219,38 @@ def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
         r = system.apply(np.concatenate([u, p])) - np.concatenate([f, system.balance(g)])
         assert np.linalg.norm(r) <= rtol * np.linalg.norm(np.concatenate([f, system.balance(g)]))
     assert lu_solves[1e-4] < lu_solves[1e-12]
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+def test_newton_asks_its_linear_rtol_of_pardiso(monkeypatch):
+    """NewtonSettings.linear_rtol reaches PARDISO's refinement: a steady Navier-Stokes solve past
+    a sphere converges to the same solution (to Newton's tolerance) with fewer triangular solves
+    at 1e-6 than at the solver's own 1e-12."""
+    from fbmflow.solvers import NewtonSettings
+
+    mesh = StructuredMesh.box((6, 4, 4))
+    centres = np.array([[0.45, 0.5, 0.5]])
+
+    def obstacle(V, t):
+        return rigid_body_constraints(V, node_owner(V, centres, [Ball(0.3, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+
+    def inflow(x, t):
+        return np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]), 0 * x[:, 0], 0 * x[:, 0]], axis=1)
+
+    calls = []
+    original = linear.PardisoAnalysis.solve
+    monkeypatch.setattr(linear.PardisoAnalysis, "solve", lambda self, M, B: calls.append(1) or original(self, M, B))
+    solutions, lu_solves = {}, {}
+    for rtol in (None, 1e-6):
+        bcs = {"xmin": Dirichlet(inflow), "xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t not in ("xmin", "xmax")}}
+        flow = NavierStokesProblem(mesh, 0.02, bcs, linear_solver=DirectSolver("pardiso"), extra_constraints=obstacle,
+                                   newton=NewtonSettings(linear_rtol=rtol))
+        calls.clear()
+        solutions[rtol], report = flow.solve_steady()
+        lu_solves[rtol] = len(calls)
+        assert report.converged
+    assert np.linalg.norm(solutions[1e-6] - solutions[None]) <= 1e-8 * np.linalg.norm(solutions[None])
+    assert lu_solves[1e-6] < lu_solves[None]
 
 
 def test_backend_errors():

@@ -272,7 +272,7 @@ class NavierStokesProblem:
 
         def linear_step(x, F, fresh=True):
             solve = self._linearise(x, m, a, con, t, fresh)
-            du, dp, report = solve(-F[:self.space.n_u], -F[self.space.n_u:])
+            du, dp, report = self._linear_solve(solve, -F[:self.space.n_u], -F[self.space.n_u:])
             return np.concatenate([du, dp]), report
 
         orphans = self.orphans(con)
@@ -290,6 +290,14 @@ class NavierStokesProblem:
         else:
             self._linearisation = (m, a, con, last[3])
         return self._linearisation[3]
+
+    def _linear_solve(self, solve, f, g):
+        """``solve(f, g)`` to ``self.newton.linear_rtol`` where the solver takes a target per
+        solve (the direct solver's PARDISO refinement), else to the solver's own."""
+        rtol = self.newton.linear_rtol
+        if rtol is not None and getattr(solve, "takes_rtol", False):
+            return solve(f, g, rtol)
+        return solve(f, g)
 
     def forget_linearisation(self) -> None:
         """Drop the stored factorisation: the next solve starts with a fresh Jacobian, as after
@@ -324,9 +332,9 @@ class NavierStokesProblem:
         Wd = W.toarray()
         Jp = self._continuity(Wd, con, self.orphans(con))
         if getattr(solve, "multiple_rhs", False):
-            du, dp, _ = solve(-Ju, -Jp)
+            du, dp, _ = self._linear_solve(solve, -Ju, -Jp)
         else:
-            cols = [solve(-Ju[:, k], -Jp[:, k])[:2] for k in range(W.shape[1])]
+            cols = [self._linear_solve(solve, -Ju[:, k], -Jp[:, k])[:2] for k in range(W.shape[1])]
             du, dp = np.column_stack([c[0] for c in cols]), np.column_stack([c[1] for c in cols])
         return np.vstack([Wd + du, dp]).T
 

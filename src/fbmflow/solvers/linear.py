@@ -311,7 +311,8 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     unit rows, so that the pattern does not change as they come and go.
 
     ``rtol``: with PARDISO, the relative residual to which each solve is refined
-    (:func:`_pardiso`); SuperLU's solves are not refined.
+    (:func:`_pardiso`); ``solve(f, g, rtol)`` asks for another one. SuperLU's solves are not
+    refined.
 
     When the pressure is determined only up to a constant (``mean_weights`` given), the constant
     mode of one cell is pinned to zero instead of bordering the matrix with the dense row
@@ -349,13 +350,14 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
             reserve = lambda: _pressure_cell_pattern(system.n_u, system.n_p, npl, free)  # noqa: E731
         lu_solve = _pardiso(K_free[:, free], rtol=rtol, analysis=analysis, reserve=reserve)
     else:
-        lu_solve = _superlu(K_free[:, free])
+        superlu = _superlu(K_free[:, free])
+        lu_solve = lambda b, tol=None: superlu(b)  # noqa: E731
 
-    def solve(f, g):  # (n_u,), (n_p,) or, for k right-hand sides at once, (n_u, k), (n_p, k)
+    def solve(f, g, rtol=None):  # (n_u,), (n_p,) or, for k right-hand sides at once, (n_u, k), (n_p, k)
         x = np.concatenate([f, system.balance(g)])
         if pinned is not None:
             x[pinned] = 0.0
-        x[free] = lu_solve(x[free] - coupling @ x[~free])
+        x[free] = lu_solve(x[free] - coupling @ x[~free], rtol)
         if not np.all(np.isfinite(x)):
             raise np.linalg.LinAlgError("direct solve produced non-finite values (singular system?)")
         system.remove_pressure_mean(x)
@@ -561,7 +563,6 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     residual ends above ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh
     analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
     with SuperLU, with a warning."""
-    accept = max(accept, rtol)
     A = sp.csr_matrix(K)
     A.sort_indices()
     live = {"analysis": analysis if analysis is not None else PardisoAnalysis()}
@@ -582,37 +583,39 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
 
     abs_A = abs(A)
 
-    def error(B, X):  # per column (k,): |B - A X| over the larger of rtol |B| and its round-off floor; and B - A X
+    def error(B, X, tol):  # per column (k,): |B - A X| over the larger of |B| and its round-off floor / tol; and B - A X
         R = B - A @ X
-        floor = ROUNDOFF * np.linalg.norm(abs_A @ abs(X) + abs(B), axis=0) / rtol
+        floor = ROUNDOFF * np.linalg.norm(abs_A @ abs(X) + abs(B), axis=0) / tol
         return np.linalg.norm(R, axis=0) / np.maximum(np.maximum(np.linalg.norm(B, axis=0), floor), 1e-300), R
 
-    def refined(B):  # X, its error per column, refinement steps, whether FGMRES was needed
+    def refined(B, tol):  # X, its error per column, refinement steps, whether FGMRES was needed
         X = lu(B)
-        err, R = error(B, X)
+        err, R = error(B, X, tol)
         previous, steps = np.inf, 0
         for steps in range(max_refinements + 1):
             size = np.max(err)
-            if size <= rtol or size > 0.5 * previous or steps == max_refinements:
+            if size <= tol or size > 0.5 * previous or steps == max_refinements:
                 break
             previous = size
             X += lu(R)
-            err, R = error(B, X)
-        stalled = np.flatnonzero(err > rtol)
+            err, R = error(B, X, tol)
+        stalled = np.flatnonzero(err > tol)
         for c in stalled:  # refinement stalled: FGMRES
             r0 = np.linalg.norm(R[:, c])
-            target = rtol * r0 / err[c]
+            target = tol * r0 / err[c]
             X[:, c] = fgmres(lambda v: A @ v, lambda r: lu(r[:, None])[:, 0], B[:, c], X[:, c].copy(),
                              target / r0, 60, 30)[0]
-            err[c] = error(B[:, c:c + 1], X[:, c:c + 1])[0][0]
+            err[c] = error(B[:, c:c + 1], X[:, c:c + 1], tol)[0][0]
         return X, np.max(err), steps, stalled.size > 0
 
-    def solve(b):
+    def solve(b, tol=None):  # tol: this solve's refinement target instead of rtol
         b = np.asarray(b, dtype=float)
         if fallback:
             return fallback[0](b)
+        tol = rtol if tol is None else tol
+        accepted = max(accept, tol)
         B = b.reshape(b.shape[0], -1)
-        X, size, steps, stalled = refined(B)
+        X, size, steps, stalled = refined(B, tol)
         log.debug("PARDISO solve: %d refinement steps%s (%s analysis)", steps, ", FGMRES" if stalled else "",
                   "reused" if live["reused"] else "fresh")
         if live["reused"] and live["first"] and (steps > REUSE_REFINEMENTS or stalled):
@@ -620,13 +623,13 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
                       "analyses again", steps, " and FGMRES" if stalled else "")
             live["analysis"].stale = True
         live["first"] = False
-        if size > accept and live["reused"]:
+        if size > accepted and live["reused"]:
             log.info("PARDISO solve with a reused analysis inaccurate (relative residual %.1e); "
                      "analysing again", size)
             live["analysis"].stale = True
             factor()
-            X, size, _, _ = refined(B)
-        if size > accept:
+            X, size, _, _ = refined(B, tol)
+        if size > accepted:
             log.warning("PARDISO solve inaccurate (relative residual %.1e); factorising with SuperLU instead", size)
             fallback.append(_superlu(A))
             return fallback[0](b)
@@ -670,20 +673,22 @@ class DirectSolver:
         self.analysis = PardisoAnalysis()  # kept between PARDISO factorisations; unused by SuperLU
 
     def factor(self, system: SaddlePointSystem):
-        """Factorise ``system``; returns ``solve(f, g) -> (u, p, LinearReport)``. With PARDISO the
+        """Factorise ``system``; returns ``solve(f, g, rtol=None) -> (u, p, LinearReport)``
+        (``rtol``: this solve's refinement target instead of ``self.rtol``). With PARDISO the
         factorisation reuses the last one's analysis where the pattern allows
         (:class:`PardisoAnalysis`) and replaces its factors: solve with the latest only."""
         t0 = time.perf_counter()
         direct = factorize(system, self.backend, self.analysis, self.rtol)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
 
-        def solve(f, g):
+        def solve(f, g, rtol=None):
             t1 = time.perf_counter()
-            u, p = direct(f, g)
+            u, p = direct(f, g, rtol)
             setup = pending.pop() if pending else 0.0
             return u, p, LinearReport(self.name, setup + time.perf_counter() - t1, iterations=1,
                                       setup_time_s=setup)
         solve.multiple_rhs = True  # f (n_u, k) and g (n_p, k) solve k systems in one call
+        solve.takes_rtol = True  # solve(f, g, rtol): a target per solve (NewtonSettings.linear_rtol)
         return solve
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):

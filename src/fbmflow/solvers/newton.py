@@ -23,6 +23,11 @@ class NewtonSettings:
     iteration; a fresh one is built otherwise, and always after a failed line search. The solution
     and the stopping rule are the same; only the work changes. Pays off in time stepping, where
     the mass term dominates and the Jacobian changes little from step to step.
+
+    ``linear_rtol``: the relative residual asked of each linear step from a linear solver that
+    takes one per solve (the direct solver's PARDISO refinement; None: the solver's own target).
+    A Newton (or chord) step needs no more than a small fraction of the residual it reduces; the
+    stopping rule above, on the nonlinear residual, decides the accuracy of the solution.
     """
 
     rtol: float = 1e-10
@@ -32,6 +37,7 @@ class NewtonSettings:
     max_backtracks: int = 8
     reuse_jacobian: bool = False
     reuse_contraction: float = 10.0
+    linear_rtol: float | None = None
 
 
 @dataclass
