@@ -11,14 +11,19 @@ from fbmflow.solvers import linear
 from fbmflow.solvers.linear import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
 
 
-def fbm_system(x_centre=0.45, radius=0.3):
-    """A 3D channel with a sphere held still: orphaned pressure modes inside it, do-nothing outflow."""
-    mesh = StructuredMesh.box((6, 4, 4))
-    centres = np.array([[x_centre, 0.5, 0.5]])
+def sphere_at_rest(centre, radius):
+    """``extra_constraints`` holding a sphere of ``radius`` still at ``centre`` (3,)."""
+    centres = np.array([centre])
 
     def obstacle(V, t):
         return rigid_body_constraints(V, node_owner(V, centres, [Ball(radius, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+    return obstacle
 
+
+def fbm_system(x_centre=0.45, radius=0.3):
+    """A 3D channel with a sphere held still: orphaned pressure modes inside it, do-nothing outflow."""
+    mesh = StructuredMesh.box((6, 4, 4))
+    obstacle = sphere_at_rest([x_centre, 0.5, 0.5], radius)
     bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
     flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
     con = flow.constraints(0.0)
@@ -83,7 +88,6 @@ def test_pardiso_finds_mkl_once(monkeypatch):
     import glob
 
     import scipy.sparse as sp
-
 
     K = sp.csr_matrix(np.diag(np.arange(1.0, 6.0)))
     b = np.ones(5)
@@ -229,10 +233,7 @@ def test_newton_asks_its_linear_rtol_of_pardiso(monkeypatch):
     from fbmflow.solvers import NewtonSettings
 
     mesh = StructuredMesh.box((6, 4, 4))
-    centres = np.array([[0.45, 0.5, 0.5]])
-
-    def obstacle(V, t):
-        return rigid_body_constraints(V, node_owner(V, centres, [Ball(0.3, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+    obstacle = sphere_at_rest([0.45, 0.5, 0.5], 0.3)
 
     def inflow(x, t):
         return np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]), 0 * x[:, 0], 0 * x[:, 0]], axis=1)

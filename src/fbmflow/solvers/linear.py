@@ -556,12 +556,12 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     1e-12 the first solve is accurate to 1e-10..1e-8 and one refinement step reaches 1e-13.
 
     Each solve is refined against the true ``K`` (iterative refinement, then FGMRES
-    preconditioned by the factors where that stalls) to ``|b - K x| <= rtol |b|``, or to the
-    round-off floor ``ROUNDOFF | |K| |x| + |b| |`` (entrywise absolute values) where that is
-    larger: when ``b`` is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding
-    error of ``K x`` itself, and FGMRES then ran 60 useless iterations per solve. Only if the
-    residual ends above ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh
-    analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
+    preconditioned by the factors where that stalls) to ``|b - K x| <= rtol |b|`` (``rtol``: the
+    ``tol`` of ``solve(b, tol)``, else this function's), or to the round-off floor
+    ``ROUNDOFF | |K| |x| + |b| |`` (entrywise absolute values) where that is larger: when ``b``
+    is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding error of ``K x``
+    itself, and FGMRES then ran 60 useless iterations per solve. Only if the residual ends above
+    ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
     with SuperLU, with a warning."""
     A = sp.csr_matrix(K)
     A.sort_indices()
