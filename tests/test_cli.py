@@ -10,7 +10,7 @@ from fbmflow.cli import main
 from fbmflow.scenes import SCENES
 
 REQUIRED = {"scene", "fbmflow_version", "params", "level", "n_cells", "n_dofs", "steps",
-            "wall_time_s", "newton_iterations", "quantities"}
+            "wall_time_s", "newton_iterations", "quantities", "linear_solver"}
 
 
 def test_scenes_lists_one_per_line(capsys):
@@ -32,6 +32,7 @@ def test_run_as_a_separate_process(tmp_path):
     assert summary["fbmflow_version"] == __version__
     assert summary["params"]["fluid"]["viscosity"] == 0.02
     assert summary["level"] == 1 and summary["n_cells"] == 8 * 2
+    assert summary["linear_solver"] == "direct (SuperLU)"  # 2D and small: SuperLU, PARDISO or not
     q = summary["quantities"]
     assert q["max_velocity_error"] < 1e-10
     assert q["pressure_drop"] == pytest.approx(32 * 0.02, rel=1e-10)

@@ -116,9 +116,10 @@ def main(argv: list[str] | None = None) -> int:
             summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
                                 fields_format=args.fields_format)
-        log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations; summary in %s",
+        log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations (%s); summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
-                 summary["newton_iterations"], out / "summary.json")
+                 summary["newton_iterations"], summary.get("linear_solver") or "linear solver not recorded",
+                 out / "summary.json")
         return 0
     except (ParamError, CheckpointError) as err:
         sys.stderr.write(f"fbmflow: error: {err}\n")

@@ -44,6 +44,19 @@ def test_auto_backend(monkeypatch, installed):
     assert auto_backend(3, 1000) == large
 
 
+@pytest.mark.parametrize("installed", [True, False])
+def test_linear_solver_description(monkeypatch, installed):
+    """Reports name the backend that ``auto`` picks for the problem."""
+    monkeypatch.setattr(linear, "pardiso_available", lambda: installed)
+    mesh = StructuredMesh.box((2, 2, 2))
+    bcs = {t: NoSlip() for t in mesh.tags}
+    direct = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct")
+    assert direct.linear_solver_description == ("direct (PARDISO)" if installed else "direct (SuperLU)")
+    forced = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver("superlu"))
+    assert forced.linear_solver_description == "direct (SuperLU)"
+    assert NavierStokesProblem(mesh, 1.0, bcs, linear_solver="multigrid").linear_solver_description == "multigrid"
+
+
 @pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
 def test_pardiso_matches_superlu():
     system = fbm_system()

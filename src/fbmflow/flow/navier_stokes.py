@@ -24,7 +24,7 @@ from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
-from ..solvers.linear import balance_volume, orphan_pressure_modes, pardiso_available
+from ..solvers.linear import BACKEND_NAMES, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -116,6 +116,17 @@ class NavierStokesProblem:
     @property
     def n_dofs(self) -> int:
         return self.space.n_dofs
+
+    @property
+    def linear_solver_description(self) -> str:
+        """The linear solver in words, for reports: ``"multigrid"``, ``"direct (SuperLU)"`` or
+        ``"direct (PARDISO)"`` (the backend ``"auto"`` picks for this problem)."""
+        backend = getattr(self.linear_solver, "backend", None)
+        if backend is None:
+            return self.linear_solver.name
+        if backend == "auto":
+            backend = auto_backend(self.mesh.dim, self.n_dofs)
+        return f"{self.linear_solver.name} ({BACKEND_NAMES[backend]})"
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Velocity (dim, n_v) and pressure (n_p,) views of ``x``."""

@@ -24,6 +24,8 @@ class SceneResult:
     """What a scene run produced.
 
     quantities : flat dict of named results (numbers or lists of numbers)
+    linear_solver : the flow's linear solver in words
+        (:attr:`~fbmflow.flow.NavierStokesProblem.linear_solver_description`)
     """
 
     quantities: dict[str, Any]
@@ -32,6 +34,7 @@ class SceneResult:
     steps: int = 0
     newton_iterations: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+    linear_solver: str = ""
 
 
 class Scene:
@@ -166,7 +169,8 @@ class SimulationScene(Scene):
                     checkpoint(k)
         return SceneResult(self.quantities(params, series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=newton_its,
-                           extra={} if failure is None else {"failure": failure})
+                           extra={} if failure is None else {"failure": failure},
+                           linear_solver=sim.flow.linear_solver_description)
 
     @staticmethod
     def _row(sim, rep) -> dict:

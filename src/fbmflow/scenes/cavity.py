@@ -83,7 +83,8 @@ class Cavity2D(Scene):
         if re_int in ghia1982.U and abs(params.fluid.re - re_int) < 1e-12:
             q["ghia_max_deviation_u"] = float(np.max(np.abs(np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int])))
             q["ghia_max_deviation_v"] = float(np.max(np.abs(np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int])))
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=0, newton_iterations=newton_its)
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=0, newton_iterations=newton_its,
+                           linear_solver=problem.linear_solver_description)
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib

@@ -85,7 +85,8 @@ class Channel2D(_Channel):
         q = {"max_velocity_error": float(np.max(np.abs(u - exact))),
              "pressure_drop": float(drop[0] - drop[1]),
              "pressure_drop_exact": 32.0 * params.fluid.viscosity * params.inflow.max_velocity}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations)
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
+                           linear_solver=problem.linear_solver_description)
 
 
 class Channel3D(_Channel):
@@ -114,4 +115,5 @@ class Channel3D(_Channel):
         q = {"flow_rate_in": flux(0.0), "flow_rate_out": flux(4.0),
              "flow_rate_exact": 4.0 * params.inflow.max_velocity / 9.0,
              "centerline_velocity_out": float(centre)}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations)
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
+                           linear_solver=problem.linear_solver_description)

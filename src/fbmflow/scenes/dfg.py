@@ -132,7 +132,8 @@ class _DFGScene(Scene):
              "cells_per_diameter": self.cells_per_diameter(mesh)}
         for key, ref in self.reference.items():
             q[f"{key}_error"] = abs(q[key] - ref) / abs(ref)
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations)
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
+                           linear_solver=problem.linear_solver_description)
 
     def cells_per_diameter(self, mesh: StructuredMesh) -> float:
         """Cells across the diameter along x at the cylinder centre."""

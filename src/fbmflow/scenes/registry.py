@@ -110,7 +110,7 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     wall = time.perf_counter() - t0
     summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
                "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
-               "steps": result.steps, "wall_time_s": wall,
+               "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
                "newton_iterations": result.newton_iterations, "quantities": result.quantities}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if plot and scene.plot(summary, out / f"{scene.name}.png"):

@@ -115,7 +115,8 @@ class TaylorGreen2D(Scene):
         exact_energy = 0.25 * np.exp(-4.0 * TWO_PI**2 * nu * np.array(times))
         q = {"velocity_l2_error": err["u_l2"], "kinetic_energy": energies, "t": times,
              "kinetic_energy_exact": exact_energy.tolist()}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=n_steps, newton_iterations=newton_its)
+        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=n_steps, newton_iterations=newton_its,
+                           linear_solver=problem.linear_solver_description)
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib
