@@ -72,15 +72,19 @@ def plot(rows, name, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
     err = [100 * r["drag_coefficient_error"] for r in rows]
-    a.loglog([r["cells_per_diameter"] for r in rows], err, "o-")
-    a.set(xlabel="cells per diameter", ylabel="C_D error (%)", title=name)
+    cells = [r["cells_per_diameter"] for r in rows]
+    a.loglog(cells, err, "o-")
+    a.set_xticks(cells, [f"{c:g}" for c in cells])
+    a.xaxis.set_minor_formatter(NullFormatter())
+    a.set(xlabel="cells per diameter", ylabel="|C_D error| (%)", title=name)
     b.loglog([r["wall_s"] for r in rows], err, "s-")
     for r, e in zip(rows, err):
         b.annotate(f"level {r['level']}", (r["wall_s"], e), textcoords="offset points", xytext=(4, 4), fontsize=8)
-    b.set(xlabel="wall time (s)", ylabel="C_D error (%)", title="accuracy against cost")
+    b.set(xlabel="wall time (s)", ylabel="|C_D error| (%)", title="accuracy against cost")
     for ax in (a, b):
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
