@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
-from fbmflow.solvers.linear import BACKEND_NAMES, PARDISO_MIN_UNKNOWNS_2D, auto_backend
+from fbmflow.solvers.linear import PARDISO_MIN_UNKNOWNS_2D
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -39,7 +39,7 @@ def main():
         wall = time.perf_counter() - t0
         q = result.quantities
         rows.append(dict(level=level, cells_per_diameter=q["cells_per_diameter"], n_dofs=result.n_dofs,
-                         wall_s=wall, newton=result.newton_iterations,
+                         wall_s=wall, newton=result.newton_iterations, linear_solver=result.linear_solver,
                          **{k: q[k] for k in ("drag_coefficient", "lift_coefficient", "pressure_difference")},
                          **{k + "_error": q[k + "_error"] for k in ref}))
         r = rows[-1]
@@ -49,10 +49,10 @@ def main():
               f"({100 * r.get('pressure_difference_error', float('nan')):.2f} %)", flush=True)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"{args.scene}.json").write_text(json.dumps(rows, indent=1))
-    backend = " / ".join(sorted({BACKEND_NAMES[auto_backend(scene.dim, r["n_dofs"])] for r in rows}))
+    solvers = " / ".join(sorted({r["linear_solver"] for r in rows}))
     refs = ", ".join(f"{k} = {v}" for k, v in ref.items())
     lines = [f"# {scene.description} (benchmarks/bench_dfg.py)", "",
-             f"Linear solver: {args.solver} (direct backend: {backend}; PARDISO, when installed, in 3D and from {PARDISO_MIN_UNKNOWNS_2D} unknowns in 2D). Reference {refs}. Wall time includes assembly, all Newton "
+             f"Linear solver: {solvers} (PARDISO, when installed, in 3D and from {PARDISO_MIN_UNKNOWNS_2D} unknowns in 2D). Reference {refs}. Wall time includes assembly, all Newton "
              "steps and the force evaluation, not the JIT compilation.", "",
              "| level | cells/D | unknowns | wall s | Newton | C_D | err C_D | C_L | dp | err dp |",
              "|---|---|---|---|---|---|---|---|---|---|"]

@@ -12,7 +12,7 @@ overset-grid peak and the largest deviation of the velocity curve from theirs (r
 peak, after the first 0.05 s where the digitised points scatter). A run that fails (the disk
 reaching the bottom before ``t_end``) keeps its curve up to its last good step. With ``--reuse``
 a run already in the results file (same mesh kind, level, time step and end time) is taken from
-there with the wall time and direct backend it was measured with, instead of being run again.
+there with the wall time and linear solver it was measured with, instead of being run again.
 """
 from __future__ import annotations
 
@@ -26,7 +26,6 @@ import numpy as np
 from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.data import koblitz2017
-from fbmflow.solvers.linear import BACKEND_NAMES, auto_backend
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -37,7 +36,7 @@ def run(scene, level, dt, t_end, mesh="graded"):
     result = scene.run(params, level, stop_on_failure=True)
     q = result.quantities
     row = dict(level=level, cells_per_diameter=2**level, n_dofs=result.n_dofs, dt=dt,
-               wall_s=time.perf_counter() - t0, backend=BACKEND_NAMES[auto_backend(2, result.n_dofs)],
+               wall_s=time.perf_counter() - t0, linear_solver=result.linear_solver,
                newton=result.newton_iterations,
                max_settling_velocity=q["max_settling_velocity"], max_reynolds_number=q["max_reynolds_number"],
                final_y=q["final_position"][1], t=q["t"], v=q["v"],
@@ -60,15 +59,15 @@ def curve_deviation(t, v) -> float:
 
 
 def table(rows, key):
-    lines = [f"| level | cells/D | unknowns | dt s | direct backend | wall s | v_max cm/s | Re_max | y(t_end) cm "
+    lines = [f"| level | cells/D | unknowns | dt s | linear solver | wall s | v_max cm/s | Re_max | y(t_end) cm "
              f"| change of v_max vs finer {key} | v_max vs Koblitz | curve vs Koblitz |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for a, b in zip(rows, rows[1:] + [None]):
         change = "" if b is None else f"{100 * abs(a['max_settling_velocity'] / b['max_settling_velocity'] - 1):.2f} %"
         end = f"{a['final_y']:.4f}" + (" (failed)" if a.get("failure") else "")
-        # rows measured before the backend was recorded ran on SuperLU (then the only 2D backend)
+        # rows measured before the solver was recorded ran on SuperLU (then the only 2D direct backend)
         lines.append(f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | "
-                     f"{a.get('backend', 'SuperLU')} | {a['wall_s']:.1f} | "
+                     f"{a.get('linear_solver', 'direct (SuperLU)')} | {a['wall_s']:.1f} | "
                      f"{a['max_settling_velocity']:.4f} | {a['max_reynolds_number']:.3f} | {end} | {change} | "
                      f"{100 * a['vs_koblitz']:+.2f} % | {100 * a['curve_deviation']:.2f} % |")
     return lines
