@@ -180,6 +180,9 @@ class CouplingParams:
     tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
     max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
+    integrator: str = param("semi-implicit-euler", "particle integrator: semi-implicit-euler (first order) "
+                            "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
+                            "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))
 
 
 @dataclasses.dataclass(frozen=True)

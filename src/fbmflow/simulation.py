@@ -56,6 +56,8 @@ class Simulation:
     particles : Particles
     gravity : (dim,) float64 [m/s^2]
     scheme : time scheme name; integrator : particle integrator name
+        (:data:`~fbmflow.particles.dynamics.INTEGRATORS`; ``trapezoidal`` with ``crank-nicolson``
+        is second order in time)
     linear_solver, newton : passed to the flow problem
     coupling : ``explicit`` or ``implicit`` (see the module docstring)
     symmetry : normal axes of mirror planes that cut the domain through every particle centre
@@ -107,6 +109,9 @@ class Simulation:
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0
+        # hydrodynamic force (n, dim) and torque (n, 3) at the end of the last step (zero at rest)
+        self._last_force = np.zeros(particles.position.shape)
+        self._last_torque = np.zeros((particles.n, 3))
 
     def owner(self) -> np.ndarray:
         """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
@@ -146,10 +151,13 @@ class Simulation:
         """New particle state under the hydrodynamic and the repulsive forces (the latter at the
         positions of the start of the step) and, with hard contact (unless ``contact`` is False),
         the contact impulses."""
+        previous = self._last_force, self._last_torque  # the trapezoidal rule's, at the start of the step
         if self.repulsion is not None:
-            force = force + self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
+            repulsion = self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
+            force, previous = force + repulsion, (previous[0] + repulsion, previous[1])
         if self.contact is None or not contact:
-            return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator)
+            return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator,
+                             previous)
         lin, ang = accelerations(self.particles, force, torque, self.gravity, self.flow.rho)
         new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
         return new
@@ -162,7 +170,8 @@ class Simulation:
         out = {"x": self.x.copy(), "t": self.t, "step_count": self.step_count,
                "position": p.position.copy(), "velocity": p.velocity.copy(),
                "orientation": p.orientation.copy(), "angular_velocity": p.angular_velocity.copy(),
-               "density": p.density.copy(), "fixed": p.fixed.copy()}
+               "density": p.density.copy(), "fixed": p.fixed.copy(),
+               "last_force": self._last_force.copy(), "last_torque": self._last_torque.copy()}
         if self.contact is not None:
             out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
         return out
@@ -181,6 +190,11 @@ class Simulation:
         for name in ("position", "velocity", "orientation", "angular_velocity", "density"):
             setattr(p, name, np.array(state[name], dtype=float))
         p.fixed = np.array(state["fixed"], dtype=bool)
+        if "last_force" in state:
+            self._last_force = np.array(state["last_force"], dtype=float)
+            self._last_torque = np.array(state["last_torque"], dtype=float)
+        elif self.integrator == "trapezoidal":
+            raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
         if self.contact is not None:
             self.contact.set_state({k[len("contact_"):]: v for k, v in state.items() if k.startswith("contact_")})
         self._owner_of = None
@@ -203,6 +217,7 @@ class Simulation:
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(x))):
             raise ConvergenceError(f"{where}: non-finite state")
         self.x, self.particles = x, new
+        self._last_force, self._last_torque = force, torque
         self.t += dt
         self.step_count += 1
         return StepReport(self.step_count, self.t, sum(r.iterations for r in reports),
@@ -237,7 +252,7 @@ class Simulation:
         """
         p, space = self.particles, self.flow.space
         new = self._integrate(force, torque, dt, contact=False)
-        gain = velocity_gain(p, dt)
+        gain = velocity_gain(p, dt, self.integrator)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
         free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)

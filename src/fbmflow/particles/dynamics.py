@@ -10,6 +10,11 @@ Integrators (a registry):
   velocities; the default. With an explicit (staggered) fluid coupling both are stable only while
   the added mass is smaller than the particle mass, roughly ``rho_s / rho_f`` above about 1 for a
   disk or 0.5 for a sphere; density ratios closer to 1 need sub-iterated (implicit) coupling.
+* ``trapezoidal``: velocities with the mean of the old and the new accelerations, positions with
+  the mean of the old and the new velocities; second order when the forces are (with the
+  Crank–Nicolson flow scheme and the implicit coupling, whose new forces belong to the new
+  velocities). A-stable but not damping: a force relaxing the velocity in much less than a
+  step (``dt`` above about twice the particle's response time) makes it oscillate.
 """
 from __future__ import annotations
 
@@ -73,32 +78,47 @@ def symmetric_motion(dim: int, axes) -> np.ndarray:
     return free
 
 
-def velocity_gain(p: Particles, dt: float) -> np.ndarray:
+def velocity_gain(p: Particles, dt: float, scheme: str = "semi-implicit-euler") -> np.ndarray:
     """``d v_new / d f``: how the new generalised velocities of :func:`integrate` respond to the
-    generalised force ``f = [F, T_z]`` (2D) or ``[F, T]`` (3D); (n, r, r), zero for fixed
-    particles: ``dt / M_i`` for the translation, ``dt I_i^{-1}`` (world axes) for the rotation."""
+    (new) generalised force ``f = [F, T_z]`` (2D) or ``[F, T]`` (3D); (n, r, r), zero for fixed
+    particles: ``dt / M_i`` for the translation, ``dt I_i^{-1}`` (world axes) for the rotation,
+    half of that for the trapezoidal rule."""
     r = 3 if p.dim == 2 else 6
+    k = 0.5 * dt if scheme == "trapezoidal" else dt
     gain = np.zeros((p.n, r, r))
     idx = np.arange(p.dim)
-    gain[:, idx, idx] = dt / p.mass[:, None]
-    gain[:, p.dim:, p.dim:] = dt * np.linalg.inv(p.inertia_world())
+    gain[:, idx, idx] = k / p.mass[:, None]
+    gain[:, p.dim:, p.dim:] = k * np.linalg.inv(p.inertia_world())
     gain[p.fixed] = 0.0
     return gain
 
 
 def integrate(p: Particles, force: np.ndarray, torque: np.ndarray, gravity, fluid_density: float,
-              dt: float, scheme: str = "semi-implicit-euler") -> Particles:
+              dt: float, scheme: str = "semi-implicit-euler", previous: tuple | None = None) -> Particles:
     """Advance the particles over ``dt`` under hydrodynamic ``force (n, dim)``, ``torque (n, 3)``,
-    gravity ``(dim,)`` [m/s^2] and buoyancy; returns the new state (``p`` is not changed)."""
+    gravity ``(dim,)`` [m/s^2] and buoyancy; returns the new state (``p`` is not changed).
+
+    ``previous``: the trapezoidal rule's force and torque at the start of the step (those of the
+    previous step's end; zero, for a start from rest, when None)."""
     if scheme not in INTEGRATORS:
         raise ValueError(f"unknown integrator {scheme!r}; choose one of {sorted(INTEGRATORS)}")
     if not dt > 0:
         raise ValueError(f"time step must be positive, got {dt}")
-    lin, ang = accelerations(p, force, torque, np.asarray(gravity, dtype=float), fluid_density)
+    gravity = np.asarray(gravity, dtype=float)
+    lin, ang = accelerations(p, force, torque, gravity, fluid_density)
     new = p.copy()
+    if scheme == "trapezoidal":
+        old = previous if previous is not None else (np.zeros_like(force), np.zeros_like(torque))
+        lin_old, ang_old = accelerations(p, old[0], old[1], gravity, fluid_density)
+        lin, ang = 0.5 * (lin + lin_old), 0.5 * (ang + ang_old)
     new.velocity = p.velocity + dt * lin
     new.angular_velocity = p.angular_velocity + dt * ang
-    v, w = (p.velocity, p.angular_velocity) if scheme == "explicit-euler" else (new.velocity, new.angular_velocity)
+    if scheme == "explicit-euler":
+        v, w = p.velocity, p.angular_velocity
+    elif scheme == "semi-implicit-euler":
+        v, w = new.velocity, new.angular_velocity
+    else:
+        v, w = 0.5 * (p.velocity + new.velocity), 0.5 * (p.angular_velocity + new.angular_velocity)
     new.position = p.position + dt * v
     if p.dim == 2:
         new.orientation = p.orientation + dt * w
@@ -107,4 +127,4 @@ def integrate(p: Particles, force: np.ndarray, torque: np.ndarray, gravity, flui
     return new
 
 
-INTEGRATORS = ("explicit-euler", "semi-implicit-euler")
+INTEGRATORS = ("explicit-euler", "semi-implicit-euler", "trapezoidal")

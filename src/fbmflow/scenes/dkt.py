@@ -119,7 +119,7 @@ class DKT2D(SimulationScene):
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations,
+                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"]),
                          contact_substeps=params.contact.substeps)

@@ -117,7 +117,7 @@ class GlowinskiFreeFall(SimulationScene):
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations,
+                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
                          repulsion=params.repulsion.make(mesh))
         n_steps = params.time.n_steps
         return Setup(sim, params.time.t_end / n_steps, n_steps)

@@ -188,7 +188,7 @@ class _ManyParticles(SimulationScene):
                          density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
-                         coupling_tol=params.coupling.tol, max_subiterations=params.coupling.max_subiterations,
+                         coupling_tol=params.coupling.tol, max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=f.viscosity),
                          contact_substeps=params.contact.substeps)

@@ -140,7 +140,7 @@ class TenCate(SimulationScene):
                          scheme=params.time.scheme, linear_solver=params.solver.linear_solver(),
                          newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
                          coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations,
+                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
                          symmetry=(0, 1) if quarter else (),
                          repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
                                                          else None))
