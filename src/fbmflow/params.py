@@ -184,6 +184,32 @@ class CouplingParams:
                             "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
                             "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))
 
+    def settings(self) -> dict:
+        """Keyword arguments of :class:`~fbmflow.simulation.Simulation` for these settings."""
+        return dict(coupling=self.scheme, coupling_tol=self.tol, max_subiterations=self.max_subiterations,
+                    integrator=self.integrator)
+
+
+@dataclasses.dataclass(frozen=True)
+class FictitiousBoundaryParams:
+    """How particles and obstacles meet the mesh (docs/method.md, "Particles as fictitious
+    boundaries")."""
+
+    boundary: str = param("sharp", "nodes: every velocity node inside a particle moves rigidly (first order "
+                          "in the mesh size); sharp: the no-slip condition on the true surface (balls, "
+                          "boxes and cylinders; direct solver)", choices=("nodes", "sharp"))
+
+
+@dataclasses.dataclass(frozen=True)
+class NodalBoundaryParams(FictitiousBoundaryParams):
+    """How particles and obstacles meet the mesh; the nodal boundary by default, in the scenes
+    where the sharp one is not yet the better choice (many particles in contact; fixed obstacles,
+    whose drag from the cut cells converges only to first order with it, docs/method.md)."""
+
+    boundary: str = param("nodes", "nodes: every velocity node inside a particle moves rigidly (first order "
+                          "in the mesh size); sharp: the no-slip condition on the true surface (balls, "
+                          "boxes and cylinders; direct solver)", choices=("nodes", "sharp"))
+
 
 @dataclasses.dataclass(frozen=True)
 class RepulsionParams:

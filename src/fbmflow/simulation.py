@@ -19,9 +19,11 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings
+from .coupling import (hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings,
+                       sharp_boundary, supports_sharp_boundary)
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
 from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
@@ -72,13 +74,17 @@ class Simulation:
         :mod:`fbmflow.contact.contact_set`), so that contact resolution does not depend on the
         fluid time step. With the implicit coupling, contact acts once the coupling iteration has
         converged (a collision's velocity change reaches the flow in the next step).
+    fbm : ``nodes`` (every node inside a particle moves rigidly; first order in the mesh size) or
+        ``sharp`` (the no-slip condition on the true surface, :mod:`fbmflow.coupling.sharp`;
+        shapes with ``project``, the direct linear solver)
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
                  density: float = 1.0, scheme: str = "backward-euler",
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
                  coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
-                 symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1):
+                 symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1,
+                 fbm: str = "nodes"):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
         if contact is not None and integrator != "semi-implicit-euler":
@@ -86,6 +92,12 @@ class Simulation:
                              f"integrator {integrator!r} cannot be combined with it")
         if contact_substeps < 1:
             raise ValueError(f"contact_substeps must be >= 1, got {contact_substeps}")
+        if fbm not in FBM_BOUNDARIES:
+            raise ValueError(f"unknown fictitious boundary {fbm!r}; choose one of {FBM_BOUNDARIES}")
+        if fbm == "sharp" and not supports_sharp_boundary(particles.shapes):
+            raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
+                             "(Ball, Box, Cylinder); use fbm='nodes' for the others")
+        self.fbm = fbm
         self.contact = contact
         self.contact_substeps = int(contact_substeps)
         self._contact_report = None
@@ -98,6 +110,7 @@ class Simulation:
         self._constraint_state: Particles | None = None
         self._owner_of: np.ndarray | None = None  # positions and orientations of _owner_cache
         self._owner_cache: dict = {}  # id of the DOF map (fine or multigrid level) -> owner
+        self._sharp_of = None  # the sharp boundary of the current state
         self.particles = particles
         self.gravity = np.asarray(gravity, dtype=float)
         self.scheme = scheme
@@ -106,6 +119,9 @@ class Simulation:
         self.flow = NavierStokesProblem(mesh, viscosity, boundary, density=density,
                                         linear_solver=linear_solver,
                                         extra_constraints=self._constraints, **kwargs)
+        if fbm == "sharp" and self.flow.linear_solver.name != "direct":
+            raise ValueError("the sharp fictitious boundary needs the direct linear solver "
+                             f"(got {self.flow.linear_solver.name!r}); use linear_solver='direct' or fbm='nodes'")
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0
@@ -123,17 +139,31 @@ class Simulation:
         p = self.particles
         key = np.concatenate([p.position.ravel(), np.ravel(p.orientation)])
         if self._owner_of is None or not np.array_equal(self._owner_of, key):
-            self._owner_cache, self._owner_of = {}, key
+            self._owner_cache, self._sharp_of, self._owner_of = {}, None, key
         if id(V) not in self._owner_cache:
             self._owner_cache[id(V)] = node_owner(V, p.position, p.shapes, p.rotations())
         return self._owner_cache[id(V)]
 
+    def _sharp(self, V):
+        """The sharp boundary on the fine DOF map ``V`` for the current particle state (None for
+        the nodal boundary and on coarser multigrid levels); computed once per state."""
+        if self.fbm != "sharp" or V is not self.flow.space.V:
+            return None
+        owner = self._owner(V)  # resets the caches when the particles moved
+        if self._sharp_of is None:
+            p = self.particles
+            self._sharp_of = sharp_boundary(self.flow.space, owner, p.position, p.shapes, p.rotations())
+        return self._sharp_of
+
     def _constraints(self, V, t):
-        """Rigid-body constraints at the current positions with the velocities of the particle
-        state being iterated (the current one for the explicit coupling)."""
+        """Fictitious-boundary constraints at the current positions with the velocities of the
+        particle state being iterated (the current one for the explicit coupling): rigid motion
+        on the particles' nodes, with the sharp boundary's changes on the fine level."""
         p = self.particles
         v = self._constraint_state or p
-        return rigid_body_constraints(V, self._owner(V), p.position, v.velocity, v.angular_velocity)
+        rigid = rigid_body_constraints(V, self._owner(V), p.position, v.velocity, v.angular_velocity)
+        sharp = self._sharp(V)
+        return rigid if sharp is None else sharp.constraints(rigid, v.velocity, v.angular_velocity)
 
     def _forces(self, owner: np.ndarray, x: np.ndarray):
         """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for flow ``x``."""
@@ -257,7 +287,9 @@ class Simulation:
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
         free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)
         owner = self._owner(space.V)
-        dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free))
+        sharp = self._sharp(space.V)
+        row_liftings = None if sharp is None else sharp.ghosts.liftings(free)
+        dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free), row_liftings)
         sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every iterated component k
         dF = np.zeros((len(dX),) + force.shape)
         dT = np.zeros((len(dX),) + torque.shape)
@@ -320,3 +352,4 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
 
 
 COUPLINGS = ("explicit", "implicit")
+FBM_BOUNDARIES = ("nodes", "sharp")

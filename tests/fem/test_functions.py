@@ -19,9 +19,9 @@ def test_sampling_on_a_graded_mesh_is_exact_for_q2_fields(dim):
     rng = np.random.default_rng(0)
     pts = rng.uniform([a[0] for a in axes], [a[-1] for a in axes], (200, dim))
     np.testing.assert_allclose(sample_velocity(space, u, pts)[:, 0], f(pts), atol=1e-12)
-    cells, xi = locate(space, pts)
+    cells, xi = locate(space.mesh, pts)
     for k in range(10):
         np.testing.assert_allclose(space.mesh.map_to_physical(xi[k:k + 1], cells[k:k + 1])[0, 0], pts[k], atol=1e-13)
     assert np.all(np.abs(xi) <= 1 + 1e-12)
     with pytest.raises(ValueError, match="outside"):
-        locate(space, np.full((1, dim), 5.0))
+        locate(space.mesh, np.full((1, dim), 5.0))

@@ -260,3 +260,28 @@ def set_identity_rows(indptr, indices, rows, data):
         r = rows[j]
         for s in range(indptr[r], indptr[r + 1]):
             data[s] = 1.0 if indices[s] == r else 0.0
+
+
+@njit
+def replace_rows(indptr, indices, data, rows, r_indptr, r_indices, r_data):
+    """Replace CSR rows ``rows`` (n_rows,) of ``(indptr, indices, data)`` by the rows of the
+    small CSR matrix ``(r_indptr, r_indices, r_data)`` (n_rows rows, same columns; duplicates
+    summed), in place, if all its entries lie in the pattern. Column indices sorted within
+    rows in both. Returns False, changing nothing, when an entry does not fit."""
+    for j in range(rows.shape[0]):  # check first: all or nothing
+        r = rows[j]
+        q, end = indptr[r], indptr[r + 1]
+        for k in range(r_indptr[j], r_indptr[j + 1]):
+            while q < end and indices[q] < r_indices[k]:
+                q += 1
+            if q == end or indices[q] != r_indices[k]:
+                return False
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        q, end = indptr[r], indptr[r + 1]
+        data[q:end] = 0.0
+        for k in range(r_indptr[j], r_indptr[j + 1]):
+            while indices[q] < r_indices[k]:
+                q += 1
+            data[q] += r_data[k]
+    return True

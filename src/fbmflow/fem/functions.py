@@ -6,17 +6,19 @@ from typing import Callable
 import numpy as np
 
 from . import _kernels
+from ..mesh import StructuredMesh
 from .elements import ElementQ1
 from .quadrature import gauss_tensor
 from .space import FlowSpace
 
 
-def locate(space: FlowSpace, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def locate(mesh: StructuredMesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cell and reference coordinates of physical points on a tensor-product (uniform or
     rectilinear) mesh.
 
     Parameters
     ----------
+    mesh : StructuredMesh
     points : (n, dim) float64 inside the box (the boundary included)
 
     Returns
@@ -24,7 +26,6 @@ def locate(space: FlowSpace, points: np.ndarray) -> tuple[np.ndarray, np.ndarray
     cells : (n,) int64
     xi : (n, dim) float64 in [-1, 1]^dim
     """
-    mesh = space.mesh
     axes = mesh.axis_coordinates
     if axes is None:
         raise NotImplementedError("point location on a deformed mesh is not implemented")
@@ -45,7 +46,7 @@ def locate(space: FlowSpace, points: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def sample_velocity(space: FlowSpace, u: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Velocity at physical points: u (dim * n_v,), points (n, dim) -> (n, dim) float64."""
-    cells, xi = locate(space, points)
+    cells, xi = locate(space.mesh, points)
     phi, _ = space.V.element.tabulate(xi)  # (n, nl)
     uu = u.reshape(space.dim, space.n_v)
     return np.einsum("ina,na->ni", uu[:, space.V.cell_dofs[cells]], phi)
@@ -59,7 +60,7 @@ def sample_pressure(space: FlowSpace, p: np.ndarray, points: np.ndarray,
     evaluated at ``points[k]`` (extrapolation from a neighbouring cell, e.g. from the fluid side of
     a fictitious boundary).
     """
-    cells, _ = locate(space, points if cells_at is None else cells_at)
+    cells, _ = locate(space.mesh, points if cells_at is None else cells_at)
     points = np.atleast_2d(points)
     psi = space.Q.element.tabulate(points, space.Q.centre[cells], space.Q.scale[cells])
     return np.einsum("nm,nm->n", p.reshape(-1, space.dim + 1)[cells], psi)

@@ -34,6 +34,7 @@ class FlowLevel:
         self.boundary_constraints = build_constraints(space.V, boundary, 0.0)
         self.extra_constraints = extra_constraints
         self._jacobian_data: np.ndarray | None = None
+        self._diagonals: tuple | None = None  # diagonals of M and L (row_scale)
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
 
@@ -43,7 +44,7 @@ class FlowLevel:
         con = self.boundary_constraints
         if self.extra_constraints is not None:
             con = con.merged(self.extra_constraints(self.space.V, t))
-        return DirichletConstraints(con.dofs, np.zeros(con.dofs.size))
+        return con.homogeneous()
 
     def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
                con: DirichletConstraints | None = None, newton: bool = True,
@@ -77,8 +78,28 @@ class FlowLevel:
                 J[i * s.nnz:(i + 1) * s.nnz] = S
         A = s.coupled_matrix(J)
         con.zero_rows(A)
-        return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
-                                 fixed_always=self.boundary_constraints.dofs)
+        if not con.sharp:
+            return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
+                                     fixed_always=self.boundary_constraints.dofs)
+        rows = None
+        if con.rows is not None:
+            rows = con.rows.dofs
+            A = con.rows.write_rows(A, self.row_scale(rows, m, a, rho, mu))
+        return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
+                                 self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
+                                 rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
+                                 extension=con.extension)
+
+    def row_scale(self, dofs: np.ndarray, m: float, a: float, rho: float, mu: float) -> np.ndarray:
+        """Scale of the momentum equations of the velocity ``dofs`` (component-blocked): the
+        diagonal of ``m rho M + a mu L`` there, (n,) float64. Row constraints replacing those
+        equations are multiplied by it, so that their residuals weigh like the others."""
+        s = self.space
+        if self._diagonals is None:
+            diag = np.flatnonzero(s.indices == np.repeat(np.arange(s.n_v), np.diff(s.indptr)))
+            self._diagonals = (self.M[diag], self.L[diag])
+        node = dofs % s.n_v
+        return m * rho * self._diagonals[0][node] + a * mu * self._diagonals[1][node]
 
 
 def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cells: int,

@@ -199,7 +199,8 @@ class NavierStokesProblem:
 
     def residual(self, x: np.ndarray, m: float, a: float, rhs: np.ndarray,
                  con: DirichletConstraints, orphans: sp.csr_matrix | None = None) -> np.ndarray:
-        """``[F_u, F_p]`` (n_dofs,) with the constrained rows of ``F_u`` zero.
+        """``[F_u, F_p]`` (n_dofs,) with the fixed rows of ``F_u`` zero (and those of row
+        constraints their scaled residual ``s (C u - g)``).
 
         ``orphans (n_p, n_p)``: projector onto the pressure modes that no free velocity sees
         (see :func:`~fbmflow.solvers.linear.orphan_pressure_modes`); their continuity equations
@@ -210,25 +211,36 @@ class NavierStokesProblem:
         u, p = x[:n_u], x[n_u:]
         Fu = self._apply_scalar(self._scalar_operator(u, m, a), u) + self.BT.T @ p - rhs
         Fu[con.dofs] = 0.0
-        return np.concatenate([Fu, self._continuity(u[:, None], con, orphans)[:, 0]])
+        Fp = self._continuity(u[:, None], con, orphans)[:, 0]
+        if con.rows is not None:  # row constraints, scaled as in the linear system
+            Fu[con.rows.dofs] = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu) * con.rows.residual(u)
+        if con.extension is not None:
+            Fp[con.extension.dofs] = con.extension.residual(p)
+        return np.concatenate([Fu, Fp])
 
     def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: sp.csr_matrix | None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
         dropped and, in a closed box, the volume defect of the prescribed velocities taken out
         as the linear solvers do (:func:`~fbmflow.solvers.linear.balance_volume`), (n_p, k)."""
-        Fp = self.BT @ U
+        BT = self.BT if con.continuity is None else con.continuity.apply(self.BT)
+        Fp = BT @ U
+        if con.extension is not None:
+            Fp = con.extension.transfer(Fp)
         if orphans is not None:
             Fp = Fp - orphans @ Fp
         if self.mean_weights is None:
             return Fp
-        return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1)
+        return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1, con.extension)
 
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """Pressure modes that no free velocity sees under the constraints ``con``."""
         if self.extra_constraints is None:
             return None
-        return orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1,
-                                     closed=self.mean_weights is not None)
+        P = orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1,
+                                  closed=self.mean_weights is not None)
+        if con.extension is not None:
+            P = con.extension.exclude(P)
+        return P
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
@@ -296,7 +308,8 @@ class NavierStokesProblem:
         """The factorised Newton linearisation at ``x`` (a new one when ``fresh`` or when the
         stored one belongs to other time-step weights or another constrained set)."""
         last = self._linearisation
-        if fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs):
+        if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
+                or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
             self._linearisation = (m, a, con, self.linear_solver.factor(self.linear_system(x, m, a, con, t)))
         else:
             self._linearisation = (m, a, con, last[3])
@@ -320,7 +333,7 @@ class NavierStokesProblem:
         if forget is not None:
             forget()
 
-    def lifting_response(self, x: np.ndarray, liftings: np.ndarray) -> np.ndarray:
+    def lifting_response(self, x: np.ndarray, liftings, row_liftings=None) -> np.ndarray:
         """How the solution of the last :meth:`solve` responds to changed constraint values.
 
         ``liftings (dim * n_v, k)`` (dense or sparse) are velocity fields, one per column, that
@@ -331,7 +344,9 @@ class NavierStokesProblem:
         product with the Jacobian assembled at ``x`` (one assembly, constrained rows zeroed and
         orphaned continuity modes dropped as in :meth:`residual`); the factorisation of the last
         Newton step is reused (a Jacobian one iteration old, good enough for the coupling
-        iteration it serves). Returns (k, n_dofs) float64.
+        iteration it serves). ``row_liftings (dim * n_v, k)`` (dense or sparse): how the values
+        ``g`` of the row constraints change with each lifting, on their DOFs; the response then
+        keeps ``C dx = dg`` there. Returns (k, n_dofs) float64.
         """
         m, a, con, solve = self._linearisation
         n_u = self.space.n_u
@@ -341,6 +356,10 @@ class NavierStokesProblem:
         Ju = np.asarray((J.A @ W).todense())
         Ju[con.dofs] = 0.0
         Wd = W.toarray()
+        if con.rows is not None:
+            dg = sp.csr_matrix(row_liftings)[con.rows.dofs].toarray() if row_liftings is not None else 0.0
+            scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
+            Ju[con.rows.dofs] = scale[:, None] * (con.rows.matrix @ Wd - dg)
         Jp = self._continuity(Wd, con, self.orphans(con))
         if getattr(solve, "multiple_rhs", False):
             du, dp, _ = self._linear_solve(solve, -Ju, -Jp)

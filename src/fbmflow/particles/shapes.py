@@ -10,6 +10,9 @@ Every shape is described relative to its **centre of mass** in body axes and giv
 * ``support(d)``: for directions ``d (n, dim)`` (body axes, any length) the points of the shape
   farthest along them, ``(n, dim)``, for contact detection (exact for the convex analytic shapes
   and for the vertices of a surface; the bounding ball for an implicit shape);
+* ``project(x)`` (the analytic shapes: ball, box, cylinder): for points ``x (n, dim)`` inside
+  the shape, the closest points of its surface and the outward unit normals there, both
+  ``(n, dim)`` (for the sharp fictitious boundary);
 * ``centre_of_mass``: where the centre of mass lies in the coordinates the user described the
   shape in (zero for the symmetric shapes; computed for implicit functions and surfaces, whose
   ``inside`` is then shifted so that it works relative to the centre of mass).
@@ -64,6 +67,14 @@ class Ball:
 
     def support(self, d: np.ndarray) -> np.ndarray:
         return self.radius * _unit(d)
+
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Closest surface points ``r x / |x|`` and normals ``x / |x|`` (the centre itself goes
+        along the first axis)."""
+        x = np.array(x, dtype=float)
+        x[np.all(x == 0.0, axis=1), 0] = 1.0
+        n = _unit(x)
+        return self.radius * n, n
 
     @property
     def bounding_radius(self) -> float:
@@ -156,6 +167,18 @@ class Box:
     def support(self, d: np.ndarray) -> np.ndarray:
         return np.where(d >= 0.0, 1.0, -1.0) * np.array(self.half_extents)
 
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Closest surface points of inside points: onto the nearest face, ``x_k = +-h_k`` for
+        the axis ``k`` of least ``h_k - |x_k|``; normals ``+-e_k``."""
+        x = np.asarray(x, dtype=float)
+        k = np.argmin(np.array(self.half_extents) - np.abs(x), axis=1)
+        rows = np.arange(len(x))
+        sign = np.where(x[rows, k] >= 0.0, 1.0, -1.0)
+        p, n = x.copy(), np.zeros_like(x)
+        p[rows, k] = sign * np.array(self.half_extents)[k]
+        n[rows, k] = sign
+        return p, n
+
     @property
     def bounding_radius(self) -> float:
         return float(np.linalg.norm(self.half_extents))
@@ -197,6 +220,24 @@ class Cylinder:
         s[..., :2] = self.radius * _unit(d[..., :2])
         s[..., 2] = np.where(d[..., 2] >= 0.0, 0.5, -0.5) * self.length
         return s
+
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Closest surface points of inside points: radially onto the mantle, or onto the nearer
+        cap where that is closer."""
+        x = np.asarray(x, dtype=float)
+        radial = np.array(x[:, :2])
+        radial[np.all(radial == 0.0, axis=1), 0] = 1.0
+        radial = _unit(radial)
+        to_mantle = self.radius - np.hypot(x[:, 0], x[:, 1])
+        to_cap = self.length / 2.0 - np.abs(x[:, 2])
+        cap = to_cap < to_mantle
+        p, n = x.copy(), np.zeros_like(x)
+        p[:, :2] = np.where(cap[:, None], x[:, :2], self.radius * radial)
+        n[:, :2] = np.where(cap[:, None], 0.0, radial)
+        sign = np.where(x[:, 2] >= 0.0, 1.0, -1.0)
+        p[cap, 2] = sign[cap] * self.length / 2.0
+        n[cap, 2] = sign[cap]
+        return p, n
 
     @property
     def bounding_radius(self) -> float:

@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import hydrodynamic_forces, node_owner, rigid_body_constraints
+from ..coupling import hydrodynamic_forces, node_owner, rigid_body_constraints, sharp_boundary
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import SolverParams, param, section
+from ..params import NodalBoundaryParams, SolverParams, param, section
 from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
 
@@ -51,6 +51,7 @@ class DFGParams:
 
     fluid: DFGFluid = section(DFGFluid)
     solver: SolverParams = section(SolverParams)
+    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
 
 
 @dataclass(frozen=True)
@@ -98,8 +99,15 @@ class _DFGScene(Scene):
         cylinder, centres = self.cylinder(), self.centre[None, :]
         at_rest = (np.zeros((1, dim)), np.zeros(1) if dim == 2 else np.zeros((1, 3)))  # U, omega
 
+        sharp = params.fbm.boundary == "sharp"
+        problem = None  # the flow problem below; its constraints are first asked for in its solve
+
         def obstacle(V, t):
-            return rigid_body_constraints(V, node_owner(V, centres, [cylinder]), centres, *at_rest)
+            owner = node_owner(V, centres, [cylinder])
+            rigid = rigid_body_constraints(V, owner, centres, *at_rest)
+            if not sharp or V is not problem.space.V:  # coarser multigrid levels: nodal
+                return rigid
+            return sharp_boundary(problem.space, owner, centres, [cylinder]).constraints(rigid, *at_rest)
 
         bcs = {"xmin": Dirichlet(self.inflow(f.max_inflow)), "xmax": DoNothing(),
                **{tag: NoSlip() for tag in mesh.tags if tag not in ("xmin", "xmax")}}
@@ -107,7 +115,7 @@ class _DFGScene(Scene):
         if linear == "auto":
             # multigrid does not yet handle fictitious boundaries efficiently (65 s against 10 s
             # for the direct solver at 2D level 3): direct while it fits, multigrid beyond
-            linear = "direct" if FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
+            linear = "direct" if sharp or FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
         problem = NavierStokesProblem(mesh, f.viscosity, bcs, density=f.density, linear_solver=linear,

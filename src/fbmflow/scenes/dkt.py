@@ -26,8 +26,8 @@ import numpy as np
 
 from ..flow import NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, SolverParams, TimeParams, param,
-                      section)
+from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams,
+                      SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
@@ -73,6 +73,7 @@ class DktParams:
     case: DktCase = section(DktCase)
     time: DktTime = section(DktTime)
     coupling: CouplingParams = section(CouplingParams)
+    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
     contact: ContactParams = section(ContactParams)
     repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
     solver: SolverParams = section(SolverParams)
@@ -117,9 +118,8 @@ class DKT2D(SimulationScene):
         sim = Simulation(mesh, s["nu"] * s["rho_f"], {t: NoSlip() for t in mesh.tags}, particles,
                          [0.0, -c.gravity], density=s["rho_f"], scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
-                         coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
+                         newton=params.solver.newton_settings(), **params.coupling.settings(),
+                         fbm=params.fbm.boundary,
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"]),
                          contact_substeps=params.contact.substeps)

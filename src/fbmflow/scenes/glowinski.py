@@ -8,12 +8,13 @@ through the release point and from the bottom to one diameter above it, its cell
 most 1.3 per cell towards the side walls and the lid (about a third of the cells); with
 ``domain.mesh = "uniform"`` the ``8 2^L x 24 2^L`` cells of size h everywhere. Implicit
 (sub-iterated) fluid–particle coupling by default; ``coupling.scheme = "explicit"`` for the
-staggered one.
+staggered one. The sharp fictitious boundary by default (``fbm.boundary = "nodes"`` for the nodal
+one, which needs about eight times finer cells for the same accuracy).
 
 References: Glowinski et al. (2001) and Wan & Turek (2006) report Re_max about 17.3; Koblitz et
 al. (2017), with a body-fitted overset grid, about 14.0 (their curve ships in
 :mod:`fbmflow.scenes.data.koblitz2017` and is drawn in the plot). fbmflow converges towards the
-latter (benchmarks/results/glowinski.md).
+latter (benchmarks/results/glowinski.md, and glowinski-nodes.md for the nodal boundary).
 """
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ import numpy as np
 
 from ..flow import NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
+from ..params import (CouplingParams, FictitiousBoundaryParams, ParamError, RepulsionParams, SolverParams,
+                      TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
@@ -78,6 +80,7 @@ class GlowinskiParams:
     domain: GlowinskiDomain = section(GlowinskiDomain)
     time: GlowinskiTime = section(GlowinskiTime)
     coupling: CouplingParams = section(CouplingParams)
+    fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
     repulsion: RepulsionParams = section(RepulsionParams)
     solver: SolverParams = section(SolverParams)
 
@@ -115,9 +118,8 @@ class GlowinskiFreeFall(SimulationScene):
         sim = Simulation(mesh, f.viscosity, {t: NoSlip() for t in mesh.tags}, particles,
                          [0.0, -f.gravity], density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
-                         coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
+                         newton=params.solver.newton_settings(), **params.coupling.settings(),
+                         fbm=params.fbm.boundary,
                          repulsion=params.repulsion.make(mesh))
         n_steps = params.time.n_steps
         return Setup(sim, params.time.t_end / n_steps, n_steps)

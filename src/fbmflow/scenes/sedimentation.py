@@ -30,8 +30,8 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, ParamError, SolverParams, TimeParams,
-                      param, section)
+from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams, ParamError,
+                      SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
@@ -97,6 +97,7 @@ class Sedimentation2DParams:
     particles: ManyParticles = section(ManyParticles)
     time: ManyTime = section(ManyTime)
     coupling: CouplingParams = section(CouplingParams)
+    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
     contact: ContactParams = section(ContactParams)
     repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
     solver: SolverParams = section(SolverParams)
@@ -187,8 +188,8 @@ class _ManyParticles(SimulationScene):
         sim = Simulation(mesh, f.viscosity, self.boundary(mesh, params), particles, gravity,
                          density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
-                         coupling_tol=params.coupling.tol, max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
+                         newton=params.solver.newton_settings(), **params.coupling.settings(),
+                         fbm=params.fbm.boundary,
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=f.viscosity),
                          contact_substeps=params.contact.substeps)

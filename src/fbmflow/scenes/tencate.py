@@ -22,7 +22,8 @@ import numpy as np
 
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import CouplingParams, ParamError, RepulsionParams, SolverParams, TimeParams, param, section
+from ..params import (CouplingParams, FictitiousBoundaryParams, ParamError, RepulsionParams, SolverParams,
+                      TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from .base import Setup, SimulationScene
@@ -83,6 +84,7 @@ class TenCateParams:
     domain: TenCateDomain = section(TenCateDomain)
     time: TenCateTime = section(TenCateTime)
     coupling: CouplingParams = section(CouplingParams)
+    fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
     repulsion: RepulsionParams = section(RepulsionParams)
     solver: SolverParams = section(SolverParams)
 
@@ -136,11 +138,13 @@ class TenCate(SimulationScene):
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
         particles = Particles.at_rest([Ball(pp.diameter / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
+        linear = params.solver.linear_solver()
+        if linear == "auto" and params.fbm.boundary == "sharp":
+            linear = "direct"  # the sharp boundary's row constraints need it
         sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
-                         scheme=params.time.scheme, linear_solver=params.solver.linear_solver(),
-                         newton=params.solver.newton_settings(), coupling=params.coupling.scheme,
-                         coupling_tol=params.coupling.tol,
-                         max_subiterations=params.coupling.max_subiterations, integrator=params.coupling.integrator,
+                         scheme=params.time.scheme, linear_solver=linear,
+                         newton=params.solver.newton_settings(), **params.coupling.settings(),
+                         fbm=params.fbm.boundary,
                          symmetry=(0, 1) if quarter else (),
                          repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
                                                          else None))

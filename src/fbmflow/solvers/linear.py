@@ -19,12 +19,14 @@ import os
 import time
 import weakref
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
 
+from ..fem.constraints import zero_columns
 from . import _kernels
 from .krylov import fgmres
 
@@ -55,8 +57,12 @@ class SaddlePointSystem:
         onto the pressure modes that no free velocity DOF sees any more (cells inside or almost
         inside a fictitious boundary, alone or in clusters). Those modes would make the system
         singular; ``C`` sets them to ``g`` (zero for Newton updates) and leaves every other
-        unknown unchanged. Computed from ``B^T`` when ``space`` is given
-        (:func:`orphan_pressure_modes`).
+        unknown unchanged. Computed from ``B^T`` (the columns of ``rows`` zeroed) when ``space``
+        is given (:func:`orphan_pressure_modes`).
+    rows : (n_r,) int64 or None, velocity DOFs whose rows of ``A`` are linear constraints
+        (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
+        are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
+        carry no pressure gradient, and no pressure mode counts as seen through them.
     """
 
     A: sp.csr_matrix
@@ -68,10 +74,27 @@ class SaddlePointSystem:
     coarser: "SaddlePointSystem | None" = None
     prolongation: tuple | None = None
     orphans: sp.csr_matrix | None = None
+    rows: np.ndarray | None = None
+    gradient_BT: sp.csr_matrix | None = None
+    extension: object = None
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
-            self.orphans = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None)
+            seen = self.BT if self.gradient_BT is None else self.gradient_BT
+            self.orphans = orphan_pressure_modes(zero_columns(seen, self.rows), self.space.dim + 1,
+                                                 closed=self.mean_weights is not None)
+            if self.extension is not None:  # continued cells' pressures are constrained instead
+                self.orphans = self.extension.exclude(self.orphans)
+        if self.rows is not None and self.orphans is not None:
+            # the orphaned modes' continuity equations drop out (as in the residual): they see the
+            # row-constrained columns only, and would otherwise tie those to the modes' g
+            self.BT = (self.BT - self.orphans @ self.BT).tocsr()
+
+    @cached_property
+    def gradient(self) -> sp.csr_matrix:
+        """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` transposed, the rows of
+        ``rows`` zeroed."""
+        return zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self.rows).T.tocsr()
 
     @property
     def n_u(self) -> int:
@@ -81,20 +104,28 @@ class SaddlePointSystem:
     def n_p(self) -> int:
         return self.BT.shape[0]
 
+    @cached_property
+    def pressure_block(self) -> sp.csr_matrix | None:
+        """The pressure-pressure block: ``orphans`` plus the extension's constraint rows."""
+        if self.extension is None:
+            return self.orphans
+        D = self.extension.block(self.n_p)
+        return D if self.orphans is None else (self.orphans + D).tocsr()
+
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
         u, p = x[:self.n_u], x[self.n_u:]
         q = self.BT @ u
-        if self.orphans is not None:
-            q += self.orphans @ p
-        return np.concatenate([self.A @ u + self.BT.T @ p, q])
+        if self.pressure_block is not None:
+            q += self.pressure_block @ p
+        return np.concatenate([self.A @ u + self.gradient @ p, q])
 
     def balance(self, g: np.ndarray) -> np.ndarray:
         """Continuity right-hand side(s) made solvable (:func:`balance_volume`); ``g`` itself when
         the pressure is determined."""
         if self.mean_weights is None:
             return g
-        return balance_volume(g, self.mean_weights, self.orphans, self.space.dim + 1)
+        return balance_volume(g, self.mean_weights, self.orphans, self.space.dim + 1, self.extension)
 
     def remove_pressure_mean(self, x: np.ndarray) -> None:
         """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
@@ -111,13 +142,13 @@ class SaddlePointSystem:
         False (CSR, explicit zeros of the blocks kept, sorted indices). The unbordered one is
         stacked row-wise from CSR blocks without a COO round trip (scipy's ``bmat`` took 3.6 s
         per factorisation at ten-cate level 1)."""
-        C = self.orphans
+        C = self.pressure_block
         if bordered and self.mean_weights is not None:
             w = sp.csr_matrix(self.mean_weights[None, :])
-            blocks = [[self.A, self.BT.T, None], [self.BT, C, w.T], [None, w, None]]
+            blocks = [[self.A, self.gradient, None], [self.BT, C, w.T], [None, w, None]]
             return sp.bmat(blocks, format="csc")
         C = sp.csr_matrix((self.n_p, self.n_p)) if C is None else sp.csr_matrix(C)
-        top = sp.hstack([sp.csr_matrix(self.A), self.BT.T.tocsr()], format="csr")
+        top = sp.hstack([sp.csr_matrix(self.A), self.gradient], format="csr")
         K = sp.vstack([top, sp.hstack([sp.csr_matrix(self.BT), C], format="csr")], format="csr")
         K.sort_indices()
         return K
@@ -203,7 +234,7 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
 
 
 def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matrix | None,
-                   npl: int) -> np.ndarray:
+                   npl: int, extension=None) -> np.ndarray:
     """Continuity right-hand side(s) ``g`` ((n_p,) or (n_p, k)) made solvable in a closed domain:
     ``g - lambda w`` with ``lambda = (q . g) / (q . w)``, a copy.
 
@@ -225,6 +256,9 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     w = np.asarray(mean_weights, dtype=float)
     if orphans is not None:
         q, w = q - orphans @ q, w - orphans @ w
+    if extension is not None:  # continued cells: no continuity rows of their own
+        q[extension.dofs] = 0.0
+        w = extension.transfer(w)
     lam = (q @ g) / (q @ w)
     return g - np.multiply.outer(w, lam)
 
@@ -645,10 +679,13 @@ def _pinned_pressure(system: SaddlePointSystem) -> int | None:
     if system.mean_weights is None:
         return None
     npl = system.space.dim + 1 if system.space is not None else 1
-    if system.orphans is None:
+    if system.orphans is None and system.extension is None:
         return 0
     touched = np.zeros(system.n_p // npl, dtype=bool)
-    touched[system.orphans.tocoo().row // npl] = True
+    if system.orphans is not None:
+        touched[system.orphans.tocoo().row // npl] = True
+    if system.extension is not None:
+        touched[system.extension.dofs // npl] = True
     return int(np.flatnonzero(~touched)[0]) * npl if not touched.all() else 0
 
 

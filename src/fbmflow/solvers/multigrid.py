@@ -137,6 +137,10 @@ class MultigridSolver:
     def factor(self, system: SaddlePointSystem):
         """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
         returns ``solve(f, g) -> (u, p, LinearReport)``."""
+        if system.rows is not None:
+            raise NotImplementedError("multigrid does not handle row constraints (the sharp fictitious "
+                                      "boundary); use the direct solver (solver.linear = \"direct\") or "
+                                      "the nodal boundary")
         t0 = time.perf_counter()
         levels = self.setup(system)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
