@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
+from fbmflow.coupling import FixedObstacles, node_owner, sharp_boundary
 from fbmflow.coupling.sharp import pressure_extension
 from fbmflow.fem import FlowSpace, assemble_divergence
 from fbmflow.fem import _kernels as fk
@@ -144,21 +144,10 @@ def _cylinder_flow(level, boundary, convection=True):
     from fbmflow.scenes.dfg import DFG2D1
     scene = DFG2D1()
     mesh = scene.mesh(level)
-    cyl, centres = scene.cylinder(), scene.centre[None, :]
-    rest = (np.zeros((1, 2)), np.zeros(1))
-    problem = None
-
-    def obstacle(V, t):
-        owner = node_owner(V, centres, [cyl])
-        rigid = rigid_body_constraints(V, owner, centres, *rest)
-        if boundary == "nodes":
-            return rigid
-        return sharp_boundary(problem.space, owner, centres, [cyl]).constraints(rigid, *rest)
-
     bcs = {"xmin": Dirichlet(scene.inflow(0.3)), "xmax": DoNothing(), "ymin": NoSlip(), "ymax": NoSlip()}
-    problem = NavierStokesProblem(mesh, 1e-3, bcs, linear_solver="direct", extra_constraints=obstacle,
-                                  convection=convection)
-    return problem
+    obstacle = FixedObstacles([scene.cylinder()], scene.centre[None, :], boundary)
+    return NavierStokesProblem(mesh, 1e-3, bcs, linear_solver="direct", extra_constraints=obstacle,
+                               convection=convection)
 
 
 def test_newton_system_matches_the_residual():
@@ -201,23 +190,14 @@ def test_channel_over_a_flat_face_is_far_more_accurate_than_the_nodal_boundary()
     (measured max errors, 8 / 16 / 32 cells: nodal 1.2e-2 / 2.5e-3 / 4.3e-3, sharp 5.8e-4 /
     1.2e-5 / 8.7e-5)."""
     y0, box, centres = 0.23, Box((5.0, 0.23)), np.array([[0.5, 0.0]])
-    rest = (np.zeros((1, 2)), np.zeros(1))
     errors = {}
     for boundary in ("nodes", "sharp"):
         for n in (8, 16, 32):
             mesh = StructuredMesh.box((n, n), periodic=(True, False))
-            problem = None
-
-            def floor(V, t):
-                owner = node_owner(V, centres, [box])
-                rigid = rigid_body_constraints(V, owner, centres, *rest)
-                if boundary == "nodes":
-                    return rigid
-                return sharp_boundary(problem.space, owner, centres, [box]).constraints(rigid, *rest)
-
             problem = NavierStokesProblem(mesh, 1.0, {"ymin": NoSlip(), "ymax": NoSlip()}, convection=False,
                                           body_force=lambda x, t: np.column_stack([np.ones(len(x)), 0 * x[:, 0]]),
-                                          linear_solver="direct", extra_constraints=floor)
+                                          linear_solver="direct",
+                                          extra_constraints=FixedObstacles([box], centres, boundary))
             x, _ = problem.solve_steady()
             u, _ = problem.split(x)
             X = problem.space.V.coordinates

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import hydrodynamic_forces, node_owner, rigid_body_constraints, sharp_boundary
+from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
@@ -97,18 +97,8 @@ class _DFGScene(Scene):
         f, dim = params.fluid, self.dim
         mesh = self.mesh(level)
         cylinder, centres = self.cylinder(), self.centre[None, :]
-        at_rest = (np.zeros((1, dim)), np.zeros(1) if dim == 2 else np.zeros((1, 3)))  # U, omega
-
+        obstacle = FixedObstacles([cylinder], centres, params.fbm.boundary)
         sharp = params.fbm.boundary == "sharp"
-        problem = None  # the flow problem below; its constraints are first asked for in its solve
-
-        def obstacle(V, t):
-            owner = node_owner(V, centres, [cylinder])
-            rigid = rigid_body_constraints(V, owner, centres, *at_rest)
-            if not sharp or V is not problem.space.V:  # coarser multigrid levels: nodal
-                return rigid
-            return sharp_boundary(problem.space, owner, centres, [cylinder]).constraints(rigid, *at_rest)
-
         bcs = {"xmin": Dirichlet(self.inflow(f.max_inflow)), "xmax": DoNothing(),
                **{tag: NoSlip() for tag in mesh.tags if tag not in ("xmin", "xmax")}}
         linear = params.solver.linear_solver()

@@ -1,0 +1,50 @@
+"""Bodies held still in a flow (e.g. the DFG cylinder) as fictitious boundaries."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..fem import FlowSpace
+from ..fem.constraints import DirichletConstraints
+from ..fem.dofmap import DofMap
+from .indicator import node_owner, rigid_body_constraints
+from .sharp import sharp_boundary, supports_sharp_boundary
+
+
+class FixedObstacles:
+    """The ``extra_constraints`` of a :class:`~fbmflow.flow.NavierStokesProblem` for bodies at
+    rest: zero velocity on their nodes, and with ``boundary = "sharp"`` the sharp boundary's
+    changes (:mod:`fbmflow.coupling.sharp`) on the finest mesh asked for (coarser multigrid
+    levels get the nodal constraints).
+
+    Parameters
+    ----------
+    shapes : list of shapes, one per body
+    centres : (n, dim) float64, the bodies' centres [m]
+    boundary : ``"nodes"`` or ``"sharp"``
+    """
+
+    def __init__(self, shapes: list, centres, boundary: str = "nodes"):
+        if boundary not in ("nodes", "sharp"):
+            raise ValueError(f"unknown fictitious boundary {boundary!r}; choose nodes or sharp")
+        if boundary == "sharp" and not supports_sharp_boundary(shapes):
+            raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
+                             "(Ball, Box, Cylinder); use the nodal boundary for the others")
+        self.shapes = list(shapes)
+        self.centres = np.atleast_2d(np.asarray(centres, dtype=float))
+        self.boundary = boundary
+        self._finest: tuple | None = None  # (DOF map, its FlowSpace, the sharp boundary there)
+
+    def __call__(self, V: DofMap, t: float) -> DirichletConstraints:
+        n, dim = len(self.shapes), V.mesh.dim
+        rest = (np.zeros((n, dim)), np.zeros(n) if dim == 2 else np.zeros((n, 3)))  # velocities U, omega
+        owner = node_owner(V, self.centres, self.shapes)
+        rigid = rigid_body_constraints(V, owner, self.centres, *rest)
+        if self.boundary == "nodes":
+            return rigid
+        if self._finest is None or V.n_dofs > self._finest[0].n_dofs:
+            space = FlowSpace(V.mesh)
+            self._finest = (V, space, sharp_boundary(space, node_owner(space.V, self.centres, self.shapes),
+                                                     self.centres, self.shapes))
+        if V.n_dofs < self._finest[0].n_dofs:
+            return rigid
+        return self._finest[2].constraints(rigid, *rest)
