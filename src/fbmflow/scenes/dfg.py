@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner
+from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner, steady_test_function_forces
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
@@ -115,7 +115,12 @@ class _DFGScene(Scene):
         space = problem.space
         u, p = x[:space.n_u], x[space.n_u:]
         owner = node_owner(space.V, centres, [cylinder])
-        force, _ = hydrodynamic_forces(space, owner, centres, u, p, f.viscosity)
+        if sharp:  # the cut-cell volume force converges to first order only with the sharp boundary
+            walls = problem.constraints().fixed
+            force, _ = steady_test_function_forces(space, owner, centres, [cylinder], u, p, f.viscosity,
+                                                   f.density, walls[walls < space.n_v])
+        else:
+            force, _ = hydrodynamic_forces(space, owner, centres, u, p, f.viscosity)
         mean = self.mean_inflow(f.max_inflow)
         scale = 2.0 / (f.density * mean**2 * D * self.depth)
         # front and back points of the cylinder; the cell behind a surface point is partly inside
