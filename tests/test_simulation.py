@@ -167,9 +167,12 @@ def test_symmetry_plane_must_pass_through_the_particle():
         Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))
 
 
-def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d():
+@pytest.mark.parametrize("fbm", ["nodes", "sharp"])
+def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm):
     """A sphere falling on the axis of a small box: the quarter with slip planes x = y = 0.5 and
-    mirrored forces reproduces the whole box (implicit coupling, 6 -> 1 iterated component)."""
+    mirrored forces reproduces the whole box (implicit coupling, 6 -> 1 iterated component), with
+    either boundary (the sharp one has ghost nodes on the planes, their normal velocity held by
+    the slip condition)."""
     from fbmflow.flow import NoSlip, Slip
     from fbmflow.mesh import StructuredMesh
     from fbmflow.particles import Ball, Particles
@@ -182,7 +185,7 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d():
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
         sim = Simulation(mesh, 0.5, bc, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]),
-                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else ())
+                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else (), fbm=fbm)
         reps = [sim.step(0.01) for _ in range(2)]
         return np.array([r.velocity[0] for r in reps]), reps[-1].flow_solves
 

@@ -253,14 +253,23 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     """
     q = np.zeros(len(mean_weights))
     q[::npl] = 1.0
-    w = np.asarray(mean_weights, dtype=float)
     if orphans is not None:
-        q, w = q - orphans @ q, w - orphans @ w
+        q = q - orphans @ q
     if extension is not None:  # continued cells: no continuity rows of their own
         q[extension.dofs] = 0.0
-        w = extension.transfer(w)
+    w = expansion(mean_weights, orphans, extension)
     lam = (q @ g) / (q @ w)
     return g - np.multiply.outer(w, lam)
+
+
+def expansion(mean_weights: np.ndarray, orphans: sp.csr_matrix | None, extension=None) -> np.ndarray:
+    """The continuity rows' response to a uniform expansion rate of the fluid, (n_p,): the mean
+    weights less their orphaned part, moved to the continuing cells by a pressure extension. The
+    column of the mean-pressure border (:func:`balance_volume`)."""
+    w = np.asarray(mean_weights, dtype=float)
+    if orphans is not None:
+        w = w - orphans @ w
+    return w if extension is None else extension.transfer(w)
 
 
 def _without_constant(P: sp.csr_matrix, npl: int) -> sp.csr_matrix | None:
@@ -387,11 +396,29 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
         superlu = _superlu(K_free[:, free])
         lu_solve = lambda b, tol=None: superlu(b)  # noqa: E731
 
+    border = None
+    if pinned is not None and (system.rows is not None or system.extension is not None):
+        # the left null vector is no longer [0, 1 - C 1] (the continuity rows are not the gradient's
+        # transpose), so balancing alone leaves the pinned row unmet: solve the bordered system
+        # K x + lambda [0, w] = b exactly instead, with the response to the border column
+        column = np.zeros(n)
+        column[system.n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
+        response = np.zeros(n)
+        response[free] = lu_solve(column[free], None)
+        row = K[pinned]
+        border = (column, response, row, float(column[pinned] - (row @ response)[0]))
+
     def solve(f, g, rtol=None):  # (n_u,), (n_p,) or, for k right-hand sides at once, (n_u, k), (n_p, k)
         x = np.concatenate([f, system.balance(g)])
+        if border is not None:
+            column, response, row, pivot = border
+            b_pinned = x[pinned].copy()
         if pinned is not None:
             x[pinned] = 0.0
         x[free] = lu_solve(x[free] - coupling @ x[~free], rtol)
+        if border is not None:  # lambda from the pinned row, then x - lambda (response to the border)
+            lam = (b_pinned - np.asarray(row @ x).reshape(x.shape[1:])) / pivot
+            x -= np.multiply.outer(response, lam)
         if not np.all(np.isfinite(x)):
             raise np.linalg.LinAlgError("direct solve produced non-finite values (singular system?)")
         system.remove_pressure_mean(x)
