@@ -210,6 +210,16 @@ def test_ten_cate_scene_validation_and_gap_deviation():
     assert scene.mesh(1, "quarter", "uniform").shape == (20, 20, 64)  # 6 cells per diameter
 
 
+def test_ten_cate_sharp_boundary_without_pardiso_is_refused(monkeypatch):
+    """SuperLU cannot factorise the 3D systems of the sharp boundary at these sizes: without the
+    PARDISO extra the scene says so before any work instead of exhausting the memory."""
+    import fbmflow.scenes.tencate as tencate
+    monkeypatch.setattr(tencate, "pardiso_available", lambda: False)
+    scene = get_scene("ten-cate")
+    with pytest.raises(ParamError, match="pardiso"):
+        scene.build(from_dict(scene.Params, {}), 0)
+
+
 @pytest.mark.parametrize("symmetry", ["quarter", "none"])
 def test_ten_cate_graded_mesh_is_uniform_along_the_path(symmetry):
     """Cells of 2.5 mm (level 1) within one diameter of the axis and from the bottom to one

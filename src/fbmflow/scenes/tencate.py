@@ -29,6 +29,7 @@ from ..params import (CouplingParams, FictitiousBoundaryParams, ParamError, Repu
                       TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
+from ..solvers.linear import pardiso_available
 from .base import Setup, SimulationScene
 from .data import tencate2002
 
@@ -153,6 +154,10 @@ class TenCate(SimulationScene):
         particles = Particles.at_rest([Ball(pp.diameter / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
         linear = params.solver.linear_solver()
         if linear == "auto" and params.fbm.boundary == "sharp":
+            if not pardiso_available():  # SuperLU's 3D fill at these sizes exhausts the memory
+                raise ParamError("ten-cate with fbm.boundary = sharp needs the direct solver with PARDISO: "
+                                 "pip install 'fbmflow[pardiso]' (or fbm.boundary = nodes, which multigrid solves, "
+                                 "far more slowly)")
             linear = "direct"  # the sharp boundary's row constraints need it
         sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
                          scheme=params.time.scheme, linear_solver=linear,
