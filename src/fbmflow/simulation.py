@@ -125,9 +125,10 @@ class Simulation:
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0
-        # hydrodynamic force (n, dim) and torque (n, 3) at the end of the last step (zero at rest)
-        self._last_force = np.zeros(particles.position.shape)
-        self._last_torque = np.zeros((particles.n, 3))
+        # hydrodynamic force (n, dim) and torque (n, 3) at the end of the last step (None before
+        # the first: unknown, the fluid's reaction to the first acceleration is not zero)
+        self._last_force: np.ndarray | None = None
+        self._last_torque: np.ndarray | None = None
 
     def owner(self) -> np.ndarray:
         """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
@@ -181,10 +182,14 @@ class Simulation:
         """New particle state under the hydrodynamic and the repulsive forces (the latter at the
         positions of the start of the step) and, with hard contact (unless ``contact`` is False),
         the contact impulses."""
-        previous = self._last_force, self._last_torque  # the trapezoidal rule's, at the start of the step
+        previous = None  # the trapezoidal rule's forces at the start of the step (None: no history)
+        if self._last_force is not None:
+            previous = self._last_force, self._last_torque
         if self.repulsion is not None:
             repulsion = self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
-            force, previous = force + repulsion, (previous[0] + repulsion, previous[1])
+            force = force + repulsion
+            if previous is not None:
+                previous = (previous[0] + repulsion, previous[1])
         if self.contact is None or not contact:
             return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator,
                              previous)
@@ -200,8 +205,9 @@ class Simulation:
         out = {"x": self.x.copy(), "t": self.t, "step_count": self.step_count,
                "position": p.position.copy(), "velocity": p.velocity.copy(),
                "orientation": p.orientation.copy(), "angular_velocity": p.angular_velocity.copy(),
-               "density": p.density.copy(), "fixed": p.fixed.copy(),
-               "last_force": self._last_force.copy(), "last_torque": self._last_torque.copy()}
+               "density": p.density.copy(), "fixed": p.fixed.copy()}
+        if self._last_force is not None:  # the trapezoidal rule's force history (none before step 1)
+            out.update(last_force=self._last_force.copy(), last_torque=self._last_torque.copy())
         if self.contact is not None:
             out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
         return out
@@ -223,8 +229,10 @@ class Simulation:
         if "last_force" in state:
             self._last_force = np.array(state["last_force"], dtype=float)
             self._last_torque = np.array(state["last_torque"], dtype=float)
-        elif self.integrator == "trapezoidal":
+        elif self.integrator == "trapezoidal" and self.step_count > 0:
             raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
+        else:
+            self._last_force = self._last_torque = None
         if self.contact is not None:
             self.contact.set_state({k[len("contact_"):]: v for k, v in state.items() if k.startswith("contact_")})
         self._owner_of = None
@@ -246,7 +254,12 @@ class Simulation:
             self._constraint_state = None
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(x))):
             raise ConvergenceError(f"{where}: non-finite state")
+        sharp = self._sharp(self.flow.space.V)  # of the positions the flow was solved with
         self.x, self.particles = x, new
+        if sharp is not None:  # uncovered ghost nodes start the next step with the solid's velocity
+            dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
+                                                  new.angular_velocity)
+            self.x[dofs] = values
         self._last_force, self._last_torque = force, torque
         self.t += dt
         self.step_count += 1
@@ -282,7 +295,7 @@ class Simulation:
         """
         p, space = self.particles, self.flow.space
         new = self._integrate(force, torque, dt, contact=False)
-        gain = velocity_gain(p, dt, self.integrator)
+        gain = velocity_gain(p, dt, self.integrator, history=self._last_force is not None)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
         free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)

@@ -80,6 +80,25 @@ def test_ghost_liftings_are_the_derivatives_of_the_values():
 
 
 @pytest.mark.parametrize("dim", [2, 3])
+def test_uncovered_ghost_nodes_take_the_solids_velocity(dim):
+    """Moved by a third of a cell, the particle leaves some ghost nodes in the fluid: exactly
+    those are returned, with the rigid velocity of the moved, spinning particle."""
+    space, centres, shapes, owner = _setup(dim)
+    ghosts = sharp_boundary(space, owner, centres, shapes).ghosts
+    moved = centres + 0.3 / (4 * 2**2)
+    later = node_owner(space.V, moved, shapes)
+    U, w = RNG.normal(size=(1, dim)), RNG.normal(size=(1,) if dim == 2 else (1, 3))
+    dofs, values = ghosts.uncovered(space.V, later, moved, U, w)
+    expected = ghosts.nodes[later[ghosts.nodes] < 0]
+    assert expected.size > 0 and np.all(owner[expected] >= 0)
+    n_v = space.V.n_dofs
+    np.testing.assert_array_equal(dofs, np.concatenate([c * n_v + expected for c in range(dim)]))
+    X = space.V.coordinates[expected] - moved[0]
+    rigid = U[0] + (w[0] * np.column_stack([-X[:, 1], X[:, 0]]) if dim == 2 else np.cross(w[0], X))
+    np.testing.assert_allclose(values, rigid.T.ravel(), atol=1e-14)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
 def test_fluid_continuity_rows(dim):
     """The cut cells' continuity rows over the fluid part: equal to the assembled rows for a
     particle too small to reach the quadrature points, zero for one that covers the cell, and in

@@ -58,16 +58,21 @@ def test_fixed_particles_do_not_move_and_bad_input_is_rejected():
         Particles.at_rest([Ball(0.1, 2)], -1.0, [[0.0, 0.0]])
 
 
-@pytest.mark.parametrize("scheme, order", [("semi-implicit-euler", 1), ("trapezoidal", 2)])
-def test_convergence_order_under_a_time_dependent_force(scheme, order):
+@pytest.mark.parametrize("scheme, start, order", [("semi-implicit-euler", "exact", 1), ("trapezoidal", "exact", 2),
+                                                  ("trapezoidal", "none", 2), ("trapezoidal", "zero", 1)])
+def test_convergence_order_under_a_time_dependent_force(scheme, start, order):
     """``F(t) = m cos t`` on a sphere from rest (no gravity): ``v = sin t``, ``x = 1 - cos t``.
     The trapezoidal rule (new force at the end of the step, the previous step's at its start)
-    is second order, semi-implicit Euler first; fitted slopes of the position error at t = 1."""
+    is second order, semi-implicit Euler first; fitted slopes of the position error at t = 1.
+    Started without a force history (``previous=None``, a backward-Euler first velocity step)
+    the trapezoidal rule stays second order; started from a zero force where ``F(0)`` is not
+    zero it falls to first order."""
     errors = []
-    for n in (20, 40, 80, 160):
+    for n in (40, 80, 160, 320):
         p = Particles.at_rest([Ball(0.1, 3)], 2.0, [[0.0, 0.0, 0.0]])
         m, dt = p.mass[0], 1.0 / n
-        previous = (np.array([[m, 0.0, 0.0]]), np.zeros((1, 3)))  # F(0)
+        previous = {"exact": (np.array([[m, 0.0, 0.0]]), np.zeros((1, 3))), "none": None,
+                    "zero": (np.zeros((1, 3)), np.zeros((1, 3)))}[start]
         for k in range(n):
             F = np.array([[m * np.cos((k + 1) * dt), 0.0, 0.0]])
             p = integrate(p, F, np.zeros((1, 3)), [0.0, 0.0, 0.0], 0.0, dt, scheme, previous)
@@ -77,12 +82,16 @@ def test_convergence_order_under_a_time_dependent_force(scheme, order):
     assert np.all(np.abs(slopes - order) < 0.1), slopes
 
 
-def test_trapezoidal_gain_is_half_a_step():
+def test_trapezoidal_gain_is_half_a_step_with_a_force_history():
     from fbmflow.particles import velocity_gain
 
     p = Particles.at_rest([Ball(0.1, 2)], 2.0, [[0.0, 0.0]])
     full, half = velocity_gain(p, 0.1), velocity_gain(p, 0.1, "trapezoidal")
     np.testing.assert_allclose(half, 0.5 * full)
+    np.testing.assert_allclose(velocity_gain(p, 0.1, "trapezoidal", history=False), full)
     F = np.array([[0.0, 0.3]])
+    zero = (np.zeros((1, 2)), np.zeros((1, 3)))
+    v1 = integrate(p, F, np.zeros((1, 3)), [0.0, 0.0], 1.0, 0.1, "trapezoidal", zero).velocity[0]
+    np.testing.assert_allclose(v1, half[0, :2, :2] @ F[0])  # with a zero force at the start
     v1 = integrate(p, F, np.zeros((1, 3)), [0.0, 0.0], 1.0, 0.1, "trapezoidal").velocity[0]
-    np.testing.assert_allclose(v1, half[0, :2, :2] @ F[0])  # from rest with zero previous force
+    np.testing.assert_allclose(v1, full[0, :2, :2] @ F[0])  # without a history: the end's force
