@@ -228,6 +228,22 @@ def test_ten_cate_scene_validation_and_gap_deviation():
     assert scene.mesh(1, "quarter", "uniform").shape == (20, 20, 64)  # 6 cells per diameter
 
 
+def test_gap_from_the_velocity_curve_integrates_it(monkeypatch):
+    """A velocity ``v = a t`` sampled unordered gives ``gap = 8 - a t^2 / (2 d)`` to the
+    trapezoidal rule's error at the gap curve's times from 0 on, and ``gap_deviation`` compares
+    with it when asked."""
+    from fbmflow.scenes.data import tencate2002
+    from fbmflow.scenes.tencate import gap_deviation
+    ts = np.linspace(0.01, 1.0, 400)
+    monkeypatch.setitem(tencate2002.VELOCITY, "E4", np.column_stack([ts, 0.1 * ts])[::-1])
+    monkeypatch.setitem(tencate2002.GAP, "E4", np.column_stack([[-0.02, 0.0, 0.5, 1.0], [8.0, 8.0, 7.0, 5.0]]))
+    g = tencate2002.gap_from_velocity("E4")
+    np.testing.assert_allclose(g[:, 0], [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(g[:, 1], 8.0 - 0.1 * g[:, 0] ** 2 / 0.03, atol=1e-5)
+    assert gap_deviation(g[:, 0], g[:, 1], "E4", reference=g) == 0.0
+    assert gap_deviation(g[:, 0], g[:, 1], "E4") == pytest.approx(abs(g[2, 1] - 5.0) / 5.0)
+
+
 def test_ten_cate_sharp_boundary_without_pardiso_is_refused(monkeypatch):
     """SuperLU cannot factorise the 3D systems of the sharp boundary at these sizes: without the
     PARDISO extra the scene says so before any work instead of exhausting the memory."""

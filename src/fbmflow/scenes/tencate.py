@@ -111,10 +111,13 @@ class TenCateParams:
             raise ParamError(f"particle.diameter = {self.particle.diameter} m does not fit the {BOX[0]} m box")
 
 
-def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0) -> float:
+def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0,
+                  reference: np.ndarray | None = None) -> float:
     """Largest relative deviation ``|gap(t_k) - gap_exp(t_k)| / gap_exp(t_k)`` over the
-    experiment's samples with ``gap_exp >= up_to`` inside the simulated time span."""
-    ref = tencate2002.GAP[case]
+    experiment's samples with ``gap_exp >= up_to`` inside the simulated time span; ``reference``
+    (t, gap/d) replaces the measured gap curve ``tencate2002.GAP[case]`` (e.g. the one its
+    velocity curve gives, :func:`~fbmflow.scenes.data.tencate2002.gap_from_velocity`)."""
+    ref = tencate2002.GAP[case] if reference is None else reference
     sel = (ref[:, 1] >= up_to) & (ref[:, 0] >= t[0]) & (ref[:, 0] <= t[-1])
     sim = np.interp(ref[sel, 0], t, gap)
     return float(np.max(np.abs(sim - ref[sel, 1]) / ref[sel, 1])) if sel.any() else float("nan")
@@ -184,6 +187,9 @@ class TenCate(SimulationScene):
         return {"max_settling_velocity": u_max,
                 "max_settling_velocity_error": u_max / tencate2002.U_MAX[case] - 1.0,
                 "gap_max_deviation": gap_deviation(np.array(series["t"]), np.array(series["gap_over_d"]), case),
+                "gap_max_deviation_from_velocity": gap_deviation(
+                    np.array(series["t"]), np.array(series["gap_over_d"]), case,
+                    reference=tencate2002.gap_from_velocity(case)),
                 "cells_per_diameter": float(params.particle.diameter / sim.flow.mesh.finest_spacing.max()),
                 **series}
 
@@ -196,6 +202,7 @@ class TenCate(SimulationScene):
         fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
         ax[0].plot(q["t"], q["gap_over_d"], label="fbmflow")
         ax[0].plot(*tencate2002.GAP[case].T, "o", mfc="none", label="ten Cate et al. 2002 (PIV)")
+        ax[0].plot(*tencate2002.gap_from_velocity(case).T, "k:", label="their velocity curve, integrated")
         ax[0].set_ylabel("gap / d")
         ax[1].plot(q["t"], q["settling_velocity"], label="fbmflow")
         ax[1].plot(*tencate2002.VELOCITY[case].T, "o", mfc="none", label="ten Cate et al. 2002 (PIV)")
