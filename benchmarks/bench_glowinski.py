@@ -1,11 +1,14 @@
 """Glowinski's free fall of a disk: convergence in the mesh level and in the time step.
 
 Run:  python benchmarks/bench_glowinski.py [--levels 2 3 4] [--dts 0.004 0.002 0.001] [--dt-level 3]
-      [--mesh graded|uniform] [--boundary sharp|nodes] [--t-end 0.65] [--reuse]
+      [--mesh graded|uniform] [--boundary sharp|nodes] [--scheme crank-nicolson|backward-euler]
+      [--t-end 0.65] [--reuse]
 
-Writes ``benchmarks/results/glowinski.md``, ``.json`` and ``.png`` for the scene's default sharp
-fictitious boundary (``glowinski-nodes.*`` with ``--boundary nodes``, ``glowinski-uniform.*``
-with ``--mesh uniform``, an older study with the nodal boundary): per run the level, cells
+Writes ``benchmarks/results/glowinski.md``, ``.json`` and ``.png`` for the scene's defaults (sharp
+fictitious boundary, Crank–Nicolson with the trapezoidal particle integrator; ``glowinski-be.*``
+with ``--scheme backward-euler``, backward Euler with semi-implicit Euler), ``glowinski-nodes.*``
+with ``--boundary nodes`` and ``glowinski-uniform.*`` with ``--mesh uniform`` (older studies of the
+nodal boundary, with backward Euler, that ``--boundary nodes`` picks by default): per run the level, cells
 across the diameter, unknowns, time step, wall time (JIT excluded: a short warm-up run first),
 maximum settling velocity and Reynolds number, final height, the relative change of the
 maximum settling velocity against the next finer run, its deviation from Koblitz et al.'s (2017)
@@ -31,9 +34,13 @@ from fbmflow.scenes.data import koblitz2017
 RESULTS = Path(__file__).parent / "results"
 
 
-def run(scene, level, dt, t_end, mesh="graded", boundary="sharp"):
-    params = from_dict(scene.Params, {"time": {"dt": dt, "t_end": t_end}, "domain": {"mesh": mesh},
-                                      "fbm": {"boundary": boundary}})
+INTEGRATOR = {"crank-nicolson": "trapezoidal", "backward-euler": "semi-implicit-euler"}  # second / first order
+
+
+def run(scene, level, dt, t_end, mesh="graded", boundary="sharp", scheme="crank-nicolson"):
+    params = from_dict(scene.Params, {"time": {"dt": dt, "t_end": t_end, "scheme": scheme},
+                                      "coupling": {"integrator": INTEGRATOR[scheme]},
+                                      "domain": {"mesh": mesh}, "fbm": {"boundary": boundary}})
     t0 = time.perf_counter()
     result = scene.run(params, level, stop_on_failure=True)
     q = result.quantities
@@ -85,16 +92,23 @@ def main():
     ap.add_argument("--mesh", default="graded", choices=("graded", "uniform"),
                     help="graded: uniform cells along the disk's path only (domain.mesh)")
     ap.add_argument("--boundary", default="sharp", choices=("sharp", "nodes"), help="fbm.boundary")
+    ap.add_argument("--scheme", choices=tuple(INTEGRATOR),
+                    help="time.scheme, with the trapezoidal (Crank–Nicolson) or semi-implicit Euler (backward "
+                         "Euler) particle integrator; default: crank-nicolson for the sharp boundary, "
+                         "backward-euler for the nodal one (its stored study)")
     ap.add_argument("--reuse", action="store_true",
                     help="take runs already in the results file instead of running them again")
     args = ap.parse_args()
     scene = get_scene("glowinski-free-fall")
-    if args.mesh == "uniform" and args.boundary == "sharp":
-        ap.error("the uniform-mesh study is one of the nodal boundary (--boundary nodes)")
+    if args.mesh == "uniform" and (args.boundary == "sharp" or args.scheme == "crank-nicolson"):
+        ap.error("the uniform-mesh study is one of the nodal boundary with backward Euler (--boundary nodes)")
+    scheme = args.scheme or ("crank-nicolson" if args.boundary == "sharp" else "backward-euler")
     if args.mesh == "uniform":
         stem = "glowinski-uniform"
+    elif args.boundary == "nodes":
+        stem = "glowinski-nodes" + ("" if scheme == "backward-euler" else "-cn")
     else:
-        stem = "glowinski" if args.boundary == "sharp" else "glowinski-nodes"
+        stem = "glowinski" + ("" if scheme == "crank-nicolson" else "-be")
     run(scene, 0, 0.002, 0.004)  # JIT warm-up
     RESULTS.mkdir(exist_ok=True)
     mesh_rows, time_rows = [], []
@@ -111,7 +125,7 @@ def main():
                 if r in done:
                     print(f"level {level} dt {dt}: reused ({r['wall_s']:.1f} s, v_max {r['max_settling_velocity']:.4f} cm/s)")
                 return r
-        return run(scene, level, dt, args.t_end, args.mesh, args.boundary)
+        return run(scene, level, dt, args.t_end, args.mesh, args.boundary, scheme)
 
     def save():  # after every run, so that an interrupted study keeps what it measured
         (RESULTS / f"{stem}.json").write_text(json.dumps({"mesh": mesh_rows, "time": time_rows}))
@@ -131,7 +145,8 @@ def main():
     time_rows.sort(key=lambda r: -r["dt"])
     lines = [f"# Glowinski free fall of a disk, {args.boundary} fictitious boundary (benchmarks/bench_glowinski.py)", "",
              f"Disk d = 0.25 cm, rho_s/rho_f = 1.25, 2 x 6 cm closed channel, {args.mesh} mesh, {args.boundary} "
-             "fictitious boundary, implicit coupling, backward Euler; wall time without the JIT compilation.",
+             f"fictitious boundary, implicit coupling, {scheme} with the {INTEGRATOR[scheme]} particle integrator; "
+             "wall time without the JIT compilation (runs measured with other jobs beside them).",
              f"References: Koblitz et al. (2017), overset grid: v_max {koblitz2017.V_MAX:.3f} cm/s "
              f"(Re_max {koblitz2017.RE_MAX:.2f}); Glowinski et al. (2001) and Wan & Turek (2006): Re_max about 17.3. "
              "'curve vs Koblitz': largest |v - v_Koblitz| / v_max,Koblitz for t >= 0.05 s.", "",

@@ -191,6 +191,15 @@ class CouplingParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class SecondOrderCouplingParams(CouplingParams):
+    """Fluid–particle coupling, second order in time with ``time.scheme = "crank-nicolson"``."""
+
+    integrator: str = param("trapezoidal", "particle integrator: semi-implicit-euler (first order) "
+                            "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
+                            "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))
+
+
+@dataclasses.dataclass(frozen=True)
 class FictitiousBoundaryParams:
     """How particles and obstacles meet the mesh (docs/method.md, "Particles as fictitious
     boundaries")."""

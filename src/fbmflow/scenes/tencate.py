@@ -25,8 +25,8 @@ import numpy as np
 
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (CouplingParams, FictitiousBoundaryParams, ParamError, RepulsionParams, SolverParams,
-                      TimeParams, param, section)
+from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SecondOrderCouplingParams,
+                      SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
 from ..simulation import Simulation
 from ..solvers.linear import pardiso_available
@@ -81,15 +81,6 @@ class TenCateTime(TimeParams):
 
 
 @dataclass(frozen=True)
-class TenCateCoupling(CouplingParams):
-    """Fluid–particle coupling (second-order particle integrator by default)."""
-
-    integrator: str = param("trapezoidal", "particle integrator: semi-implicit-euler (first order) "
-                            "or trapezoidal (second order with time.scheme = crank-nicolson)",
-                            choices=("semi-implicit-euler", "trapezoidal"))
-
-
-@dataclass(frozen=True)
 class TenCateParams:
     """Parameters of ``ten-cate``."""
 
@@ -97,7 +88,7 @@ class TenCateParams:
     particle: TenCateParticle = section(TenCateParticle)
     domain: TenCateDomain = section(TenCateDomain)
     time: TenCateTime = section(TenCateTime)
-    coupling: TenCateCoupling = section(TenCateCoupling)
+    coupling: SecondOrderCouplingParams = section(SecondOrderCouplingParams)
     fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
     repulsion: RepulsionParams = section(RepulsionParams)
     solver: SolverParams = section(SolverParams)
