@@ -185,12 +185,13 @@ def test_symmetry_plane_must_pass_through_the_particle():
         Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))
 
 
-@pytest.mark.parametrize("fbm", ["nodes", "sharp"])
-def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm):
+@pytest.mark.parametrize("fbm, force", [("nodes", "volume"), ("sharp", "volume"), ("sharp", "test-function")])
+def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, force):
     """A sphere falling on the axis of a small box: the quarter with slip planes x = y = 0.5 and
     mirrored forces reproduces the whole box (implicit coupling, 6 -> 1 iterated component), with
     either boundary (the sharp one has ghost nodes on the planes, their normal velocity held by
-    the slip condition)."""
+    the slip condition) and either force (the test function crosses the planes); the coupling's
+    Newton step, with the force's linearisation, converges at once."""
     from fbmflow.flow import NoSlip, Slip
     from fbmflow.mesh import StructuredMesh
     from fbmflow.particles import Ball, Particles
@@ -203,7 +204,8 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm):
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
         sim = Simulation(mesh, 0.5, bc, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]),
-                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else (), fbm=fbm)
+                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else (), fbm=fbm,
+                         force=force)
         reps = [sim.step(0.01) for _ in range(2)]
         return np.array([r.velocity[0] for r in reps]), reps[-1].flow_solves
 
@@ -389,3 +391,14 @@ def test_trapezoidal_integrator_with_crank_nicolson_is_stable_and_resumes_exactl
     assert np.abs(ra.velocity - rb.velocity).max() <= 1e-12 * np.abs(ra.velocity).max()
     with pytest.raises(ValueError, match="last step's forces"):
         b.set_state({k: val for k, val in state.items() if k not in ("last_force", "last_torque")})
+
+
+def test_unknown_force_is_refused():
+    from fbmflow.flow import NoSlip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+    mesh = StructuredMesh.box((4, 4))
+    with pytest.raises(ValueError, match="unknown hydrodynamic force 'surface'"):
+        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.2, 2)], 1.5, [[0.5, 0.5]]),
+                   [0.0, -9.81], force="surface")

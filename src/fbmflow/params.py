@@ -207,6 +207,14 @@ class FictitiousBoundaryParams:
     boundary: str = param("sharp", "nodes: every velocity node inside a particle moves rigidly (first order "
                           "in the mesh size); sharp: the no-slip condition on the true surface (balls, "
                           "boxes and cylinders; direct solver)", choices=("nodes", "sharp"))
+    force: str = param("volume", "hydrodynamic force: volume (-int sigma . grad alpha over the cut cells; "
+                       "first order with the sharp boundary) or test-function (the momentum balance "
+                       "tested with a function that is one on the particle, its gradient in the fluid "
+                       "cells beyond the cut ones)", choices=("volume", "test-function"))
+
+    def settings(self) -> dict:
+        """Keyword arguments of :class:`~fbmflow.simulation.Simulation` for these settings."""
+        return dict(fbm=self.boundary, force=self.force)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import (hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings,
+from .coupling import (TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings,
                        sharp_boundary, supports_sharp_boundary)
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
@@ -77,6 +77,10 @@ class Simulation:
     fbm : ``nodes`` (every node inside a particle moves rigidly; first order in the mesh size) or
         ``sharp`` (the no-slip condition on the true surface, :mod:`fbmflow.coupling.sharp`;
         shapes with ``project``, the direct linear solver)
+    force : ``volume`` (``-int sigma . grad alpha`` over the cut cells,
+        :func:`~fbmflow.coupling.hydrodynamic_forces`) or ``test-function`` (the momentum balance
+        tested with a function that is one on the particle, :class:`~fbmflow.coupling.TestFunctionForces`;
+        ``du/dt`` is the step's mean acceleration ``(u - u_old) / dt``)
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
@@ -84,7 +88,7 @@ class Simulation:
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
                  coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
                  symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1,
-                 fbm: str = "nodes"):
+                 fbm: str = "nodes", force: str = "volume"):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
         if contact is not None and integrator != "semi-implicit-euler":
@@ -94,10 +98,14 @@ class Simulation:
             raise ValueError(f"contact_substeps must be >= 1, got {contact_substeps}")
         if fbm not in FBM_BOUNDARIES:
             raise ValueError(f"unknown fictitious boundary {fbm!r}; choose one of {FBM_BOUNDARIES}")
+        if force not in FORCES:
+            raise ValueError(f"unknown hydrodynamic force {force!r}; choose one of {FORCES}")
         if fbm == "sharp" and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                              "(Ball, Box, Cylinder); use fbm='nodes' for the others")
         self.fbm = fbm
+        self.force = force
+        self._tested_of = None  # the test functions of the current state (force = test-function)
         self.contact = contact
         self.contact_substeps = int(contact_substeps)
         self._contact_report = None
@@ -140,7 +148,7 @@ class Simulation:
         p = self.particles
         key = np.concatenate([p.position.ravel(), np.ravel(p.orientation)])
         if self._owner_of is None or not np.array_equal(self._owner_of, key):
-            self._owner_cache, self._sharp_of, self._owner_of = {}, None, key
+            self._owner_cache, self._sharp_of, self._tested_of, self._owner_of = {}, None, None, key
         if id(V) not in self._owner_cache:
             self._owner_cache[id(V)] = node_owner(V, p.position, p.shapes, p.rotations())
         return self._owner_cache[id(V)]
@@ -166,16 +174,35 @@ class Simulation:
         sharp = self._sharp(V)
         return rigid if sharp is None else sharp.constraints(rigid, v.velocity, v.angular_velocity)
 
-    def _forces(self, owner: np.ndarray, x: np.ndarray):
-        """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for flow ``x``."""
+    def _forces(self, owner: np.ndarray, x: np.ndarray, dt: float, about: np.ndarray | None = None):
+        """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for the flow ``x``
+        at the end of a step of length ``dt`` from ``self.x``; with ``about`` (a flow), ``x`` is a
+        change of that flow and the result the force's change (linear in ``x``)."""
         space = self.flow.space
-        force, torque = hydrodynamic_forces(space, owner, self.particles.position, x[:space.n_u],
-                                            x[space.n_u:], self.flow.mu)
+        n_u = space.n_u
+        if self.force == "volume":
+            force, torque = hydrodynamic_forces(space, owner, self.particles.position, x[:n_u], x[n_u:],
+                                                self.flow.mu)
+        else:
+            tested = self._test_functions(owner)
+            if about is None:
+                force, torque = tested(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho, u_old=self.x[:n_u], dt=dt)
+            else:
+                force, torque = tested(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho, dt=dt, about=about[:n_u])
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
+    def _test_functions(self, owner: np.ndarray) -> TestFunctionForces:
+        """The force's test functions for the current particle state (computed once per state)."""
+        if self._tested_of is None:
+            p, space = self.particles, self.flow.space
+            fixed = self.flow.fine.boundary_constraints.dofs
+            walls = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
+            self._tested_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
+        return self._tested_of
 
     def _flow_and_forces(self, dt: float):
         x, reports = advance(self.flow, self.x, self.t, dt, self.scheme)
-        force, torque = self._forces(self._owner(self.flow.space.V), x)
+        force, torque = self._forces(self._owner(self.flow.space.V), x, dt)
         return x, reports, force, torque
 
     def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
@@ -307,7 +334,7 @@ class Simulation:
         dF = np.zeros((len(dX),) + force.shape)
         dT = np.zeros((len(dX),) + torque.shape)
         for k, dx in enumerate(dX):
-            dF[k], dT[k] = self._forces(owner, dx)
+            dF[k], dT[k] = self._forces(owner, dx, dt, about=x)
             sens[:, :, k] = np.column_stack([dF[k], dT[k][:, 2:] if p.dim == 2 else dT[k]])
         J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
         guess = p.copy()
@@ -366,3 +393,4 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
 
 COUPLINGS = ("explicit", "implicit")
 FBM_BOUNDARIES = ("nodes", "sharp")
+FORCES = ("volume", "test-function")

@@ -1,13 +1,15 @@
 """Hydrodynamic forces and torques on fictitious-boundary particles: the volume integral over the
-cells cut by each particle, and, for steady flows past bodies at rest, the integral against a test
-function that is one on the body and falls to zero within the next layer of cells."""
+cells cut by each particle, and the momentum balance tested with a function that is one on the
+particle and falls to zero within the next layer of cells."""
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..fem.quadrature import gauss_tensor
 from ..fem.space import FlowSpace
 from . import _kernels
+from .indicator import periodic_offset
 
 
 def cut_cells(space: FlowSpace, owner: np.ndarray) -> np.ndarray:
@@ -49,57 +51,118 @@ def mirror_images(force: np.ndarray, torque: np.ndarray, axes) -> tuple[np.ndarr
     return F, T
 
 
-def steady_test_function_forces(space: FlowSpace, owner: np.ndarray, centres: np.ndarray, shapes: list,
-                                u: np.ndarray, p: np.ndarray, mu: float, rho: float,
-                                fixed: np.ndarray | None = None, n_1d: int = 8):
-    """Force (n, dim) and torque (n, 3) on bodies at rest in a steady flow,
+class TestFunctionForces:
+    """Force and torque on particles from the momentum balance tested with ``psi_i e``:
 
-        F_i = -int_fluid [rho ((u . grad) u) psi_i + sigma grad psi_i] dx,
-        T_i = -int_fluid (x - X_i) x [rho ((u . grad) u) psi_i + sigma grad psi_i] dx,
+        F_i = -int_fluid [rho (du/dt + (u . grad) u) psi_i + sigma grad psi_i] dx,
+        T_i = -int_fluid (x - X_i) x [rho (du/dt + (u . grad) u) psi_i + sigma grad psi_i] dx,
 
-    the momentum balance tested with ``psi_i e`` (exact for the continuous flow whenever
-    ``psi_i`` is one on body ``i``'s surface and zero on every other wall; Schaefer & Turek's
-    volume integral). ``psi_i`` is the Q2 function that is one on the nodes of every cell with a
-    node of body ``i`` and zero elsewhere and on the ``fixed`` nodes (walls, ``(k,)`` int64) that
-    ``i`` does not own, so its gradient lies in the fluid cells around the cut cells, where the
-    flow is resolved, rather than in the cut cells themselves (with the sharp boundary the
-    cut-cell volume force converges to first order only). The fluid part of the cells is found
-    with the shapes' inside test on a Gauss rule of ``n_1d`` points per axis (axis-aligned
-    cells of a tensor-product mesh). Bodies at rest, unrotated; ``u (dim n_v,)``, ``p (n_p,)``.
+    ``sigma = -p I + mu (grad u + grad u^T)``. For the continuous flow this is exactly the surface
+    force whenever ``psi_i`` is one on particle ``i``'s surface and zero on the walls and the other
+    particles (Schaefer & Turek's volume integral; the body force is absent, gravity acting on
+    the particles as buoyancy). ``psi_i`` is the Q2 function that is one on the nodes of every
+    cell with a node of particle ``i`` and zero elsewhere, on the ``walls`` and on the other
+    particles' nodes, so its gradient lies in the fluid cells around the cut cells, where the flow
+    is resolved, rather than in the cut cells themselves (with the sharp boundary the cut-cell
+    volume force converges to first order only). The fluid part of the cells is found with the
+    shapes' inside test on a Gauss rule of ``n_1d`` points per axis (tensor-product meshes).
+
+    ``du/dt`` is ``(u - u_old) / dt`` (the step's mean acceleration; omitted for a steady flow).
+    Built once per particle state, all particles together: (cell, particle) pairs, one
+    vectorised inside test per distinct shape object.
+
+    Parameters
+    ----------
+    space : FlowSpace
+    owner : (n_v,) int64, the particle of every velocity node (-1: fluid)
+    centres : (n, dim) float64
+    shapes : list of n shapes with ``inside``
+    rotations : (n, dim, dim) float64, body-to-world (identity if None)
+    walls : (k,) int64, velocity nodes held by the domain's walls (zero in every ``psi_i``)
+    n_1d : Gauss points per axis of the fluid-part rule
     """
-    V, mesh, d = space.V, space.mesh, space.dim
-    n_v, cd = V.n_dofs, V.cell_dofs
-    xi, w = gauss_tensor(d, n_1d)
-    phi, dphi = V.element.tabulate(xi)
-    uu = u.reshape(d, n_v)
-    force, torque = np.zeros((len(shapes), d)), np.zeros((len(shapes), 3))
-    for i, shape in enumerate(shapes):
-        psi_nodes = np.zeros(n_v)
-        psi_nodes[np.unique(cd[(owner[cd] == i).any(axis=1)])] = 1.0
-        if fixed is not None:
-            psi_nodes[fixed[owner[fixed] != i]] = 0.0
-        pc = psi_nodes[cd]
-        cells = np.flatnonzero(pc.max(axis=1) > 0)
-        corners = mesh.vertices[mesh.cell_vertices[cells]]
+
+    def __init__(self, space: FlowSpace, owner: np.ndarray, centres: np.ndarray, shapes: list,
+                 rotations: np.ndarray | None = None, walls: np.ndarray | None = None, n_1d: int = 8):
+        V, mesh, d = space.V, space.mesh, space.dim
+        cd, n_v, n_b = V.cell_dofs, V.n_dofs, len(shapes)
+        n_cells, nl = cd.shape
+        cell_node = sp.csr_matrix((np.ones(cd.size), cd.ravel(), np.arange(0, cd.size + 1, nl)),
+                                  shape=(n_cells, n_v))
+        own = owner[cd]
+        c, a = np.nonzero(own >= 0)
+        core = sp.csr_matrix((np.ones(c.size), (c, own[c, a])), shape=(n_cells, n_b))
+        psi = (cell_node.T @ core).tocoo()                       # nodes of the particles' cells
+        blocked = np.zeros(n_v, dtype=bool)
+        if walls is not None:
+            blocked[walls] = True
+        keep = (owner[psi.row] == psi.col) | (~blocked[psi.row] & (owner[psi.row] < 0))
+        psi_nodes = sp.csr_matrix((np.ones(keep.sum()), (psi.row[keep], psi.col[keep])), shape=(n_v, n_b))
+        pairs = (cell_node @ psi_nodes).tocoo()                  # cells where psi_i is not zero
+        self.cells, self.body = pairs.row.astype(np.int64), pairs.col.astype(np.int64)
+        nodes = cd[self.cells]
+        pc = np.asarray(psi_nodes[nodes.ravel(), np.repeat(self.body, nl)]).reshape(nodes.shape)
+        xi, w = gauss_tensor(d, n_1d)
+        self.phi, dphi = V.element.tabulate(xi)
+        corners = mesh.vertices[mesh.cell_vertices[self.cells]]
         lo, h = corners.min(axis=1), corners.max(axis=1) - corners.min(axis=1)
-        x = lo[:, None, :] + 0.5 * (xi[None, :, :] + 1.0) * h[:, None, :]       # (n_c, nq, d)
-        rel = x - centres[i]
-        fluid = ~shape.inside(rel.reshape(-1, d)).reshape(rel.shape[:2])
-        grad_phi = dphi[None, :, :, :] * (2.0 / h)[:, None, None, :]            # (n_c, nq, nl, d)
-        ul = uu[:, cd[cells]]                                                     # (d, n_c, nl)
-        uq = np.einsum("jca,qa->cqj", ul, phi)
-        gu = np.einsum("jca,cqak->cqjk", ul, grad_phi)                            # d u_j / d x_k
-        psi_q = np.einsum("ca,qa->cq", pc[cells], phi)
-        gpsi = np.einsum("ca,cqak->cqk", pc[cells], grad_phi)
-        pl = p.reshape(-1, d + 1)[cells]
-        pq = pl[:, None, 0] + np.einsum("cl,ql->cq", pl[:, 1:], xi)               # P1disc, axis-aligned
+        x = lo[:, None, :] + 0.5 * (xi[None, :, :] + 1.0) * h[:, None, :]       # (m, nq, d)
+        self.rel = periodic_offset(V, x.reshape(-1, d), np.repeat(centres[self.body], len(w), axis=0))
+        body_rel = self.rel if rotations is None else \
+            np.einsum("kd,kde->ke", self.rel, np.repeat(rotations[self.body], len(w), axis=0))
+        self.rel = self.rel.reshape(x.shape)
+        fluid = np.ones(body_rel.shape[0], dtype=bool)
+        group = np.unique(np.array([id(s) for s in shapes], dtype=np.int64), return_inverse=True)[1]
+        point_group = np.repeat(group[self.body], len(w))
+        for g, k in enumerate(np.unique(group, return_index=True)[1]):
+            rows = np.flatnonzero(point_group == g)
+            fluid[rows] = ~shapes[k].inside(body_rel[rows])
+        self.weight = fluid.reshape(x.shape[:2]) * w[None, :] * np.prod(0.5 * h, axis=1)[:, None]
+        self.grad_phi = dphi[None, :, :, :] * (2.0 / h)[:, None, None, :]       # (m, nq, nl, d)
+        self.psi_q = pc @ self.phi.T                                            # (m, nq)
+        self.grad_psi = np.einsum("ca,cqak->cqk", pc, self.grad_phi)
+        Q = space.Q
+        self.pressure_basis = Q.element.tabulate(x, Q.centre[self.cells][:, None, :], Q.scale[self.cells][:, None, :])
+        self.n_particles, self.dim, self.n_v, self.nodes = n_b, d, n_v, nodes
+
+    def _velocity(self, u: np.ndarray):
+        """Values (m, nq, d) and gradients (m, nq, d, d) (``d u_j / d x_k``) of ``u (dim n_v,)``."""
+        ul = u.reshape(self.dim, self.n_v)[:, self.nodes]                         # (d, m, nl)
+        return np.einsum("jca,qa->cqj", ul, self.phi), np.einsum("jca,cqak->cqjk", ul, self.grad_phi)
+
+    def __call__(self, u: np.ndarray, p: np.ndarray, mu: float, rho: float, u_old: np.ndarray | None = None,
+                 dt: float | None = None, about: np.ndarray | None = None):
+        """Force (n, dim) [N] and torque (n, 3) [N m] of the flow ``u (dim n_v,)``, ``p (n_p,)``.
+
+        ``u_old`` and ``dt``: the step's start velocity and length (du/dt = (u - u_old) / dt).
+        ``about``: the velocity of a flow to linearise about; ``u, p`` are then a change of it
+        (``du, dp``) and the result the change of the force, with ``du / dt`` for the time
+        derivative and ``(about . grad) du + (du . grad) about`` for the convection.
+        """
+        uq, gu = self._velocity(u)
+        if about is None:
+            accel = np.einsum("cqjk,cqk->cqj", gu, uq)
+            if u_old is not None:
+                accel += (uq - self._velocity(u_old)[0]) / dt
+        else:
+            aq, ga = self._velocity(about)
+            accel = np.einsum("cqjk,cqk->cqj", gu, aq) + np.einsum("cqjk,cqk->cqj", ga, uq)
+            if dt is not None:
+                accel += uq / dt
+        d = self.dim
+        pq = np.einsum("cqm,cm->cq", self.pressure_basis, p.reshape(-1, d + 1)[self.cells])
         sigma = mu * (gu + np.swapaxes(gu, 2, 3))
         sigma[..., np.arange(d), np.arange(d)] -= pq[..., None]
-        f = rho * np.einsum("cqjk,cqk->cqj", gu, uq) * psi_q[..., None] + np.einsum("cqjk,cqk->cqj", sigma, gpsi)
-        weight = fluid * w[None, :] * np.prod(0.5 * h, axis=1)[:, None]
-        force[i] = -np.einsum("cqj,cq->j", f, weight)
+        f = -(rho * accel * self.psi_q[..., None] + np.einsum("cqjk,cqk->cqj", sigma, self.grad_psi))
+        f *= self.weight[..., None]
+        force = np.zeros((self.n_particles, d))
+        np.add.at(force, self.body, f.sum(axis=1))
+        r = self.rel
         if d == 2:
-            torque[i, 2] = -np.sum(weight * (rel[..., 0] * f[..., 1] - rel[..., 1] * f[..., 0]))
+            t = np.zeros((len(self.cells), 3))
+            t[:, 2] = np.sum(r[..., 0] * f[..., 1] - r[..., 1] * f[..., 0], axis=1)
         else:
-            torque[i] = -np.einsum("cqj,cq->j", np.cross(rel, f), weight)
-    return force, torque
+            t = np.cross(r, f).sum(axis=1)
+        torque = np.zeros((self.n_particles, 3))
+        np.add.at(torque, self.body, t)
+        return force, torque

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner, steady_test_function_forces
+from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner, TestFunctionForces
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
@@ -117,8 +117,8 @@ class _DFGScene(Scene):
         owner = node_owner(space.V, centres, [cylinder])
         if sharp:  # the cut-cell volume force converges to first order only with the sharp boundary
             walls = problem.constraints().fixed
-            force, _ = steady_test_function_forces(space, owner, centres, [cylinder], u, p, f.viscosity,
-                                                   f.density, walls[walls < space.n_v])
+            tested = TestFunctionForces(space, owner, centres, [cylinder], walls=walls[walls < space.n_v])
+            force, _ = tested(u, p, f.viscosity, f.density)
         else:
             force, _ = hydrodynamic_forces(space, owner, centres, u, p, f.viscosity)
         mean = self.mean_inflow(f.max_inflow)

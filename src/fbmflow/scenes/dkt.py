@@ -119,7 +119,7 @@ class DKT2D(SimulationScene):
                          [0.0, -c.gravity], density=s["rho_f"], scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         fbm=params.fbm.boundary,
+                         **params.fbm.settings(),
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"]),
                          contact_substeps=params.contact.substeps)

@@ -123,7 +123,7 @@ class GlowinskiFreeFall(SimulationScene):
                          [0.0, -f.gravity], density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         fbm=params.fbm.boundary,
+                         **params.fbm.settings(),
                          repulsion=params.repulsion.make(mesh))
         n_steps = params.time.n_steps
         return Setup(sim, params.time.t_end / n_steps, n_steps)

@@ -189,7 +189,7 @@ class _ManyParticles(SimulationScene):
                          density=f.density, scheme=params.time.scheme,
                          linear_solver="direct" if linear == "auto" else linear,
                          newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         fbm=params.fbm.boundary,
+                         **params.fbm.settings(),
                          repulsion=params.repulsion.make(mesh),
                          contact=params.contact.make(mesh, viscosity=f.viscosity),
                          contact_substeps=params.contact.substeps)

@@ -156,7 +156,7 @@ class TenCate(SimulationScene):
         sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
                          scheme=params.time.scheme, linear_solver=linear,
                          newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         fbm=params.fbm.boundary,
+                         **params.fbm.settings(),
                          symmetry=(0, 1) if quarter else (),
                          repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
                                                          else None))
