@@ -93,3 +93,23 @@ def test_mismatched_or_missing_checkpoint_is_refused(tmp_path, capsys):
     assert "no checkpoint" in capsys.readouterr().err
     assert main(["resume", str(tmp_path / "nowhere"), "--quiet"]) == 2
     assert main(["run", "cavity-2d", "--checkpoint-every", "2", "--out", str(tmp_path / "c")]) == 2
+
+
+def test_checkpoint_from_before_a_new_parameter_resumes_with_its_default(tmp_path, capsys):
+    """A checkpoint written before a parameter existed (here: without fbm.force) matches a run
+    that has the parameter at its default, and is refused when the run sets another value."""
+    from fbmflow.io import load_checkpoint, save_checkpoint
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
+                 "--checkpoint-every", "4", "--quiet", "--no-plot", "--out", str(tmp_path)]) == 0
+    state, meta, extra = load_checkpoint(tmp_path / "checkpoint.h5")
+    del meta["params"]["fbm"]["force"]
+    save_checkpoint(tmp_path / "checkpoint.h5", state, meta, extra)
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 0
+    with h5py.File(tmp_path / "run.h5") as f:
+        assert f["t"][-1] == pytest.approx(0.03) and f["t"].shape == (7,)
+    save_checkpoint(tmp_path / "checkpoint.h5", state, meta, extra)
+    info = json.loads((tmp_path / "run.json").read_text())
+    info["params"]["fbm"]["force"] = "test-function"
+    (tmp_path / "run.json").write_text(json.dumps(info))
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 2
+    assert "another params" in capsys.readouterr().err

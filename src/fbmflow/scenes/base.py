@@ -106,7 +106,7 @@ class SimulationScene(Scene):
         fails in the last approach to a wall keeps the curve it computed)."""
         from pathlib import Path
 
-        from ..io import FieldWriter, RunData, load_checkpoint, save_checkpoint
+        from ..io import FieldWriter, RunData, save_checkpoint
         from ..solvers import ConvergenceError
 
         files = files or RunFiles()
@@ -117,7 +117,7 @@ class SimulationScene(Scene):
         out = Path(files.out) if files.out is not None else None
         data = None
         if files.resume:
-            state, _, extra = load_checkpoint(out / "checkpoint.h5", expect=files.meta)
+            state, extra = self._resume_checkpoint(out / "checkpoint.h5", params, files.meta)
             sim.set_state(state)
             series, newton_its = extra["series"], extra["newton_iterations"]
             log.info("resumed from step %d (t = %.6g)", sim.step_count, sim.t)
@@ -171,6 +171,26 @@ class SimulationScene(Scene):
                            steps=sim.step_count, newton_iterations=newton_its,
                            extra={} if failure is None else {"failure": failure},
                            linear_solver=sim.flow.linear_solver_description)
+
+    @staticmethod
+    def _resume_checkpoint(path, params, meta: dict) -> tuple[dict, dict]:
+        """``(state, extra)`` of the checkpoint at ``path`` if it belongs to the run described by
+        ``meta`` (CheckpointError otherwise). Its parameters are compared resolved with today's
+        defaults: a parameter added since it was written takes its default, which reproduces
+        the behaviour of the code that wrote it."""
+        from ..io import CheckpointError, load_checkpoint
+        from ..params import ParamError, from_dict, to_dict
+
+        state, saved, extra = load_checkpoint(path, expect={k: v for k, v in meta.items() if k != "params"})
+        if "params" in meta:
+            try:
+                resolved = to_dict(from_dict(type(params), saved.get("params")))
+            except ParamError as err:
+                resolved = f"<not valid today: {err}>"
+            if resolved != meta["params"]:
+                raise CheckpointError(f"checkpoint {path} is for another params ({resolved!r}, this run has "
+                                      f"{meta['params']!r}); resume it with its own settings or start afresh")
+        return state, extra
 
     @staticmethod
     def _row(sim, rep) -> dict:
