@@ -22,8 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import (TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, rigid_liftings,
-                       sharp_boundary, supports_sharp_boundary)
+from .coupling import (TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints,
+                       rigid_liftings, sharp_boundary, supports_sharp_boundary)
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
 from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
@@ -184,11 +184,9 @@ class Simulation:
             force, torque = hydrodynamic_forces(space, owner, self.particles.position, x[:n_u], x[n_u:],
                                                 self.flow.mu)
         else:
-            tested = self._test_functions(owner)
-            if about is None:
-                force, torque = tested(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho, u_old=self.x[:n_u], dt=dt)
-            else:
-                force, torque = tested(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho, dt=dt, about=about[:n_u])
+            u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
+            force, torque = self._test_functions(owner)(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho,
+                                                        u_old=u_old, dt=dt, about=linear)
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
     def _test_functions(self, owner: np.ndarray) -> TestFunctionForces:

@@ -107,10 +107,10 @@ class TestFunctionForces:
         corners = mesh.vertices[mesh.cell_vertices[self.cells]]
         lo, h = corners.min(axis=1), corners.max(axis=1) - corners.min(axis=1)
         x = lo[:, None, :] + 0.5 * (xi[None, :, :] + 1.0) * h[:, None, :]       # (m, nq, d)
-        self.rel = periodic_offset(V, x.reshape(-1, d), np.repeat(centres[self.body], len(w), axis=0))
-        body_rel = self.rel if rotations is None else \
-            np.einsum("kd,kde->ke", self.rel, np.repeat(rotations[self.body], len(w), axis=0))
-        self.rel = self.rel.reshape(x.shape)
+        rel = periodic_offset(V, x.reshape(-1, d), np.repeat(centres[self.body], len(w), axis=0))
+        body_rel = rel if rotations is None else \
+            np.einsum("kd,kde->ke", rel, np.repeat(rotations[self.body], len(w), axis=0))  # world -> body
+        self.rel = rel.reshape(x.shape)                                          # (m, nq, d)
         fluid = np.ones(body_rel.shape[0], dtype=bool)
         group = np.unique(np.array([id(s) for s in shapes], dtype=np.int64), return_inverse=True)[1]
         point_group = np.repeat(group[self.body], len(w))
