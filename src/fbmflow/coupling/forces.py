@@ -84,7 +84,7 @@ class TestFunctionForces:
 
     def __init__(self, space: FlowSpace, owner: np.ndarray, centres: np.ndarray, shapes: list,
                  rotations: np.ndarray | None = None, walls: np.ndarray | None = None, n_1d: int = 8):
-        V, mesh, d = space.V, space.mesh, space.dim
+        V = space.V
         cd, n_v, n_b = V.cell_dofs, V.n_dofs, len(shapes)
         n_cells, nl = cd.shape
         cell_node = sp.csr_matrix((np.ones(cd.size), cd.ravel(), np.arange(0, cd.size + 1, nl)),
@@ -99,31 +99,41 @@ class TestFunctionForces:
         keep = (owner[psi.row] == psi.col) | (~blocked[psi.row] & (owner[psi.row] < 0))
         psi_nodes = sp.csr_matrix((np.ones(keep.sum()), (psi.row[keep], psi.col[keep])), shape=(n_v, n_b))
         pairs = (cell_node @ psi_nodes).tocoo()                  # cells where psi_i is not zero
-        self.cells, self.body = pairs.row.astype(np.int64), pairs.col.astype(np.int64)
-        nodes = cd[self.cells]
-        pc = np.asarray(psi_nodes[nodes.ravel(), np.repeat(self.body, nl)]).reshape(nodes.shape)
+        cells, body = pairs.row.astype(np.int64), pairs.col.astype(np.int64)
+        self._quadrature(space, cells, body, centres, shapes, rotations, n_1d)
+        pc = np.asarray(psi_nodes[self.nodes.ravel(), np.repeat(body, nl)]).reshape(self.nodes.shape)
+        self.psi_q = pc @ self.phi.T                                            # (m, nq)
+        self.grad_psi = np.einsum("ca,cqak->cqk", pc, self.grad_phi)
+
+    def _quadrature(self, space: FlowSpace, cells: np.ndarray, body: np.ndarray, centres: np.ndarray,
+                    shapes: list, rotations: np.ndarray | None, n_1d: int) -> None:
+        """The fluid-part Gauss rule of ``n_1d`` points per axis on the (cell, particle) pairs
+        ``cells, body (m,)``: points ``x`` (m, nq, dim) as offsets ``rel`` from the particle's
+        centre, weights (zero inside any tested shape), Q2 basis values and gradients, P1disc
+        basis values. The test function itself (``psi_q``, ``grad_psi``) is the caller's."""
+        V, mesh, d = space.V, space.mesh, space.dim
+        self.cells, self.body = cells, body
+        self.nodes = V.cell_dofs[cells]
         xi, w = gauss_tensor(d, n_1d)
         self.phi, dphi = V.element.tabulate(xi)
-        corners = mesh.vertices[mesh.cell_vertices[self.cells]]
+        corners = mesh.vertices[mesh.cell_vertices[cells]]
         lo, h = corners.min(axis=1), corners.max(axis=1) - corners.min(axis=1)
         x = lo[:, None, :] + 0.5 * (xi[None, :, :] + 1.0) * h[:, None, :]       # (m, nq, d)
-        rel = periodic_offset(V, x.reshape(-1, d), np.repeat(centres[self.body], len(w), axis=0))
+        rel = periodic_offset(V, x.reshape(-1, d), np.repeat(centres[body], len(w), axis=0))
         body_rel = rel if rotations is None else \
-            np.einsum("kd,kde->ke", rel, np.repeat(rotations[self.body], len(w), axis=0))  # world -> body
+            np.einsum("kd,kde->ke", rel, np.repeat(rotations[body], len(w), axis=0))  # world -> body
         self.rel = rel.reshape(x.shape)                                          # (m, nq, d)
         fluid = np.ones(body_rel.shape[0], dtype=bool)
         group = np.unique(np.array([id(s) for s in shapes], dtype=np.int64), return_inverse=True)[1]
-        point_group = np.repeat(group[self.body], len(w))
+        point_group = np.repeat(group[body], len(w))
         for g, k in enumerate(np.unique(group, return_index=True)[1]):
             rows = np.flatnonzero(point_group == g)
             fluid[rows] = ~shapes[k].inside(body_rel[rows])
         self.weight = fluid.reshape(x.shape[:2]) * w[None, :] * np.prod(0.5 * h, axis=1)[:, None]
         self.grad_phi = dphi[None, :, :, :] * (2.0 / h)[:, None, None, :]       # (m, nq, nl, d)
-        self.psi_q = pc @ self.phi.T                                            # (m, nq)
-        self.grad_psi = np.einsum("ca,cqak->cqk", pc, self.grad_phi)
         Q = space.Q
-        self.pressure_basis = Q.element.tabulate(x, Q.centre[self.cells][:, None, :], Q.scale[self.cells][:, None, :])
-        self.n_particles, self.dim, self.n_v, self.nodes = n_b, d, n_v, nodes
+        self.pressure_basis = Q.element.tabulate(x, Q.centre[cells][:, None, :], Q.scale[cells][:, None, :])
+        self.n_particles, self.dim, self.n_v = len(shapes), d, V.n_dofs
 
     def _velocity(self, u: np.ndarray):
         """Values (m, nq, d) and gradients (m, nq, d, d) (``d u_j / d x_k``) of ``u (dim n_v,)``."""
