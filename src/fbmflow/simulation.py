@@ -125,14 +125,12 @@ class Simulation:
         self.integrator = integrator
         kwargs = {} if newton is None else {"newton": newton}
         self.flow = NavierStokesProblem(mesh, viscosity, boundary, density=density,
-                                        linear_solver=linear_solver, extra_constraints=self._constraints,
-                                        forecast_constraints=self._forecast if fbm == "sharp" else None,
-                                        **kwargs)
+                                        linear_solver=linear_solver,
+                                        extra_constraints=self._constraints, **kwargs)
         if fbm == "sharp" and self.flow.linear_solver.name != "direct":
             raise ValueError("the sharp fictitious boundary needs the direct linear solver "
                              f"(got {self.flow.linear_solver.name!r}); use linear_solver='direct' or fbm='nodes'")
         self.x = self.flow.zero_state()
-        self._dt: float | None = None  # the length of the step under way
         self.t = 0.0
         self.step_count = 0
         # hydrodynamic force (n, dim) and torque (n, 3) at the end of the last step (None before
@@ -175,24 +173,6 @@ class Simulation:
         rigid = rigid_body_constraints(V, self._owner(V), p.position, v.velocity, v.angular_velocity)
         sharp = self._sharp(V)
         return rigid if sharp is None else sharp.constraints(rigid, v.velocity, v.angular_velocity)
-
-    def _forecast(self, V, t) -> list:
-        """The sharp boundary's constraints of the particles moved on by 1 to
-        :data:`FORECAST_STEPS` steps of the current length at their current velocities (rotations
-        left as they are): its ghost rows and pressure extension change the sparsity pattern as
-        the particles cross the mesh, and a new PARDISO analysis reserves these patterns too, so
-        that the next steps can reuse it. Empty while no particle moves."""
-        p = self.particles
-        if self._dt is None or not np.any(p.velocity):
-            return []
-        out = []
-        for k in range(1, FORECAST_STEPS + 1):
-            position = p.position + (k * self._dt) * p.velocity
-            owner = node_owner(V, position, p.shapes, p.rotations())
-            rigid = rigid_body_constraints(V, owner, position, p.velocity, p.angular_velocity)
-            sharp = sharp_boundary(self.flow.space, owner, position, p.shapes, p.rotations())
-            out.append(sharp.constraints(rigid, p.velocity, p.angular_velocity))
-        return out
 
     def _forces(self, owner: np.ndarray, x: np.ndarray, dt: float, about: np.ndarray | None = None):
         """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for the flow ``x``
@@ -286,7 +266,6 @@ class Simulation:
     def step(self, dt: float) -> StepReport:
         """Advance flow and particles over ``dt``; ConvergenceError names the step and time."""
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
-        self._dt = dt
         flow_solves = 1
         self._contact_report = None
         try:
@@ -411,8 +390,5 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
 
 
 COUPLINGS = ("explicit", "implicit")
-# steps ahead whose sparsity patterns a new PARDISO analysis reserves (sharp boundary); measured
-# at ten-cate level 1: the analysis is about a third of a factorisation, which is two thirds of a step
-FORECAST_STEPS = 2
 FBM_BOUNDARIES = ("nodes", "sharp")
 FORCES = ("volume", "test-function")

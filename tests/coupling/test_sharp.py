@@ -13,7 +13,6 @@ from fbmflow.fem.constraints import RowConstraints
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball, Box, Cylinder
-from fbmflow.solvers.linear import pardiso_available
 
 RNG = np.random.default_rng(7)
 
@@ -259,32 +258,3 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
                                    sim._sharp(space.V).ghosts.liftings(free))[0]
     fd = (flow(1e-4) - flow(-1e-4)) / 2e-4
     assert np.abs(dX - fd).max() < 1e-7 * np.abs(fd).max()
-
-
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
-def test_forecast_patterns_let_pardiso_reuse_its_analysis(monkeypatch):
-    """A disk falling through the mesh (sharp boundary, implicit coupling, 4 cells per
-    diameter, up to 0.6 cells per step): its ghost rows change the sparsity pattern as it crosses
-    the nodes. Reserving the patterns of the next two steps' positions (``FORECAST_STEPS``) at
-    every new analysis lets PARDISO reuse it: 9 analyses in 12 steps instead of 13 measured,
-    the velocities the same to the solver's accuracy."""
-    import fbmflow.simulation as simulation
-    from fbmflow.particles import Particles
-    from fbmflow.solvers import DirectSolver
-
-    def fall(forecast_steps):
-        monkeypatch.setattr(simulation, "FORECAST_STEPS", forecast_steps)
-        mesh = StructuredMesh.box((32, 48), upper=(2.0, 3.0))
-        solver = DirectSolver("pardiso")
-        sim = simulation.Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
-                                    Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.03, 2.0]]), [0.0, -980.0],
-                                    linear_solver=solver, fbm="sharp", coupling="implicit",
-                                    scheme="crank-nicolson", integrator="trapezoidal")
-        velocity = np.array([sim.step(0.004).velocity[0] for _ in range(12)])
-        return velocity, solver.analysis.analyses
-
-    v_plain, plain = fall(0)
-    v_forecast, forecast = fall(2)
-    assert forecast < plain - 2, (forecast, plain)
-    assert v_plain[-1, 1] < -4.0  # it fell across several cells
-    np.testing.assert_allclose(v_forecast, v_plain, rtol=0, atol=1e-9 * np.abs(v_plain).max())

@@ -67,10 +67,6 @@ class NavierStokesProblem:
     extra_constraints : callable ``(DofMap, t) -> DirichletConstraints``, optional
         Further velocity constraints evaluated on every level (the fictitious boundaries of
         particles and obstacles); the box faces win where both constrain a DOF.
-    forecast_constraints : callable ``(DofMap, t) -> list[DirichletConstraints]``, optional
-        The extra constraints of states expected in the next steps (particles moved on): the
-        fine system's :attr:`~fbmflow.solvers.linear.SaddlePointSystem.forecast`, whose patterns
-        a new PARDISO analysis reserves.
     max_cell_reynolds : float, default 64
         Multigrid only: no level coarser than cell Reynolds number ``rho U h / mu`` of this,
         with ``U = max |u|`` at the first linearisation.
@@ -80,7 +76,7 @@ class NavierStokesProblem:
                  density: float = 1.0, body_force: Callable | None = None,
                  convection: bool = True, linear_solver="auto",
                  newton: NewtonSettings = NewtonSettings(), coarse_cells: int | None = None,
-                 max_cell_reynolds: float = 64.0, extra_constraints=None, forecast_constraints=None):
+                 max_cell_reynolds: float = 64.0, extra_constraints=None):
         if not viscosity > 0:
             raise ValueError(f"viscosity must be positive, got {viscosity}")
         if not density > 0:
@@ -103,7 +99,6 @@ class NavierStokesProblem:
                               else linear_solver)
         pressure_fixed = not pressure_is_determined(boundary)
         self.extra_constraints = extra_constraints
-        self.forecast_constraints = forecast_constraints
         self.fine = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
         self.space = self.fine.space
         self.M, self.L, self.BT = self.fine.M, self.fine.L, self.fine.BT
@@ -144,14 +139,10 @@ class NavierStokesProblem:
             if self._constraints is None:
                 self._constraints = build_constraints(self.space.V, self.boundary, t)
             return self._constraints
-        if self.extra_constraints is None:
-            return build_constraints(self.space.V, self.boundary, t)
-        return self._merged(self.extra_constraints(self.space.V, t), t)
-
-    def _merged(self, extra: DirichletConstraints, t: float) -> DirichletConstraints:
-        """The boundary's constraints at time ``t`` with ``extra`` (a particle state's), pockets
-        closed."""
-        return self._close_pockets(build_constraints(self.space.V, self.boundary, t).merged(extra))
+        con = build_constraints(self.space.V, self.boundary, t)
+        if self.extra_constraints is not None:
+            con = self._close_pockets(con.merged(self.extra_constraints(self.space.V, t)))
+        return con
 
     def _close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
         """Hold still the fluid nodes cut off from the main fluid by constrained nodes.
@@ -266,9 +257,6 @@ class NavierStokesProblem:
             self.coarse = [lv for lv in self.coarse if float(np.max(lv.mesh.spacing)) <= limit]
         args = (m, a, self.rho, self.mu, self.convection)
         system = self.fine.system(u, *args, con=con)
-        if self.forecast_constraints is not None:
-            system.forecast = lambda u=u: [self.fine.system(u, *args, con=self._merged(extra, t), own_buffer=True)
-                                           for extra in self.forecast_constraints(self.space.V, t)]
         finer_level, finer_system = self.fine, system
         for level in self.coarse:
             u = inject_velocity(u, level, finer_level.space.n_v)

@@ -63,11 +63,6 @@ class SaddlePointSystem:
         (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
         are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
         carry no pressure gradient, and no pressure mode counts as seen through them.
-    forecast : callable or None, ``forecast() -> list[SaddlePointSystem]``: systems of states
-        expected in the next time steps (particles moved on), whose constrained rows have other
-        sparsity patterns (the sharp boundary's). A factorisation that analyses afresh reserves
-        their patterns too (:class:`PardisoAnalysis`), so that it can reuse the analysis for
-        them; called only then.
     """
 
     A: sp.csr_matrix
@@ -82,7 +77,6 @@ class SaddlePointSystem:
     rows: np.ndarray | None = None
     gradient_BT: sp.csr_matrix | None = None
     extension: object = None
-    forecast: object = None
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
@@ -395,7 +389,8 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     if backend == "pardiso":
         reserve = None
         if analysis is not None:
-            reserve = lambda: _reserved_pattern(system, free)  # noqa: E731
+            npl = system.space.dim + 1 if system.space is not None else 1
+            reserve = lambda: _pressure_cell_pattern(system.n_u, system.n_p, npl, free)  # noqa: E731
         lu_solve = _pardiso(K_free[:, free], rtol=rtol, analysis=analysis, reserve=reserve)
     else:
         superlu = _superlu(K_free[:, free])
@@ -430,17 +425,6 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
         return x[:system.n_u], x[system.n_u:]
 
     return solve
-
-
-def _reserved_pattern(system: SaddlePointSystem, free: np.ndarray) -> sp.csr_matrix:
-    """What a new PARDISO analysis of ``system`` reduced to the unknowns ``free`` (n,) bool
-    reserves beyond its own pattern: the cells' pressure blocks (:func:`_pressure_cell_pattern`)
-    and the patterns of ``system.forecast``'s systems, reduced alike."""
-    npl = system.space.dim + 1 if system.space is not None else 1
-    P = _pressure_cell_pattern(system.n_u, system.n_p, npl, free)
-    for expected in (system.forecast() if system.forecast is not None else ()):
-        P = P + _ones(expected.matrix(bordered=False)[free][:, free])
-    return P
 
 
 def _pressure_cell_pattern(n_u: int, n_p: int, npl: int, free: np.ndarray) -> sp.csr_matrix:
