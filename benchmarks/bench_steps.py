@@ -9,8 +9,8 @@ written by ``fbmflow run ... --checkpoint-every N`` or by ``bench_tencate.py`` (
 folders). Both files are copied to a temporary folder; ``RUN_DIR`` is left as it is. The JIT
 compilation is done first by a two-step run of the scene at level 0 and not timed.
 
-Prints the steps, wall time, Newton iterations, linear factorisations, PARDISO's triangular
-solves (refinement steps included), the peak memory of the process and the scene's quantities
+Prints the steps, wall time, Newton iterations, linear factorisations (and how many of them
+analysed afresh), PARDISO's triangular solves (refinement steps included), the peak memory of the process and the scene's quantities
 (the time series' last values; full precision, to check that two versions compute the same).
 ``--set`` overrides a scene parameter for the timed steps, as ``fbmflow run --set`` does (e.g.
 ``solver.linear_rtol=1e-12``, PARDISO's refinement target in Newton steps).
@@ -57,21 +57,23 @@ def main() -> None:
     params = with_end((step + args.steps) * dt)
     scene.run(with_end(2 * dt), 0)  # JIT compilation, not timed
 
-    factorisations, lu_solves = [], []
-    factor, lu_solve = DirectSolver.factor, PardisoAnalysis.solve
+    factorisations, lu_solves, analyses = [], [], []
+    factor, lu_solve, factorise = DirectSolver.factor, PardisoAnalysis.solve, PardisoAnalysis._factorise
 
     DirectSolver.factor = lambda self, system: factorisations.append(1) or factor(self, system)
     PardisoAnalysis.solve = lambda self, M, B: lu_solves.append(1) or lu_solve(self, M, B)
+    PardisoAnalysis._factorise = lambda self, phase, M: analyses.append(phase == 12) or factorise(self, phase, M)
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("checkpoint.h5", "run.h5"):
             shutil.copy(args.run_dir / name, Path(tmp) / name)
         t0 = time.perf_counter()
         result = scene.run(params, meta["level"], None, RunFiles(tmp, 10**9, True, meta=meta))
         wall = time.perf_counter() - t0
-    DirectSolver.factor, PardisoAnalysis.solve = factor, lu_solve
+    DirectSolver.factor, PardisoAnalysis.solve, PardisoAnalysis._factorise = factor, lu_solve, factorise
     print(f"{meta['scene']} level {meta['level']}: steps {step} -> {result.steps} (dt {dt:g} s), "
           f"{wall:.1f} s ({wall / args.steps:.1f} s per step), Newton iterations "
-          f"{result.newton_iterations} (whole run), factorisations {len(factorisations)}, "
+          f"{result.newton_iterations} (whole run), factorisations {len(factorisations)} "
+          f"({sum(analyses)} with a new PARDISO analysis), "
           f"PARDISO triangular solves {len(lu_solves)}, overrides {args.overrides}, "
           f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.1f} GB")
     last = {k: (v[-1] if isinstance(v, list) else v) for k, v in result.quantities.items()
