@@ -142,13 +142,17 @@ def main():
     write(row)
 
 
+def pct(force: float, weight: float) -> str:
+    """``force`` and its deviation from ``weight``."""
+    return f"{force:.4e} ({force / weight - 1:+.1%})"
+
+
 def write(row: dict) -> None:
     path = RESULTS / "force_estimators.json"
     rows = json.loads(path.read_text()) if path.exists() else []
     rows = [r for r in rows if (r["case"], r["level"], round(r["t"], 6)) != (row["case"], row["level"], round(row["t"], 6))]
     rows.append(row)
     path.write_text(json.dumps(rows, indent=1))
-    pct = lambda f, w: f"{f:.4e} ({f / w - 1:+.1%})"  # noqa: E731
     lines = ["# Force estimators on one flow field (benchmarks/bench_force_estimators.py)", "",
              "Vertical hydrodynamic force [N] on the ten-cate sphere from one checkpointed flow, against the net "
              "weight (rho_s - rho_f) V g that it balances near terminal velocity. 'moving': the momentum balance "

@@ -10,8 +10,9 @@ folders). Both files are copied to a temporary folder; ``RUN_DIR`` is left as it
 compilation is done first by a two-step run of the scene at level 0 and not timed.
 
 Prints the steps, wall time, Newton iterations, linear factorisations (and how many of them
-analysed afresh), PARDISO's triangular solves (refinement steps included), the peak memory of the process and the scene's quantities
-(the time series' last values; full precision, to check that two versions compute the same).
+analysed afresh), PARDISO's triangular solves (refinement steps included), the peak memory of
+the process and the scene's quantities (the time series' last values; full precision, to check
+that two versions compute the same).
 ``--set`` overrides a scene parameter for the timed steps, as ``fbmflow run --set`` does (e.g.
 ``solver.linear_rtol=1e-12``, PARDISO's refinement target in Newton steps).
 """
