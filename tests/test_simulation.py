@@ -185,7 +185,8 @@ def test_symmetry_plane_must_pass_through_the_particle():
         Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))
 
 
-@pytest.mark.parametrize("fbm, force", [("nodes", "volume"), ("sharp", "volume"), ("sharp", "test-function")])
+@pytest.mark.parametrize("fbm, force", [("nodes", "volume"), ("sharp", "volume"), ("sharp", "test-function"),
+                                        ("sharp", "surface")])
 def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, force):
     """A sphere falling on the axis of a small box: the quarter with slip planes x = y = 0.5 and
     mirrored forces reproduces the whole box (implicit coupling, 6 -> 1 iterated component), with

@@ -210,7 +210,8 @@ class FictitiousBoundaryParams:
     force: str = param("volume", "hydrodynamic force: volume (-int sigma . grad alpha over the cut cells; "
                        "first order with the sharp boundary) or test-function (the momentum balance "
                        "tested with a function that is one on the particle, its gradient in the fluid "
-                       "cells beyond the cut ones)", choices=("volume", "test-function"))
+                       "cells beyond the cut ones) or surface (the traction integrated over the true "
+                       "surface; balls with the sharp boundary)", choices=("volume", "test-function", "surface"))
 
     def settings(self) -> dict:
         """Keyword arguments of :class:`~fbmflow.simulation.Simulation` for these settings."""

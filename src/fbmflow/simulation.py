@@ -22,11 +22,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import (TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints,
+from .coupling import (SurfaceForces, TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints,
                        rigid_liftings, sharp_boundary, supports_sharp_boundary)
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
-from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
+from .particles import (Ball, Particles, accelerations, integrate, pack_velocities, symmetric_motion,
                         unpack_velocities, velocity_gain)
 from .solvers import ConvergenceError
 
@@ -80,7 +80,9 @@ class Simulation:
     force : ``volume`` (``-int sigma . grad alpha`` over the cut cells,
         :func:`~fbmflow.coupling.hydrodynamic_forces`) or ``test-function`` (the momentum balance
         tested with a function that is one on the particle, :class:`~fbmflow.coupling.TestFunctionForces`;
-        ``du/dt`` is the step's mean acceleration ``(u - u_old) / dt``)
+        ``du/dt`` is the step's mean acceleration ``(u - u_old) / dt``) or ``surface`` (the
+        traction integrated over the true surface, :class:`~fbmflow.coupling.SurfaceForces`;
+        balls with the sharp boundary)
     """
 
     def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
@@ -103,9 +105,13 @@ class Simulation:
         if fbm == "sharp" and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                              "(Ball, Box, Cylinder); use fbm='nodes' for the others")
+        if force == "surface" and not (fbm == "sharp" and all(isinstance(s, Ball) for s in particles.shapes)):
+            raise ValueError("force='surface' integrates the traction over the true surface of balls with the "
+                             "sharp boundary (the nodal boundary's cut cells carry no flow up to the surface); "
+                             "use fbm='sharp' with balls, or force='volume'")
         self.fbm = fbm
         self.force = force
-        self._tested_of = None  # the test functions of the current state (force = test-function)
+        self._estimator_of = None  # the force's test functions or surface rule for the current state
         self.contact = contact
         self.contact_substeps = int(contact_substeps)
         self._contact_report = None
@@ -148,7 +154,7 @@ class Simulation:
         p = self.particles
         key = np.concatenate([p.position.ravel(), np.ravel(p.orientation)])
         if self._owner_of is None or not np.array_equal(self._owner_of, key):
-            self._owner_cache, self._sharp_of, self._tested_of, self._owner_of = {}, None, None, key
+            self._owner_cache, self._sharp_of, self._estimator_of, self._owner_of = {}, None, None, key
         if id(V) not in self._owner_cache:
             self._owner_cache[id(V)] = node_owner(V, p.position, p.shapes, p.rotations())
         return self._owner_cache[id(V)]
@@ -183,20 +189,26 @@ class Simulation:
         if self.force == "volume":
             force, torque = hydrodynamic_forces(space, owner, self.particles.position, x[:n_u], x[n_u:],
                                                 self.flow.mu)
+        elif self.force == "surface":
+            force, torque = self._estimator(owner)(x[:n_u], x[n_u:], self.flow.mu)
         else:
             u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
-            force, torque = self._test_functions(owner)(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho,
+            force, torque = self._estimator(owner)(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho,
                                                         u_old=u_old, dt=dt, about=linear)
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
-    def _test_functions(self, owner: np.ndarray) -> TestFunctionForces:
-        """The force's test functions for the current particle state (computed once per state)."""
-        if self._tested_of is None:
+    def _estimator(self, owner: np.ndarray):
+        """The force's test functions (TestFunctionForces) or surface rule (SurfaceForces) for the
+        current particle state (computed once per state)."""
+        if self._estimator_of is None and self.force == "surface":
+            p = self.particles
+            self._estimator_of = SurfaceForces(self.flow.space, p.position, p.shapes)
+        if self._estimator_of is None:
             p, space = self.particles, self.flow.space
             fixed = self.flow.fine.boundary_constraints.dofs
             walls = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
-            self._tested_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
-        return self._tested_of
+            self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
+        return self._estimator_of
 
     def _flow_and_forces(self, dt: float):
         x, reports = advance(self.flow, self.x, self.t, dt, self.scheme)
@@ -391,4 +403,4 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
 
 COUPLINGS = ("explicit", "implicit")
 FBM_BOUNDARIES = ("nodes", "sharp")
-FORCES = ("volume", "test-function")
+FORCES = ("volume", "test-function", "surface")

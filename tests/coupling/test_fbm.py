@@ -288,3 +288,55 @@ def test_test_function_force_linearisation_is_its_derivative(dim):
     for k in range(2):
         assert np.allclose(lin[k], (plus[k] - minus[k]) / (2 * eps), rtol=1e-9, atol=1e-9)
         assert np.abs(lin[k]).max() > 1e-3
+
+
+def _quadratic_shear_and_linear_pressure(space, mu, G):
+    """``u_x = y_last^2`` (last coordinate) and ``p = -G y_last``, exact in Q2 / P1disc; the
+    traction over a ball integrates (divergence theorem) to ``F = (2 mu, 0, ..., G) |B|``."""
+    dim = space.dim
+    u = np.zeros((dim, space.n_v))
+    u[0] = space.V.coordinates[:, -1] ** 2
+    p = np.zeros((space.mesh.n_cells, dim + 1))
+    p[:, 0] = -G * space.Q.centre[:, -1]
+    p[:, -1] = -G * space.Q.scale[:, -1]
+    return u.ravel(), p.ravel()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_surface_force_of_exact_fields_is_the_divergence_theorem(dim):
+    """Viscous and pressure parts with fields the mesh represents exactly: the surface rule gives
+    ``F = int div sigma dV`` to quadrature precision (two balls, one near the box corner), and
+    zero torque about the centres; with the ball on two (one) mirror planes the surface points
+    beyond them are left out and :func:`mirror_images` restores the pressure push ``G |B|``."""
+    from fbmflow.coupling import SurfaceForces, mirror_images
+    mu, G = 0.7, 2.3
+    space = FlowSpace(StructuredMesh.box((5,) * dim))
+    centres = np.array([[0.43] * dim, [0.8] * dim])
+    balls = [Ball(0.23, dim), Ball(0.15, dim)]
+    F, T = SurfaceForces(space, centres, balls)(*_quadratic_shear_and_linear_pressure(space, mu, G), mu)
+    for k, ball in enumerate(balls):
+        expected = np.zeros(dim)
+        expected[0], expected[-1] = 2 * mu * ball.volume, G * ball.volume
+        np.testing.assert_allclose(F[k], expected, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(T[k], 0.0, atol=1e-12)
+    # the centre on the planes x = 0 (and y = 0 in 3D), where a mirror-symmetric flow has slip
+    space = FlowSpace(StructuredMesh.box((4,) * dim, upper=(0.5,) * dim))
+    centre, axes = np.array([[0.0] * (dim - 1) + [0.25]]), tuple(range(dim - 1))
+    p = _quadratic_shear_and_linear_pressure(space, mu, G)[1]
+    F, T = mirror_images(*SurfaceForces(space, centre, [Ball(0.2, dim)])(np.zeros(dim * space.n_v), p, mu), axes)
+    np.testing.assert_allclose(F[0, -1], G * Ball(0.2, dim).volume, rtol=1e-10)
+    np.testing.assert_allclose(F[0, :-1], 0.0, atol=1e-12)
+
+
+def test_surface_force_is_for_balls_with_the_sharp_boundary():
+    from fbmflow.coupling import SurfaceForces
+    from fbmflow.flow import NoSlip
+    from fbmflow.simulation import Simulation
+    space = FlowSpace(StructuredMesh.box((4, 4)))
+    with pytest.raises(ValueError, match="balls"):
+        SurfaceForces(space, [[0.5, 0.5]], [Box((0.1, 0.1))])
+    mesh = StructuredMesh.box((4, 4))
+    bc = {t: NoSlip() for t in mesh.tags}
+    with pytest.raises(ValueError, match="fbm='sharp'"):
+        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), [0.0, -9.8],
+                   fbm="nodes", force="surface")

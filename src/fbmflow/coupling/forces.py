@@ -1,11 +1,13 @@
 """Hydrodynamic forces and torques on fictitious-boundary particles: the volume integral over the
-cells cut by each particle, and the momentum balance tested with a function that is one on the
-particle and falls to zero within the next layer of cells."""
+cells cut by each particle, the momentum balance tested with a function that is one on the
+particle and falls to zero within the next layer of cells, and the traction integrated over the
+true surface of balls (with the sharp boundary)."""
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..fem.functions import locate
 from ..fem.quadrature import gauss_tensor
 from ..fem.space import FlowSpace
 from . import _kernels
@@ -175,4 +177,93 @@ class TestFunctionForces:
             t = np.cross(r, f).sum(axis=1)
         torque = np.zeros((self.n_particles, 3))
         np.add.at(torque, self.body, t)
+        return force, torque
+
+
+class SurfaceForces:
+    """Force and torque on balls as the traction integrated over their true surfaces:
+
+        F_i = int_{S_i} sigma n dS,     T_i = int_{S_i} (x - X_i) x sigma n dS,
+
+    ``sigma = -p I + mu (grad u + grad u^T)`` of the discrete flow at points on the surface. With
+    the sharp boundary (:mod:`fbmflow.coupling.sharp`) the cells the surface cuts carry the flow
+    continued through it (ghost nodes) and the pressure continued from a fluid cell, so the
+    stress there is the resolved flow's own, taken where the no-slip condition holds. Rule: in
+    3D Gauss–Legendre in ``cos(theta)`` times the trapezoidal rule in ``phi``, in 2D the
+    trapezoidal rule, with ``points_per_cell`` points per finest cell length along a great
+    circle (the same unit rule for every ball, scaled by its radius; ``phi`` offset by half a
+    step so that no point lies on a mirror plane through the centre). Surface points outside the
+    mesh box are left out: the parts beyond mirror planes through the centre come back with
+    :func:`mirror_images`; periodic axes wrap. Built once per particle state; linear in ``(u, p)``
+    (tensor-product meshes).
+
+    Measured (Stokes flow through a cubic array of spheres with exact drag,
+    ``benchmarks/bench_sphere_array.py``): error +2.5 / -0.6 / +0.5 / +0.3 / -0.2 % at 4 / 6 / 8 /
+    12 / 16 cells per diameter, against +6.1 / +3.2 / +3.0 / +1.9 / +1.2 % for the cut-cell
+    volume force and -21 / -13 / -8.3 / -6.1 / -3.9 % for the tested momentum balance.
+
+    Parameters
+    ----------
+    space : FlowSpace
+    centres : (n, dim) float64, ball centres [m]
+    shapes : list of n :class:`~fbmflow.particles.Ball`
+    points_per_cell : int, default 4
+    """
+
+    def __init__(self, space: FlowSpace, centres: np.ndarray, shapes: list, points_per_cell: int = 4):
+        from ..particles import Ball
+        if not all(isinstance(s, Ball) for s in shapes):
+            raise ValueError("the surface force integrates over balls (disks, spheres) only; use the volume "
+                             "force for other shapes")
+        mesh, dim = space.mesh, space.dim
+        centres = np.atleast_2d(np.asarray(centres, dtype=float))
+        radius = np.array([s.radius for s in shapes])
+        h = float(mesh.finest_spacing.min())
+        per_circle = 4 * int(np.ceil(points_per_cell * 2 * np.pi * radius.max() / h / 4))
+        phi = (np.arange(per_circle) + 0.5) * 2 * np.pi / per_circle
+        if dim == 2:
+            unit = np.column_stack([np.cos(phi), np.sin(phi)])
+            w_unit = np.full(per_circle, 2 * np.pi / per_circle)
+        else:
+            c, wc = np.polynomial.legendre.leggauss(per_circle // 2)
+            C, P = np.meshgrid(c, phi, indexing="ij")
+            S = np.sqrt(1 - C**2)
+            unit = np.stack([S * np.cos(P), S * np.sin(P), C], -1).reshape(-1, 3)
+            w_unit = np.outer(wc, np.full(per_circle, 2 * np.pi / per_circle)).ravel()
+        n_pts = len(unit)
+        particle = np.repeat(np.arange(len(shapes)), n_pts)
+        normal = np.tile(unit, (len(shapes), 1))
+        arm = radius[particle, None] * normal
+        weight = np.tile(w_unit, len(shapes)) * radius[particle] ** (dim - 1)
+        x = centres[particle] + arm
+        lower, upper = np.array(mesh.lower), np.array(mesh.upper)
+        for d in np.flatnonzero(mesh.periodic):
+            x[:, d] = lower[d] + np.mod(x[:, d] - lower[d], upper[d] - lower[d])
+        keep = np.all((x >= lower) & (x <= upper), axis=1)
+        x, self.particle, self.normal, self.arm, self.weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
+        self.n_particles, self.space = len(shapes), space
+        self.cells, xi = locate(mesh, x)
+        self.phi, dphi = space.V.element.tabulate(xi)
+        axes = mesh.axis_coordinates
+        index = np.stack(np.unravel_index(self.cells, mesh.shape, order="F"), -1)
+        size = np.stack([axes[d][index[:, d] + 1] - axes[d][index[:, d]] for d in range(dim)], -1)
+        self.dphi = dphi * (2.0 / size)[:, None, :]  # physical gradients (n, n_local, dim)
+        self.psi = space.Q.element.tabulate(x, space.Q.centre[self.cells], space.Q.scale[self.cells])
+
+    def __call__(self, u: np.ndarray, p: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
+        """Force (n, dim) [N] and torque (n, 3) [N m] of the flow ``u (dim n_v,)``, ``p (n_p,)``."""
+        space, dim = self.space, self.space.dim
+        local = u.reshape(dim, space.n_v)[:, space.V.cell_dofs[self.cells]]  # (dim, n, n_local)
+        grad = np.einsum("ina,nad->nid", local, self.dphi)  # du_i / dx_d
+        pressure = np.einsum("nm,nm->n", p.reshape(-1, dim + 1)[self.cells], self.psi)
+        traction = -pressure[:, None] * self.normal + mu * np.einsum("nij,nj->ni", grad + grad.transpose(0, 2, 1),
+                                                                      self.normal)
+        traction *= self.weight[:, None]
+        if dim == 2:
+            moment = np.zeros((len(traction), 3))
+            moment[:, 2] = self.arm[:, 0] * traction[:, 1] - self.arm[:, 1] * traction[:, 0]
+        else:
+            moment = np.cross(self.arm, traction)
+        force = np.stack([np.bincount(self.particle, traction[:, d], self.n_particles) for d in range(dim)], -1)
+        torque = np.stack([np.bincount(self.particle, moment[:, d], self.n_particles) for d in range(3)], -1)
         return force, torque
