@@ -400,6 +400,6 @@ def test_unknown_force_is_refused():
     from fbmflow.particles import Ball, Particles
     from fbmflow.simulation import Simulation
     mesh = StructuredMesh.box((4, 4))
-    with pytest.raises(ValueError, match="unknown hydrodynamic force 'surface'"):
+    with pytest.raises(ValueError, match="unknown hydrodynamic force 'pressure-only'"):
         Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.2, 2)], 1.5, [[0.5, 0.5]]),
-                   [0.0, -9.81], force="surface")
+                   [0.0, -9.81], force="pressure-only")
