@@ -22,11 +22,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import (SurfaceForces, TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints,
-                       rigid_liftings, sharp_boundary, supports_sharp_boundary)
+from .coupling import (SurfaceForces, TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner,
+                       rigid_body_constraints, rigid_liftings, sharp_boundary, supports_sharp_boundary,
+                       supports_surface_force)
 from .flow import NavierStokesProblem
 from .flow.time_schemes import advance
-from .particles import (Ball, Particles, accelerations, integrate, pack_velocities, symmetric_motion,
+from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
                         unpack_velocities, velocity_gain)
 from .solvers import ConvergenceError
 
@@ -105,7 +106,7 @@ class Simulation:
         if fbm == "sharp" and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                              "(Ball, Box, Cylinder); use fbm='nodes' for the others")
-        if force == "surface" and not (fbm == "sharp" and all(isinstance(s, Ball) for s in particles.shapes)):
+        if force == "surface" and not (fbm == "sharp" and supports_surface_force(particles.shapes)):
             raise ValueError("force='surface' integrates the traction over the true surface of balls with the "
                              "sharp boundary (the nodal boundary's cut cells carry no flow up to the surface); "
                              "use fbm='sharp' with balls, or force='volume'")
@@ -194,20 +195,20 @@ class Simulation:
         else:
             u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
             force, torque = self._estimator(owner)(x[:n_u], x[n_u:], self.flow.mu, self.flow.rho,
-                                                        u_old=u_old, dt=dt, about=linear)
+                                                   u_old=u_old, dt=dt, about=linear)
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
     def _estimator(self, owner: np.ndarray):
         """The force's test functions (TestFunctionForces) or surface rule (SurfaceForces) for the
         current particle state (computed once per state)."""
-        if self._estimator_of is None and self.force == "surface":
-            p = self.particles
-            self._estimator_of = SurfaceForces(self.flow.space, p.position, p.shapes)
         if self._estimator_of is None:
             p, space = self.particles, self.flow.space
-            fixed = self.flow.fine.boundary_constraints.dofs
-            walls = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
-            self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
+            if self.force == "surface":
+                self._estimator_of = SurfaceForces(space, p.position, p.shapes)
+            else:
+                fixed = self.flow.fine.boundary_constraints.dofs
+                walls = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
+                self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
         return self._estimator_of
 
     def _flow_and_forces(self, dt: float):

@@ -10,6 +10,7 @@ import scipy.sparse as sp
 from ..fem.functions import locate
 from ..fem.quadrature import gauss_tensor
 from ..fem.space import FlowSpace
+from ..particles import Ball
 from . import _kernels
 from .indicator import periodic_offset
 
@@ -180,6 +181,12 @@ class TestFunctionForces:
         return force, torque
 
 
+def supports_surface_force(shapes) -> bool:
+    """True when every shape is a ball (disk or sphere), whose surface :class:`SurfaceForces`
+    integrates over."""
+    return all(isinstance(s, Ball) for s in shapes)
+
+
 class SurfaceForces:
     """Force and torque on balls as the traction integrated over their true surfaces:
 
@@ -211,8 +218,7 @@ class SurfaceForces:
     """
 
     def __init__(self, space: FlowSpace, centres: np.ndarray, shapes: list, points_per_cell: int = 4):
-        from ..particles import Ball
-        if not all(isinstance(s, Ball) for s in shapes):
+        if not supports_surface_force(shapes):
             raise ValueError("the surface force integrates over balls (disks, spheres) only; use the volume "
                              "force for other shapes")
         mesh, dim = space.mesh, space.dim
@@ -243,11 +249,9 @@ class SurfaceForces:
         x, self.particle, self.normal, self.arm, self.weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
         self.n_particles, self.space = len(shapes), space
         self.cells, xi = locate(mesh, x)
-        self.phi, dphi = space.V.element.tabulate(xi)
-        axes = mesh.axis_coordinates
-        index = np.stack(np.unravel_index(self.cells, mesh.shape, order="F"), -1)
-        size = np.stack([axes[d][index[:, d] + 1] - axes[d][index[:, d]] for d in range(dim)], -1)
-        self.dphi = dphi * (2.0 / size)[:, None, :]  # physical gradients (n, n_local, dim)
+        _, dphi = space.V.element.tabulate(xi)
+        half = space.Q.scale[self.cells]  # the cells' half extents (tensor-product cells)
+        self.dphi = dphi / half[:, None, :]  # physical gradients (n, n_local, dim)
         self.psi = space.Q.element.tabulate(x, space.Q.centre[self.cells], space.Q.scale[self.cells])
 
     def __call__(self, u: np.ndarray, p: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
