@@ -403,3 +403,45 @@ def test_unknown_force_is_refused():
     with pytest.raises(ValueError, match="unknown hydrodynamic force 'pressure-only'"):
         Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.2, 2)], 1.5, [[0.5, 0.5]]),
                    [0.0, -9.81], force="pressure-only")
+
+
+@pytest.mark.parametrize("scheme, lag", [("crank-nicolson", 0.5), ("backward-euler", 0.0),
+                                         ("fractional-step-theta", 0.0)])
+def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
+    """A step's pressure acts on the particle moved back by ``lag dt U``
+    (:func:`~fbmflow.flow.time_schemes.pressure_lag`): with a pressure ``q = k (y - c)^2 / 2`` a
+    disk at height ``Y`` feels ``F_y = -k (Y - c) |B|`` (divergence theorem), and the shear
+    ``u_y = x^2`` adds ``2 mu |B|``. The surface force
+    taken by the simulation is that of ``Y - lag dt U_y`` to a tenth of the lag's effect; the
+    volume force is the volume rule's own at that height, and the viscous part stays at ``Y``."""
+    from fbmflow.coupling import SurfaceForces, hydrodynamic_forces, node_owner
+    from fbmflow.flow import NoSlip
+    from fbmflow.flow.time_schemes import pressure_lag
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+
+    assert pressure_lag(scheme) == lag
+    mesh = StructuredMesh.box((32, 32), upper=(2.0, 2.0))
+    disk, k, c, dt, U = Ball(0.3, 2), 3.0, 0.6, 0.1, -1.0
+    for force in ("surface", "volume"):
+        sim = Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([disk], 1.5, [[1.0, 1.0]]),
+                         [0.0, -9.8], scheme=scheme, fbm="sharp", force=force)
+        sim.particles.velocity[:] = [[0.0, U]]
+        space = sim.flow.space
+        p = np.zeros((mesh.n_cells, 3))  # P1disc: the value and the gradient of q at each cell's centre
+        p[:, 0] = 0.5 * k * (space.Q.centre[:, 1] - c) ** 2
+        p[:, 2] = k * (space.Q.centre[:, 1] - c) * space.Q.scale[:, 1]
+        u = np.zeros(space.n_u)
+        u[space.n_v:] = space.V.coordinates[:, 0] ** 2  # a shear with a viscous force
+        F, _ = sim._forces(sim.owner(), np.concatenate([u, p.ravel()]), dt)
+        behind = np.array([[1.0, 1.0 - lag * dt * U]])
+        if force == "surface":
+            expected = (2 * 0.1 - k * (behind[0, 1] - c)) * disk.volume  # viscous mu lap u_y = 2 mu
+            assert abs(F[0, 1] - expected) < 0.1 * k * 0.5 * dt * abs(U) * disk.volume, (F, expected)
+            here = SurfaceForces(space, [[1.0, 1.0]], [disk])
+            parts = here(u, np.zeros(p.size), 0.1)[0] + SurfaceForces(space, behind, [disk])(0 * u, p.ravel(), 0.1)[0]
+        else:
+            parts = (hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)[0]
+                     + hydrodynamic_forces(space, node_owner(space.V, behind, [disk]), behind, 0 * u, p.ravel(), 0.1)[0])
+        np.testing.assert_allclose(F[0], parts[0], rtol=1e-12, atol=1e-12)

@@ -44,6 +44,20 @@ TIME_SCHEMES: dict[str, tuple[Substep, ...]] = {
 }
 
 
+def pressure_lag(name: str) -> float:
+    """Share of the step by which a moving fictitious boundary's pressure trails its velocity.
+
+    The particles' constraints hold at the step's start positions, so a step's start velocity
+    ``u_old`` was solved with the boundary one step further back. A single substep's pressure,
+    a Lagrange multiplier of the whole substep, balances ``b A(u_old) + a A(u)`` and so belongs
+    to the geometry ``b`` of a step behind the new velocity's: one half for Crank–Nicolson,
+    none for backward Euler. The fractional-step theta scheme's last substep starts from a
+    velocity solved with the step's own boundary: no lag to first order.
+    """
+    substeps = get_scheme(name)
+    return substeps[0].explicit if len(substeps) == 1 else 0.0
+
+
 def get_scheme(name: str) -> tuple[Substep, ...]:
     """The substeps of a registered scheme; ValueError naming the choices otherwise."""
     try:

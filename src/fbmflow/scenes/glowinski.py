@@ -10,9 +10,9 @@ most 1.3 per cell towards the side walls and the lid (about a third of the cells
 (sub-iterated) fluid–particle coupling by default; ``coupling.scheme = "explicit"`` for the
 staggered one. The sharp fictitious boundary by default (``fbm.boundary = "nodes"`` for the nodal
 one, which needs about eight times finer cells for the same accuracy), with Crank–Nicolson and the
-trapezoidal particle integrator (second order in time; with backward Euler and semi-implicit Euler
-the peak velocity at dt 2 ms is about 1 % high at 4 cells per diameter, with Crank–Nicolson 0.3 %
-low, against the time-converged value).
+trapezoidal particle integrator (the settling velocity's plateau moves -0.80 / -0.34 % from dt 4 to 2
+to 1 ms at 4 cells per diameter; with backward Euler and semi-implicit Euler the peak at dt 2 ms
+is about 1 % high, docs/method.md, "The pressure's time level").
 
 References: Glowinski et al. (2001) and Wan & Turek (2006) report Re_max about 17.3; Koblitz et
 al. (2017), with a body-fitted overset grid, about 14.0 (their curve ships in

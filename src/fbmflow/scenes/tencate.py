@@ -12,8 +12,9 @@ cells growing by at most 1.3 per cell towards the side walls and the lid (about 
 unknowns of the uniform mesh, ``domain.mesh = "uniform"``). The defaults are the sharp
 fictitious boundary (``fbm.boundary``), Crank–Nicolson with the trapezoidal particle integrator
 (second order in time for a fixed boundary; with the sphere's surface crossing the mesh the
-measured order is about 0.6: E4 level 0 peaks 2.3 / 1.5 % apart at dt 0.02 / 0.01 / 0.005 s, see
-docs/method.md) and the implicit coupling; the nodal boundary with backward Euler and
+order measured before the pressure's force was taken half a step back was about 0.6: E4 level 0
+peaks 2.3 / 1.5 % apart at dt 0.02 / 0.01 / 0.005 s, see docs/method.md, "The pressure's time
+level") and the implicit coupling; the nodal boundary with backward Euler and
 semi-implicit Euler, the earlier defaults, settled 6-8 % too fast at level 1 (E4).
 
 The run stops at ``time.t_end`` (by default the time the experiment reached the bottom) or when
@@ -78,8 +79,8 @@ class TenCateTime(TimeParams):
     dt: float = param(0.01, "time step", "s", positive=True)
     t_end: float = param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True)
     scheme: str = param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal "
-                        "particle integrator: second order for a fixed boundary, about 0.6 measured for the "
-                        "settling sphere)",
+                        "particle integrator: second order for a fixed boundary, lower with the sphere "
+                        "crossing the mesh)",
                         choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
 
 
