@@ -191,7 +191,7 @@ class Simulation:
         The volume and surface forces take the pressure's part where the pressure belongs: on
         the particles moved back by ``lag dt U`` (``lag``:
         :func:`~fbmflow.flow.time_schemes.pressure_lag`, one half with Crank–Nicolson; ``U`` the
-        velocities at the step's start, the last step's displacement for a fixed ``dt``).
+        velocities at the step's start: ``dt U`` is the last step's displacement to first order).
         Measured (glowinski-free-fall, 4 cells/D, dt 4 / 2 / 1 ms): the settling velocity's
         plateau moves -0.80 / -0.34 % (volume force) and -0.50 / -0.16 % (surface force) between
         the time steps with it, +0.78 / +0.53 % (surface, order 0.5) without. Rotation is left
