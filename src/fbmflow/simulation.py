@@ -204,32 +204,33 @@ class Simulation:
             u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
             force, torque = self._estimator(owner)(u, p, self.flow.mu, self.flow.rho,
                                                    u_old=u_old, dt=dt, about=linear)
-        elif self._pressure_lag == 0.0 or not np.any(self.particles.velocity):
-            force, torque = self._stress(owner, self.particles.position, u, p)
         else:
-            force, torque = self._stress(owner, self.particles.position, u, np.zeros_like(p))
-            behind = self.particles.position - self._pressure_lag * dt * self.particles.velocity
-            force_p, torque_p = self._stress(None, behind, np.zeros_like(u), p)
-            force, torque = force + force_p, torque + torque_p
+            here = owner if self.force == "volume" else self._estimator(owner)
+            if self._pressure_lag == 0.0 or not np.any(self.particles.velocity):
+                force, torque = self._stress(here, self.particles.position, u, p)
+            else:
+                force, torque = self._stress(here, self.particles.position, u, np.zeros_like(p))
+                behind = self.particles.position - self._pressure_lag * dt * self.particles.velocity
+                force_p, torque_p = self._stress(self._rule_behind(behind), behind, np.zeros_like(u), p)
+                force, torque = force + force_p, torque + torque_p
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
-    def _stress(self, owner: np.ndarray | None, centres: np.ndarray, u: np.ndarray, p: np.ndarray):
-        """Force and torque of the stress of ``(u, p)`` on the particles at ``centres`` (the
-        current ones with their ``owner``, or others with ``owner`` None) by the volume or surface
-        rule; the rule's geometry is built once per particle state and centres."""
-        if owner is not None:
-            if self.force == "volume":
-                return hydrodynamic_forces(self.flow.space, owner, centres, u, p, self.flow.mu)
-            return self._estimator(owner)(u, p, self.flow.mu)
+    def _stress(self, rule, centres: np.ndarray, u: np.ndarray, p: np.ndarray):
+        """Force and torque of the stress of ``(u, p)`` on the particles at ``centres``: by the
+        volume rule with ``rule`` their node owner, or by ``rule`` a SurfaceForces."""
+        if self.force == "volume":
+            return hydrodynamic_forces(self.flow.space, rule, centres, u, p, self.flow.mu)
+        return rule(u, p, self.flow.mu)
+
+    def _rule_behind(self, centres: np.ndarray):
+        """Node owner (volume force) or SurfaceForces of the particles moved to ``centres``,
+        built once per centres."""
         if self._behind is None or not np.array_equal(self._behind[0], centres):
             pts = self.particles
             rule = (node_owner(self.flow.space.V, centres, pts.shapes, pts.rotations()) if self.force == "volume"
                     else SurfaceForces(self.flow.space, centres, pts.shapes))
             self._behind = (centres.copy(), rule)
-        rule = self._behind[1]
-        if self.force == "volume":
-            return hydrodynamic_forces(self.flow.space, rule, centres, u, p, self.flow.mu)
-        return rule(u, p, self.flow.mu)
+        return self._behind[1]
 
     def _estimator(self, owner: np.ndarray):
         """The force's test functions (TestFunctionForces) or surface rule (SurfaceForces) for the
