@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from fbmflow import __version__
+from fbmflow.flow.time_schemes import pressure_lag
 from fbmflow.params import from_dict, parse_value, set_dotted, to_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.base import RunFiles
@@ -71,7 +72,7 @@ def run(scene, case: str, level: int, dt: float, settings: dict, folder: Path, c
                newton=result.newton_iterations, u_max=q["max_settling_velocity"],
                u_max_error=q["max_settling_velocity_error"], gap_deviation=q["gap_max_deviation"],
                t=q["t"], gap_over_d=q["gap_over_d"], settling_velocity=q["settling_velocity"],
-               failure=result.extra.get("failure", ""))
+               failure=result.extra.get("failure", ""), pressure_lag=pressure_lag(params.time.scheme))
     print(f"{case} level {level} dt {dt} {settings or ''}: {row['n_dofs']} unknowns, {row['steps']} steps, "
           f"{row['wall_s']:.0f} s, u_max {row['u_max']:.5f} m/s ({100 * row['u_max_error']:+.2f} %), "
           f"gap deviation {100 * row['gap_deviation']:.1f} %{'; ' + row['failure'] if row['failure'] else ''}",
@@ -93,14 +94,24 @@ SHORT = {("fbm.boundary", "nodes"): "nodal", ("fbm.boundary", "sharp"): "sharp",
          ("coupling.integrator", "semi-implicit-euler"): None, ("coupling.integrator", "trapezoidal"): None}
 
 
-def describe(settings: dict) -> str:
+def scheme_lag(settings: dict) -> float:
+    """The pressure lag (flow.time_schemes.pressure_lag) of the time scheme that ``settings`` run."""
+    scheme = settings.get("time.scheme", get_scene("ten-cate").Params().time.scheme)
+    return pressure_lag(scheme)
+
+
+def describe(row: dict) -> str:
     """A run's settings in a few words ("defaults" for none): "nodal, BE" for the nodal
-    boundary with backward Euler (the integrator goes with the scheme), else ``key=value``."""
+    boundary with backward Euler (the integrator goes with the scheme), else ``key=value``;
+    "pressure unlagged" for a run that took the pressure's force where today's code lags it
+    (rows written before the lag record none: it was zero)."""
     words = []
-    for key, value in settings.items():
+    for key, value in row["settings"].items():
         short = SHORT.get((key, value), f"{key}={value}")
         if short:
             words.append(short)
+    if row.get("pressure_lag", 0.0) != scheme_lag(row["settings"]):
+        words.append("pressure unlagged")
     return ", ".join(words) or "defaults"
 
 
@@ -114,9 +125,11 @@ def write_table(rows: list[dict], results: Path) -> None:
     backend = "PARDISO" if pardiso_available() else "SuperLU"
     lines = ["# ten Cate et al. (2002) sphere settling (benchmarks/bench_tencate.py)", "",
              "Quarter box with two mirror planes, implicit coupling, direct solver "
-             f"({backend}). 'defaults': the scene's, the sharp fictitious boundary with Crank–Nicolson "
-             "and the trapezoidal particle integrator; the earlier rows name the nodal boundary with "
-             "backward Euler and semi-implicit Euler. Wall time on this machine without the JIT "
+             f"({backend}). 'defaults': the scene's, the sharp fictitious boundary with Crank–Nicolson, "
+             "the trapezoidal particle integrator and the pressure's force taken half a step back "
+             "(docs/method.md); 'pressure unlagged': a run from before that lag, which took it where "
+             "the particle stands; 'nodal, BE': the nodal boundary with backward Euler and semi-implicit "
+             "Euler. Wall time on this machine without the JIT "
              "compilation, with other jobs beside most runs. u_max error against "
              "Table II of ten Cate et al.; gap deviation: the largest of |gap - gap_exp| / gap_exp over "
              "the experiment's samples with gap_exp >= 1; 'vs exp. velocity': the same against the gap "
@@ -129,7 +142,7 @@ def write_table(rows: list[dict], results: Path) -> None:
              "| gap deviation | vs exp. velocity | end |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: (r["case"], r["level"], -r["dt"])):
-        settings = describe(r["settings"])
+        settings = describe(r)
         lines.append(f"| {r['case']} | {r['level']} | {settings} | {r['cells_per_diameter']:.0f} | {r['n_dofs']} | "
                      f"{r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {r['u_max']:.5f} | "
                      f"{100 * r['u_max_error']:+.2f} % | {100 * r['gap_deviation']:.1f} % | "
@@ -151,7 +164,7 @@ def plot(rows: list[dict], results: Path) -> None:
         ax[1, j].plot(*tencate2002.VELOCITY[case].T, "ko", mfc="none", label="experiment")
         ax[1, j].axhline(tencate2002.U_MAX[case], ls=":", c="k", label="u_max, Table II")
         for r in (r for r in rows if r["case"] == case):
-            label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {r['dt']}, {describe(r['settings'])}"
+            label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {r['dt']}, {describe(r)}"
             ax[0, j].plot(r["t"], r["gap_over_d"], label=label)
             ax[1, j].plot(r["t"], r["settling_velocity"], label=label)
         ax[0, j].set_title(case)
@@ -189,8 +202,8 @@ def main():
     warm = False
     for case in args.cases:
         for level in args.levels:
-            key = (case, level, args.dt, settings)
-            if any((r["case"], r["level"], r["dt"], r["settings"]) == key for r in rows):
+            key = (case, level, args.dt, settings, scheme_lag(settings))
+            if any((r["case"], r["level"], r["dt"], r["settings"], r.get("pressure_lag", 0.0)) == key for r in rows):
                 continue
             if not warm:  # JIT compilation, not timed
                 scene.run(from_dict(scene.Params, {"time": {"t_end": 2 * args.dt, "dt": args.dt}}), 0)
