@@ -12,9 +12,9 @@ cells growing by at most 1.3 per cell towards the side walls and the lid (about 
 unknowns of the uniform mesh, ``domain.mesh = "uniform"``). The defaults are the sharp
 fictitious boundary (``fbm.boundary``), Crank–Nicolson with the trapezoidal particle integrator
 (second order in time for a fixed boundary; with the sphere's surface crossing the mesh the
-order measured before the pressure's force was taken half a step back was about 0.6: E4 level 0
-peaks 2.3 / 1.5 % apart at dt 0.02 / 0.01 / 0.005 s, see docs/method.md, "The pressure's time
-level") and the implicit coupling; the nodal boundary with backward Euler and
+peak's change between dt 0.02 / 0.01 / 0.005 s at E4 level 0 is -1.3 / -0.16 % with the
+pressure's force taken half a step back, against +2.3 / +1.5 % without, see docs/method.md,
+"The pressure's time level") and the implicit coupling; the nodal boundary with backward Euler and
 semi-implicit Euler, the earlier defaults, settled 6-8 % too fast at level 1 (E4).
 
 The run stops at ``time.t_end`` (by default the time the experiment reached the bottom) or when
