@@ -85,6 +85,15 @@ class TenCateTime(TimeParams):
 
 
 @dataclass(frozen=True)
+class TenCateSolver(SolverParams):
+    """Nonlinear and linear solver settings (Newton stops at a 1e-6 residual reduction: in E4 at
+    3 cells/d, dt 0.02 s, that takes 27 % fewer Newton iterations than 1e-10 and moves the peak
+    velocity by 3e-7 relative; README, "Newton's stopping rule")."""
+
+    newton_rtol: float = param(1e-6, "Newton stop: residual reduction", positive=True, maximum=1.0)
+
+
+@dataclass(frozen=True)
 class TenCateParams:
     """Parameters of ``ten-cate``."""
 
@@ -95,7 +104,7 @@ class TenCateParams:
     coupling: SecondOrderCouplingParams = section(SecondOrderCouplingParams)
     fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
     repulsion: RepulsionParams = section(RepulsionParams)
-    solver: SolverParams = section(SolverParams)
+    solver: TenCateSolver = section(TenCateSolver)
 
     def validate(self):
         r = self.particle.diameter / 2
