@@ -180,25 +180,29 @@ def plot(rows: list[dict], results: Path) -> None:
     import matplotlib.pyplot as plt
 
     cases = sorted({r["case"] for r in rows})
-    fig, ax = plt.subplots(2, len(cases), figsize=(4.2 * len(cases), 7), squeeze=False)
+    fig, ax = plt.subplots(2, len(cases), figsize=(4.2 * len(cases), 7), squeeze=False, sharex="col")
     for j, case in enumerate(cases):
-        ax[0, j].plot(*tencate2002.GAP[case].T, "ko", mfc="none", label="experiment")
-        ax[0, j].plot(*tencate2002.gap_from_velocity(case).T, "k:", label="experiment's velocity, integrated")
+        integrated, = ax[0, j].plot(*tencate2002.gap_from_velocity(case).T, "k:", label="experiment's velocity, integrated")
+        ax[0, j].plot(*tencate2002.GAP[case].T, "ko", mfc="none")
         ax[1, j].plot(*tencate2002.VELOCITY[case].T, "ko", mfc="none", label="experiment")
-        ax[1, j].axhline(tencate2002.U_MAX[case], ls=":", c="k", label="u_max, Table II")
-        for r in (r for r in rows if r["case"] == case):
+        ax[1, j].axhline(tencate2002.U_MAX[case], ls="--", c="k", lw=0.8, label="u_max, Table II")
+        for k, r in enumerate(r for r in rows if r["case"] == case):
+            style = dict(color=f"C{k % 10}", ls=("-", "--", "-.")[k // 10 % 3])  # distinct beyond 10 runs
             label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {r['dt']}, {describe(r)}"
-            ax[0, j].plot(r["t"], r["gap_over_d"], label=label)
-            ax[1, j].plot(r["t"], r["settling_velocity"], label=label)
+            ax[0, j].plot(r["t"], r["gap_over_d"], **style)
+            ax[1, j].plot(r["t"], r["settling_velocity"], label=label, **style)
         ax[0, j].set_title(case)
         ax[0, j].set_ylabel("gap / d")
         ax[1, j].set_ylabel("settling velocity [m/s]")
+        ax[1, j].set_xlabel("t [s]")
         for a in ax[:, j]:
-            a.set_xlabel("t [s]")
             a.grid(alpha=0.3)
-            a.legend(fontsize=7)
+        # one legend per case, under its plots, so that no curve is hidden
+        handles, labels = ax[1, j].get_legend_handles_labels()
+        ax[1, j].legend([integrated] + handles, [integrated.get_label()] + labels, fontsize=6.5,
+                        loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
-    fig.savefig(results / "tencate.png", dpi=110)
+    fig.savefig(results / "tencate.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
