@@ -2,7 +2,11 @@
 multigrid solver works on (re-discretisation on nested meshes)."""
 from __future__ import annotations
 
+import logging
+
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from ..fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
                    assemble_mass, expand_to_coupled, pressure_mean_weights)
@@ -11,6 +15,8 @@ from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
 from ..solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 from .boundary import build_constraints
+
+log = logging.getLogger(__name__)
 
 
 class FlowLevel:
@@ -37,6 +43,7 @@ class FlowLevel:
         self._diagonals: tuple | None = None  # diagonals of M and L (row_scale)
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
+        self._node_graph: sp.csr_matrix | None = None  # Q2 nodes sharing a cell (pocket search)
 
     def homogeneous_constraints(self, t: float = 0.0) -> DirichletConstraints:
         """Which DOFs are constrained on this level (values zero): the box faces plus the extra
@@ -45,6 +52,27 @@ class FlowLevel:
         if self.extra_constraints is not None:
             con = con.merged(self.extra_constraints(self.space.V, t))
         return con.homogeneous()
+
+    def close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
+        """Hold still the fluid nodes cut off from the main fluid by constrained nodes.
+
+        A particle within a node layer of a wall or of another particle can enclose a few free
+        nodes; the prescribed velocities around them generally carry a net flux into the pocket,
+        and no divergence-free field exists (Newton stagnates). The pocket's nodes (every
+        connected component of nodes with a free component, except the largest) get zero
+        velocity; the pressure modes of the cells they leave orphaned drop out."""
+        s = self.space
+        free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
+        if self._node_graph is None:
+            self._node_graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr),
+                                             shape=(s.n_v, s.n_v))
+        n_parts, labels = connected_components(self._node_graph[free][:, free], directed=False)
+        if n_parts <= 1:
+            return con
+        pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
+        log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
+        dofs = np.concatenate([k * s.n_v + pocket for k in range(s.dim)])
+        return con.merged(DirichletConstraints(np.sort(dofs), np.zeros(dofs.size)))
 
     def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
                con: DirichletConstraints | None = None, newton: bool = True,

@@ -18,12 +18,12 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
+from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.linear import BACKEND_NAMES, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
@@ -110,7 +110,6 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve) of the last Newton step
-        self._node_graph: sp.csr_matrix | None = None  # Q2 nodes sharing a cell (pocket search)
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -145,26 +144,7 @@ class NavierStokesProblem:
         return con
 
     def _close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
-        """Hold still the fluid nodes cut off from the main fluid by constrained nodes.
-
-        A particle within a node layer of a wall or of another particle can enclose a few free
-        nodes; the prescribed velocities around them generally carry a net flux into the pocket,
-        and no divergence-free field exists (Newton stagnates). The pocket's nodes (every
-        connected component of nodes with a free component, except the largest) get zero
-        velocity; the pressure modes of the cells they leave orphaned drop out
-        (:meth:`orphans`)."""
-        s = self.space
-        free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
-        if self._node_graph is None:
-            self._node_graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr),
-                                             shape=(s.n_v, s.n_v))
-        n_parts, labels = connected_components(self._node_graph[free][:, free], directed=False)
-        if n_parts <= 1:
-            return con
-        pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
-        log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
-        dofs = np.concatenate([k * s.n_v + pocket for k in range(s.dim)])
-        return con.merged(DirichletConstraints(np.sort(dofs), np.zeros(dofs.size)))
+        return self.fine.close_pockets(con)
 
     def load(self, t: float = 0.0) -> np.ndarray:
         """``int f . v`` for every velocity DOF, (dim * n_v,) float64."""
@@ -258,13 +238,38 @@ class NavierStokesProblem:
         args = (m, a, self.rho, self.mu, self.convection)
         system = self.fine.system(u, *args, con=con)
         finer_level, finer_system = self.fine, system
+        settings = getattr(self.linear_solver, "settings", None)
+        galerkin = getattr(settings, "coarse_obstacle", "nodes") == "galerkin" and self.extra_constraints is not None
+        irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:
             u = inject_velocity(u, level, finer_level.space.n_v)
-            coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t))
+            if galerkin:
+                walls = level.boundary_constraints.homogeneous()
+                coarse_system, irregular = galerkin_coarse_system(
+                    finer_system, level.system(u, *args, con=walls), *finer_level.prolongation, level.injection,
+                    irregular)
+            else:
+                coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t))
             finer_system.coarser = coarse_system
             finer_system.prolongation = finer_level.prolongation
             finer_level, finer_system = level, coarse_system
         return system
+
+    def _irregular_cells(self, system: SaddlePointSystem) -> np.ndarray:
+        """Fine cells whose rows are not the plain discretisation: cells with a DOF constrained
+        by the extra constraints (not the walls) or a pressure in the pressure block, and the
+        cells two layers around them (where continued pressures take their rows), (k,) int64."""
+        s = self.space
+        mark = np.zeros(s.n_u, dtype=bool)
+        for dofs in (system.fixed, system.rows):
+            if dofs is not None:
+                mark[dofs] = True
+        mark[self.fine.boundary_constraints.dofs] = False
+        cells = mark.reshape(s.dim, s.n_v).any(axis=0)[s.V.cell_dofs].any(axis=1)
+        C = system.pressure_block
+        if C is not None:
+            cells[np.flatnonzero(np.diff(sp.csr_matrix(C).indptr)) // (s.dim + 1)] = True
+        return dilate_cells(s.V.cell_dofs, s.n_v, np.flatnonzero(cells), 2)
 
     def _coarse_spacing_limit(self, u: np.ndarray) -> float:
         """Largest cell size with cell Reynolds number ``rho max|u| h / mu <= max_cell_reynolds``."""

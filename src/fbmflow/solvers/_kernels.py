@@ -225,3 +225,171 @@ def scatter_into_pattern(indptr, indices, data, p_indptr, p_indices, out):
                 return False
             out[q] += data[k]
     return True
+
+
+# -- Vanka on general CSR blocks: patches of one cell, local factors stored -------------------
+@njit
+def _lu_factor(K, piv):
+    """LU with partial pivoting of ``K (n, n)`` in place (unit lower part below the diagonal),
+    row swaps in ``piv (n,)``. A pivot below ``1e-13 max|K|`` (a locally singular pressure mode)
+    is set to zero with no multipliers below it: :func:`_lu_solve` gives that unknown zero."""
+    n = K.shape[0]
+    scale = 0.0
+    for i in range(n):
+        for j in range(n):
+            scale = max(scale, abs(K[i, j]))
+    tol = 1e-13 * scale
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(K[i, k]) > abs(K[p, k]):
+                p = i
+        piv[k] = p
+        if p != k:
+            for j in range(n):
+                K[k, j], K[p, j] = K[p, j], K[k, j]
+        if abs(K[k, k]) <= tol:
+            K[k, k] = 0.0
+            for i in range(k + 1, n):
+                K[i, k] = 0.0
+            continue
+        inv = 1.0 / K[k, k]
+        for i in range(k + 1, n):
+            f = K[i, k] * inv
+            K[i, k] = f
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    K[i, j] -= f * K[k, j]
+
+
+@njit
+def _lu_solve(LU, piv, r, out):
+    """Solve with the factors of :func:`_lu_factor`; ``r`` is overwritten, the result goes to
+    ``out`` (zero for the unknowns of zeroed pivots)."""
+    n = LU.shape[0]
+    for k in range(n):  # the row swaps first: the multipliers moved with later swaps
+        p = piv[k]
+        if p != k:
+            r[k], r[p] = r[p], r[k]
+    for k in range(n):
+        rk = r[k]
+        if rk != 0.0:
+            for i in range(k + 1, n):
+                r[i] -= LU[i, k] * rk
+    for k in range(n - 1, -1, -1):
+        if LU[k, k] == 0.0:
+            out[k] = 0.0
+            continue
+        s = r[k]
+        for j in range(k + 1, n):
+            s -= LU[k, j] * out[j]
+        out[k] = s / LU[k, k]
+
+
+@njit
+def _row_dot(ptr, idx, val, row, x, offset):
+    s = 0.0
+    for j in range(ptr[row], ptr[row + 1]):
+        s += val[j] * x[offset + idx[j]]
+    return s
+
+
+@njit
+def _patch_residual(dofs, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
+                    c_ptr, c_idx, c_val, n_u):
+    """``r = (b - K x)[dofs]`` for ``K = [[A, G], [D, C]]`` (CSR blocks)."""
+    for a in range(dofs.shape[0]):
+        g = dofs[a]
+        if g < n_u:
+            r[a] = b[g] - _row_dot(a_ptr, a_idx, a_val, g, x, 0) - _row_dot(g_ptr, g_idx, g_val, g, x, n_u)
+        else:
+            q = g - n_u
+            r[a] = b[g] - _row_dot(d_ptr, d_idx, d_val, q, x, 0) - _row_dot(c_ptr, c_idx, c_val, q, x, n_u)
+
+
+@njit(parallel=True)
+def vanka_factor(ptr, dofs, lu_ptr, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
+                 c_ptr, c_idx, c_val, n_u, n, n_chunks):
+    """LU factors of the local blocks ``K[S_k, S_k]`` of the saddle-point matrix
+    ``K = [[A, G], [D, C]]`` (each block CSR; ``C`` may be empty) for the patches
+    ``S_k = dofs[ptr[k]:ptr[k+1]]``. Returns ``LU`` (flat; patch ``k``'s ``n_k x n_k`` factors at
+    ``lu_ptr[k]``) and ``piv`` (int32, patch ``k``'s at ``ptr[k]``), see :func:`_lu_factor`.
+    ``n = n_u + n_p``."""
+    m = ptr.shape[0] - 1
+    LU = np.zeros(lu_ptr[m])
+    piv = np.zeros(ptr[m], dtype=np.int32)
+    for t in prange(n_chunks):
+        loc = np.full(n, -1, dtype=np.int32)  # global -> local position in the patch
+        for k in range(t * m // n_chunks, (t + 1) * m // n_chunks):
+            S = dofs[ptr[k]:ptr[k + 1]]
+            nk = S.shape[0]
+            for a in range(nk):
+                loc[S[a]] = a
+            K = LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk)
+            for a in range(nk):
+                g = S[a]
+                if g < n_u:
+                    for j in range(a_ptr[g], a_ptr[g + 1]):
+                        col = loc[a_idx[j]]
+                        if col >= 0:
+                            K[a, col] += a_val[j]
+                    for j in range(g_ptr[g], g_ptr[g + 1]):
+                        col = loc[n_u + g_idx[j]]
+                        if col >= 0:
+                            K[a, col] += g_val[j]
+                else:
+                    q = g - n_u
+                    for j in range(d_ptr[q], d_ptr[q + 1]):
+                        col = loc[d_idx[j]]
+                        if col >= 0:
+                            K[a, col] += d_val[j]
+                    for j in range(c_ptr[q], c_ptr[q + 1]):
+                        col = loc[n_u + c_idx[j]]
+                        if col >= 0:
+                            K[a, col] += c_val[j]
+            for a in range(nk):
+                loc[S[a]] = -1
+            _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
+    return LU, piv
+
+
+@njit(parallel=True)
+def vanka_sweep(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, a_val, g_ptr, g_idx,
+                g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val, n_u, n_chunks, width):
+    """One block update over ``patches (m,)`` that share no DOF: every patch's correction
+    ``K[S, S]^-1 (b - K x)[S]`` is computed from the same ``x``, then ``omega`` times the
+    corrections are added to ``x`` in place: deterministic whatever the number of threads, even
+    where rows couple DOFs of several patches. ``width``: the largest patch size."""
+    m = patches.shape[0]
+    out = np.zeros((m, width))
+    for t in prange(n_chunks):
+        r = np.empty(width)
+        for e in range(t * m // n_chunks, (t + 1) * m // n_chunks):
+            k = patches[e]
+            S = dofs[ptr[k]:ptr[k + 1]]
+            nk = S.shape[0]
+            _patch_residual(S, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
+                            c_ptr, c_idx, c_val, n_u)
+            _lu_solve(LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, out[e])
+    for e in prange(m):
+        k = patches[e]
+        for a in range(ptr[k + 1] - ptr[k]):
+            x[dofs[ptr[k] + a]] += omega * out[e, a]
+
+
+@njit
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, a_val, g_ptr,
+                           g_idx, g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val, n_u, width):
+    """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs): each
+    correction is added (times ``omega``) before the next patch's residual is taken."""
+    r = np.empty(width)
+    out = np.empty(width)
+    for e in range(patches.shape[0]):
+        k = patches[e]
+        S = dofs[ptr[k]:ptr[k + 1]]
+        nk = S.shape[0]
+        _patch_residual(S, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
+                        c_ptr, c_idx, c_val, n_u)
+        _lu_solve(LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, out)
+        for a in range(nk):
+            x[S[a]] += omega * out[a]

@@ -19,12 +19,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .krylov import fgmres
+from .galerkin import truncated_prolongation
 from .linear import LinearReport, SaddlePointSystem, factorize
-from .vanka import VANKA_VARIANTS, VankaSmoother
+from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
 log = logging.getLogger(__name__)
 
 CYCLES = ("V", "W", "F")
+#: how coarse levels see constraints beyond the walls: each level's own constrained nodes, or
+#: Galerkin rows of the truncated prolongation near them (:mod:`fbmflow.solvers.galerkin`)
+COARSE_OBSTACLES = ("nodes", "galerkin")
 
 
 @dataclass(frozen=True)
@@ -40,12 +44,15 @@ class MultigridSettings:
     max_iterations: int = 100
     krylov: str = "fgmres"  # or "none": multigrid as a stand-alone iteration
     restart: int = 30
+    coarse_obstacle: str = "nodes"  # or "galerkin" (solvers/galerkin.py)
 
     def __post_init__(self):
         if self.cycle not in CYCLES:
             raise ValueError(f"unknown cycle {self.cycle!r}; choose one of {CYCLES}")
         if self.smoother not in VANKA_VARIANTS:
             raise ValueError(f"unknown smoother {self.smoother!r}; choose one of {sorted(VANKA_VARIANTS)}")
+        if self.coarse_obstacle not in COARSE_OBSTACLES:
+            raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of {COARSE_OBSTACLES}")
         if self.krylov not in ("fgmres", "none"):
             raise ValueError(f"unknown Krylov method {self.krylov!r}; choose 'fgmres' or 'none'")
 
@@ -59,31 +66,26 @@ class _Level:
             self.direct = factorize(system)
             return
         omega = settings.omega if settings.omega is not None else VANKA_VARIANTS[settings.smoother]
-        self.smoother = VankaSmoother(system, settings.smoother, omega)
-        self.P_v, self.P_p = system.prolongation
-        fixed = system.fixed if system.fixed is not None else np.zeros(0, dtype=np.int64)
-        n_v = system.space.n_v
-        # rows of fine constrained DOFs get no correction: mask per component
-        self.fixed_mask = np.zeros(self.n_u, dtype=bool)
-        self.fixed_mask[fixed] = True
-        self.n_v = n_v
+        if settings.smoother == "vanka-factored":
+            self.smoother = FactoredVankaSmoother(system, omega)
+        else:
+            self.smoother = VankaSmoother(system, settings.smoother, omega)
+        # prolongation truncated on the fine DOFs that are no PDE unknowns; restriction its transpose
+        self.P = truncated_prolongation(system, *system.prolongation)
+        self.R = self.P.T.tocsr()
         coarse = system.coarser
         self.coarse_fixed = coarse.fixed if coarse.fixed is not None else np.zeros(0, dtype=np.int64)
-        self.n_v_coarse = coarse.space.n_v
+        self.coarse_orphans = coarse.orphans
 
     def restrict(self, r: np.ndarray, coarse: "_Level") -> np.ndarray:
-        d, n_v = self.d, self.n_v
-        ru = r[:self.n_u].reshape(d, n_v)
-        rc_u = (self.P_v.T @ ru.T).T.ravel()
-        rc_u[self.coarse_fixed] = 0.0
-        return np.concatenate([rc_u, self.P_p.T @ r[self.n_u:]])
+        rc = self.R @ r
+        rc[self.coarse_fixed] = 0.0
+        if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
+            rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]
+        return rc
 
     def prolongate(self, e: np.ndarray, coarse: "_Level") -> np.ndarray:
-        d = self.d
-        eu = e[:coarse.n_u].reshape(d, self.n_v_coarse)
-        fu = (self.P_v @ eu.T).T.ravel()
-        fu[self.fixed_mask] = 0.0
-        return np.concatenate([fu, self.P_p @ e[coarse.n_u:]])
+        return self.P @ e
 
 
 class MultigridSolver:
@@ -137,7 +139,7 @@ class MultigridSolver:
     def factor(self, system: SaddlePointSystem):
         """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
         returns ``solve(f, g) -> (u, p, LinearReport)``."""
-        if system.rows is not None:
+        if system.rows is not None and self.settings.smoother != "vanka-factored":
             raise NotImplementedError("multigrid does not handle row constraints (the sharp fictitious "
                                       "boundary); use the direct solver (solver.linear = \"direct\") or "
                                       "the nodal boundary")
