@@ -116,6 +116,8 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     gradient_BT = zero_columns(_standard_pattern(gradient.T.tocsr(), coarse), fixed)
     system = SaddlePointSystem(A, BT, coarse.mean_weights, fixed, space, fixed_always=coarse.fixed_always,
                                gradient_BT=gradient_BT)
+    if system.orphans is not None:  # the orphaned modes' continuity equations drop out
+        system.BT = (system.BT - system.orphans @ system.BT).tocsr()
     return system, zone
 
 

@@ -85,7 +85,7 @@ class SaddlePointSystem:
                                                  closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
-        if self.orphans is not None and (self.rows is not None or self.gradient_BT is not None):
+        if self.rows is not None and self.orphans is not None:
             # the orphaned modes' continuity equations drop out (as in the residual): they see the
             # row-constrained columns only, and would otherwise tie those to the modes' g
             self.BT = (self.BT - self.orphans @ self.BT).tocsr()
