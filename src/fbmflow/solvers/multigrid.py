@@ -4,8 +4,16 @@ The solver is a list of levels, finest first; each holds the level's system, its
 prolongation from the next coarser level; the coarsest level is solved directly. Coarse systems
 are *re-discretisations* of the same operator on the coarser meshes (with the convecting velocity
 injected), built by the flow problem: on nested structured meshes this is cheap, exact for the
-Stokes part, and avoids the fill-in of Galerkin products of the coupled Q2 velocity block (RAP of
-the 3D block would be several times denser than the re-discretised one).
+Stokes part, and avoids assembling Galerkin products of the coupled Q2 velocity block.
+
+Constraints: the prolongation is truncated on the fine DOFs that are no PDE unknowns (fixed and
+row-constrained velocities, orphaned or continued pressures) and the restriction is its
+transpose, so that a coarse correction never moves a prescribed value and the residuals of
+constraint rows never drive a coarse equation; coarse fixed DOFs and orphaned modes get no
+correction. Near fictitious boundaries the coarse levels either constrain their own nodes inside
+the particles (``coarse_obstacle = "nodes"``) or take Galerkin rows of the truncated prolongation
+(``"galerkin"``, :mod:`fbmflow.solvers.galerkin`). ``benchmarks/bench_multigrid_fbm.py`` compares
+them.
 
 Cycles: V (gamma = 1), W (gamma = 2) and F. Used stand-alone (cycles until the residual drops by
 ``rtol``) or as the preconditioner of FGMRES.
