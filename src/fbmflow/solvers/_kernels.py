@@ -97,42 +97,11 @@ def vanka_diagonal(cells, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_in
 
 @njit
 def _solve_dense(K, r, out):
-    """Solve ``K y = r`` in place by LU with partial pivoting; a pivot below ``1e-13 max|K|`` (a
-    locally singular pressure mode) gives that unknown zero."""
-    n = K.shape[0]
-    scale = 0.0
-    for i in range(n):
-        for j in range(n):
-            scale = max(scale, abs(K[i, j]))
-    tol = 1e-13 * scale
-    perm = np.arange(n)
-    for k in range(n):
-        p = k
-        for i in range(k + 1, n):
-            if abs(K[i, k]) > abs(K[p, k]):
-                p = i
-        if p != k:
-            for j in range(n):
-                K[k, j], K[p, j] = K[p, j], K[k, j]
-            r[k], r[p] = r[p], r[k]
-            perm[k], perm[p] = perm[p], perm[k]
-        if abs(K[k, k]) <= tol:
-            K[k, k] = 0.0
-            continue
-        for i in range(k + 1, n):
-            f = K[i, k] / K[k, k]
-            if f != 0.0:
-                for j in range(k + 1, n):
-                    K[i, j] -= f * K[k, j]
-                r[i] -= f * r[k]
-    for k in range(n - 1, -1, -1):
-        if K[k, k] == 0.0:
-            out[k] = 0.0
-            continue
-        s = r[k]
-        for j in range(k + 1, n):
-            s -= K[k, j] * out[j]
-        out[k] = s / K[k, k]
+    """Solve ``K y = r`` by LU with partial pivoting (``K`` and ``r`` overwritten); a pivot below
+    ``1e-13 max|K|`` (a locally singular pressure mode) gives that unknown zero."""
+    piv = np.empty(K.shape[0], dtype=np.int32)
+    _lu_factor(K, piv)
+    _lu_solve(K, piv, r, out)
 
 
 @njit(parallel=True)
@@ -307,6 +276,16 @@ def _patch_residual(dofs, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_p
             r[a] = b[g] - _row_dot(d_ptr, d_idx, d_val, q, x, 0) - _row_dot(c_ptr, c_idx, c_val, q, x, n_u)
 
 
+@njit
+def _scatter_row(ptr, idx, val, row, loc, offset, K, a):
+    """Add the entries of CSR row ``row`` whose columns (plus ``offset``) lie in the patch (local
+    position ``loc[col] >= 0``) to row ``a`` of the local block ``K``."""
+    for j in range(ptr[row], ptr[row + 1]):
+        col = loc[offset + idx[j]]
+        if col >= 0:
+            K[a, col] += val[j]
+
+
 @njit(parallel=True)
 def vanka_factor(ptr, dofs, lu_ptr, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
                  c_ptr, c_idx, c_val, n_u, n, n_chunks):
@@ -329,24 +308,11 @@ def vanka_factor(ptr, dofs, lu_ptr, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_
             for a in range(nk):
                 g = S[a]
                 if g < n_u:
-                    for j in range(a_ptr[g], a_ptr[g + 1]):
-                        col = loc[a_idx[j]]
-                        if col >= 0:
-                            K[a, col] += a_val[j]
-                    for j in range(g_ptr[g], g_ptr[g + 1]):
-                        col = loc[n_u + g_idx[j]]
-                        if col >= 0:
-                            K[a, col] += g_val[j]
+                    _scatter_row(a_ptr, a_idx, a_val, g, loc, 0, K, a)
+                    _scatter_row(g_ptr, g_idx, g_val, g, loc, n_u, K, a)
                 else:
-                    q = g - n_u
-                    for j in range(d_ptr[q], d_ptr[q + 1]):
-                        col = loc[d_idx[j]]
-                        if col >= 0:
-                            K[a, col] += d_val[j]
-                    for j in range(c_ptr[q], c_ptr[q + 1]):
-                        col = loc[n_u + c_idx[j]]
-                        if col >= 0:
-                            K[a, col] += c_val[j]
+                    _scatter_row(d_ptr, d_idx, d_val, g - n_u, loc, 0, K, a)
+                    _scatter_row(c_ptr, c_idx, c_val, g - n_u, loc, n_u, K, a)
             for a in range(nk):
                 loc[S[a]] = -1
             _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
