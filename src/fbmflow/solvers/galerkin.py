@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..fem.constraints import zero_columns
+from . import _kernels
 from .linear import SaddlePointSystem
 
 
@@ -148,7 +149,6 @@ def _standard_pattern(GT: sp.csr_matrix, coarse: SaddlePointSystem) -> sp.csr_ma
     """``GT`` (n_p, n_u) written into the cell-local pattern of the discrete divergence (what
     :func:`~fbmflow.solvers.linear.orphan_pressure_modes` reads); the Galerkin rows of nested
     meshes stay within a coarse cell."""
-    from . import _kernels
     ref = (coarse.gradient_BT if coarse.gradient_BT is not None else coarse.BT).copy()
     ref.sort_indices()
     GT.sort_indices()
