@@ -148,7 +148,12 @@ class SolverParams:
                                "rule; direct with PARDISO: its refinement target in Newton steps)",
                                positive=True, maximum=0.1)
     mg_cycle: str = param("V", "multigrid cycle", choices=("V", "W", "F"))
-    mg_smoother: str = param("vanka-full", "multigrid smoother", choices=("vanka-full", "vanka-diagonal"))
+    mg_smoother: str = param("auto", "multigrid smoother ('auto': vanka-factored with the sharp fictitious "
+                             "boundary, else vanka-full)",
+                             choices=("auto", "vanka-full", "vanka-factored", "vanka-diagonal"))
+    mg_coarse_obstacle: str = param("nodes", "how coarse multigrid levels see particles: their own nodes "
+                                    "inside them, or Galerkin rows of the truncated prolongation",
+                                    choices=("nodes", "galerkin"))
     mg_smoothing_steps: int = param(2, "multigrid pre- and post-smoothing sweeps", minimum=1)
     mg_krylov: str = param("fgmres", "Krylov acceleration of multigrid", choices=("fgmres", "none"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
@@ -163,7 +168,8 @@ class SolverParams:
             return self.linear
         return MultigridSolver(MultigridSettings(
             cycle=self.mg_cycle, smoother=self.mg_smoother, pre_smooth=self.mg_smoothing_steps,
-            post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov))
+            post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov,
+            coarse_obstacle=self.mg_coarse_obstacle))
 
     def newton_settings(self) -> NewtonSettings:
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,

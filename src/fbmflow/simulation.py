@@ -136,9 +136,6 @@ class Simulation:
         self.flow = NavierStokesProblem(mesh, viscosity, boundary, density=density,
                                         linear_solver=linear_solver,
                                         extra_constraints=self._constraints, **kwargs)
-        if fbm == "sharp" and self.flow.linear_solver.name != "direct":
-            raise ValueError("the sharp fictitious boundary needs the direct linear solver "
-                             f"(got {self.flow.linear_solver.name!r}); use linear_solver='direct' or fbm='nodes'")
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0

@@ -7,7 +7,8 @@ import numpy as np
 
 
 def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndarray, rtol: float,
-           max_iterations: int, restart: int = 40, project: Callable | None = None):
+           max_iterations: int, restart: int = 40, project: Callable | None = None,
+           augment: np.ndarray | None = None):
     """Solve ``A x = b`` to ``|b - A x| <= rtol |b - A x0|``.
 
     Parameters
@@ -15,6 +16,12 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
     apply_A, precondition : (n,) -> (n,) float64
     project : optional, applied in place to every preconditioned vector (e.g. removing a null
         space component of a singular but consistent system)
+    augment : optional (n,) float64 ``e``: solve ``A x + lam e = b`` for ``x`` and a scalar
+        ``lam`` instead, for a singular ``A`` whose range ``b`` may miss along ``e`` (the
+        Lagrange multiplier of a bordered system ``[[A, e], [w^T, 0]]``, whose border row
+        ``project`` enforces). Every restart cycle takes ``e`` as one extra search direction (no
+        preconditioner application, not counted in ``iterations``); ``x`` is returned, ``lam``
+        dropped, and the residuals are those of ``A x + lam e = b``.
 
     Returns
     -------
@@ -24,13 +31,15 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
     iterations : int
     """
     x = x0.copy()
+    lam = 0.0
     r = b - apply_A(x)
     beta = float(np.linalg.norm(r))
     residuals = [beta]
     target = rtol * beta
     its = 0
+    aug = int(augment is not None)
     while beta > target and its < max_iterations:
-        m = min(restart, max_iterations - its)
+        m = min(restart, max_iterations - its) + aug
         n = b.size
         V = np.zeros((m + 1, n))
         Z = np.zeros((m, n))
@@ -41,11 +50,15 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         V[0] = r / beta
         k_done = 0
         for k in range(m):
-            z = precondition(V[k])
-            if project is not None:
-                project(z)
-            Z[k] = z
-            w = apply_A(z)
+            if aug and k == 0:  # the direction of lam: A-image e, no preconditioning
+                w = np.array(augment, dtype=float)
+            else:  # V[1] of an augmented cycle is e's direction, which needs no preconditioning
+                z = precondition(V[0 if aug and k == 1 else k])
+                if project is not None:
+                    project(z)
+                Z[k] = z
+                w = apply_A(z)
+                its += 1
             for j in range(k + 1):  # modified Gram–Schmidt
                 H[j, k] = w @ V[j]
                 w -= H[j, k] * V[j]
@@ -59,14 +72,15 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
             H[k, k] = cs[k] * H[k, k] + sn[k] * H[k + 1, k]
             H[k + 1, k] = 0.0
             g[k], g[k + 1] = cs[k] * g[k], -sn[k] * g[k]
-            its += 1
             k_done = k + 1
             residuals.append(abs(g[k + 1]))
             if abs(g[k + 1]) <= target:
                 break
         y = np.linalg.solve(np.triu(H[:k_done, :k_done]), g[:k_done]) if k_done else np.zeros(0)
-        x += y @ Z[:k_done]
-        r = b - apply_A(x)
+        x += y[aug:] @ Z[aug:k_done]
+        if aug and k_done:
+            lam += y[0]
+        r = b - apply_A(x) - (lam * augment if aug else 0.0)
         beta = float(np.linalg.norm(r))
         residuals.append(beta)
     return x, residuals, its

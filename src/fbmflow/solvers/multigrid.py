@@ -28,7 +28,7 @@ import numpy as np
 
 from .krylov import fgmres
 from .galerkin import truncated_prolongation
-from .linear import LinearReport, SaddlePointSystem, factorize
+from .linear import LinearReport, SaddlePointSystem, expansion, factorize
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
 log = logging.getLogger(__name__)
@@ -44,7 +44,7 @@ class MultigridSettings:
     """Multigrid parameters (see the module docstring)."""
 
     cycle: str = "V"
-    smoother: str = "vanka-full"
+    smoother: str = "auto"  # "auto": vanka-factored for systems with row constraints, else vanka-full
     omega: float | None = None  # None: the smoother's default damping
     pre_smooth: int = 2
     post_smooth: int = 2
@@ -57,8 +57,8 @@ class MultigridSettings:
     def __post_init__(self):
         if self.cycle not in CYCLES:
             raise ValueError(f"unknown cycle {self.cycle!r}; choose one of {CYCLES}")
-        if self.smoother not in VANKA_VARIANTS:
-            raise ValueError(f"unknown smoother {self.smoother!r}; choose one of {sorted(VANKA_VARIANTS)}")
+        if self.smoother != "auto" and self.smoother not in VANKA_VARIANTS:
+            raise ValueError(f"unknown smoother {self.smoother!r}; choose 'auto' or one of {sorted(VANKA_VARIANTS)}")
         if self.coarse_obstacle not in COARSE_OBSTACLES:
             raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of {COARSE_OBSTACLES}")
         if self.krylov not in ("fgmres", "none"):
@@ -66,18 +66,18 @@ class MultigridSettings:
 
 
 class _Level:
-    def __init__(self, system: SaddlePointSystem, settings: MultigridSettings, coarsest: bool):
+    def __init__(self, system: SaddlePointSystem, settings: MultigridSettings, smoother: str, coarsest: bool):
         self.system = system
         self.n_u, self.n_p = system.n_u, system.n_p
         self.d = system.space.dim if system.space is not None else None
         if coarsest:
             self.direct = factorize(system)
             return
-        omega = settings.omega if settings.omega is not None else VANKA_VARIANTS[settings.smoother]
-        if settings.smoother == "vanka-factored":
+        omega = settings.omega if settings.omega is not None else VANKA_VARIANTS[smoother]
+        if smoother == "vanka-factored":
             self.smoother = FactoredVankaSmoother(system, omega)
         else:
-            self.smoother = VankaSmoother(system, settings.smoother, omega)
+            self.smoother = VankaSmoother(system, smoother, omega)
         # prolongation truncated on the fine DOFs that are no PDE unknowns; restriction its transpose
         self.P = truncated_prolongation(system, *system.prolongation)
         self.R = self.P.T.tocsr()
@@ -108,11 +108,20 @@ class MultigridSolver:
     def __init__(self, settings: MultigridSettings | None = None, **kwargs):
         self.settings = settings or MultigridSettings(**kwargs)
 
+    def smoother_for(self, system: SaddlePointSystem) -> str:
+        """The smoother used for ``system``: the configured one, or for ``"auto"`` the factored
+        Vanka blocks where the fine level has row constraints (the sharp fictitious boundary,
+        which only they smooth), else ``vanka-full`` (no stored factors)."""
+        if self.settings.smoother != "auto":
+            return self.settings.smoother
+        return "vanka-factored" if system.rows is not None else "vanka-full"
+
     def setup(self, system: SaddlePointSystem) -> list[_Level]:
         chain = [system]
         while chain[-1].coarser is not None:
             chain.append(chain[-1].coarser)
-        return [_Level(s, self.settings, coarsest=(i == len(chain) - 1)) for i, s in enumerate(chain)]
+        smoother = self.smoother_for(system)
+        return [_Level(s, self.settings, smoother, coarsest=(i == len(chain) - 1)) for i, s in enumerate(chain)]
 
     def cycle(self, levels: list[_Level], b: np.ndarray, x: np.ndarray, l: int = 0,
               kind: str | None = None) -> np.ndarray:
@@ -147,10 +156,14 @@ class MultigridSolver:
     def factor(self, system: SaddlePointSystem):
         """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
         returns ``solve(f, g) -> (u, p, LinearReport)``."""
-        if system.rows is not None and self.settings.smoother != "vanka-factored":
-            raise NotImplementedError("multigrid does not handle row constraints (the sharp fictitious "
-                                      "boundary); use the direct solver (solver.linear = \"direct\") or "
-                                      "the nodal boundary")
+        if system.rows is not None and system.mean_weights is not None and self.settings.krylov == "none":
+            raise ValueError("stand-alone multigrid cycles cannot solve the sharp fictitious boundary in a "
+                             "closed domain (its right-hand side is compatible only up to the mean-pressure "
+                             "multiplier, which FGMRES solves for); set solver.mg_krylov = \"fgmres\"")
+        if system.rows is not None and self.smoother_for(system) != "vanka-factored":
+            raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
+                             f"boundary), not {self.settings.smoother!r}; set solver.mg_smoother = \"auto\" or "
+                             "\"vanka-factored\", or use the direct solver")
         t0 = time.perf_counter()
         levels = self.setup(system)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
@@ -159,6 +172,21 @@ class MultigridSolver:
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
         """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
         return self.factor(system)(f, g)
+
+    @staticmethod
+    def _border(system: SaddlePointSystem) -> np.ndarray | None:
+        """The direction ``e`` of the mean-pressure border's multiplier in a closed domain (None
+        where the pressure is determined): a uniform expansion rate of the fluid
+        (:func:`~fbmflow.solvers.linear.expansion`). ``balance`` makes the continuity data
+        compatible with the constant pressure, the left null vector of the nodal boundary's
+        system; the sharp boundary's ghost rows give the left null vector velocity components
+        as well, so the right-hand side can miss the range along ``e`` and FGMRES solves for
+        that multiple too, as the bordered direct solve does."""
+        if system.mean_weights is None:
+            return None
+        e = np.zeros(system.n_u + system.n_p)
+        e[system.n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
+        return e
 
     def _solve(self, system, levels, setup, f, g):
         t0 = time.perf_counter() - setup
@@ -174,7 +202,7 @@ class MultigridSolver:
                 return self.cycle(levels, r, np.zeros_like(r))
 
             x, residuals, cycles = fgmres(system.apply, precondition, b, x, s.rtol, s.max_iterations,
-                                          s.restart, project)
+                                          s.restart, project, self._border(system))
         else:
             r0 = float(np.linalg.norm(b - system.apply(x)))
             residuals, cycles = [r0], 0
