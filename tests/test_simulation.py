@@ -247,14 +247,17 @@ def test_gap_from_the_velocity_curve_integrates_it(monkeypatch):
     assert gap_deviation(g[:, 0], g[:, 1], "E4") == pytest.approx(abs(g[2, 1] - 5.0) / 5.0)
 
 
-def test_ten_cate_sharp_boundary_without_pardiso_is_refused(monkeypatch):
-    """SuperLU cannot factorise the 3D systems of the sharp boundary at these sizes: without the
-    PARDISO extra the scene says so before any work instead of exhausting the memory."""
+@pytest.mark.parametrize("pardiso, level, expected", [(False, 0, "multigrid"), (True, 0, "direct"),
+                                                       (True, 1, "multigrid")])
+def test_ten_cate_auto_solver(monkeypatch, pardiso, level, expected):
+    """SuperLU cannot factorise these 3D systems: ``auto`` takes PARDISO for the small ones where
+    it is installed, multigrid (which takes the sharp boundary) otherwise."""
     import fbmflow.scenes.tencate as tencate
-    monkeypatch.setattr(tencate, "pardiso_available", lambda: False)
+    monkeypatch.setattr(tencate, "pardiso_available", lambda: pardiso)
     scene = get_scene("ten-cate")
-    with pytest.raises(ParamError, match="pardiso"):
-        scene.build(from_dict(scene.Params, {}), 0)
+    sim = scene.build(from_dict(scene.Params, {}), level).sim
+    assert sim.flow.linear_solver.name == expected
+    assert sim.fbm == "sharp"
 
 
 @pytest.mark.parametrize("symmetry", ["quarter", "none"])

@@ -15,6 +15,7 @@ Couplings (a registry):
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -30,6 +31,7 @@ from .flow.time_schemes import advance, pressure_lag
 from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
                         unpack_velocities, velocity_gain)
 from .solvers import ConvergenceError
+from .solvers.linear import LinearWork
 
 log = logging.getLogger(__name__)
 
@@ -41,13 +43,14 @@ class StepReport:
     step: int
     t: float
     newton_iterations: int
-    linear_iterations: int
     force: np.ndarray
     torque: np.ndarray
     position: np.ndarray
     velocity: np.ndarray
     flow_solves: int = 1  # flow solves of the coupling iteration (1 for the explicit coupling)
     contact: ContactReport | None = None  # what the contact solver did (None without contact)
+    linear: LinearWork = dataclasses.field(default_factory=LinearWork)  # the step's linear solves
+    # (Newton steps and the coupling's lifting responses)
 
 
 class Simulation:
@@ -312,6 +315,7 @@ class Simulation:
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
         flow_solves = 1
         self._contact_report = None
+        work = dataclasses.replace(self.flow.linear_work)
         try:
             x, reports, force, torque = self._flow_and_forces(dt)
             if self.coupling == "implicit":
@@ -332,10 +336,9 @@ class Simulation:
         self._last_force, self._last_torque = force, torque
         self.t += dt
         self.step_count += 1
-        return StepReport(self.step_count, self.t, sum(r.iterations for r in reports),
-                          sum(r.linear_iterations for r in reports), force, torque,
+        return StepReport(self.step_count, self.t, sum(r.iterations for r in reports), force, torque,
                           self.particles.position.copy(), self.particles.velocity.copy(),
-                          flow_solves, self._contact_report)
+                          flow_solves, self._contact_report, self.flow.linear_work.since(work))
 
     def _subiterate(self, dt, x, reports, force, torque):
         """Newton iteration on the particles' new generalised velocities ``v``.

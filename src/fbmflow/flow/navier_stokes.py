@@ -24,7 +24,7 @@ from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
-from ..solvers.linear import BACKEND_NAMES, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
+from ..solvers.linear import BACKEND_NAMES, LinearWork, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -110,6 +110,7 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve) of the last Newton step
+        self.linear_work = LinearWork()  # every linear solve of this problem, counted
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -322,11 +323,15 @@ class NavierStokesProblem:
 
     def _linear_solve(self, solve, f, g):
         """``solve(f, g)`` to ``self.newton.linear_rtol`` where the solver takes a target per
-        solve (the direct solver's PARDISO refinement), else to the solver's own."""
+        solve (the direct solver's PARDISO refinement), else to the solver's own; counted in
+        :attr:`linear_work`."""
         rtol = self.newton.linear_rtol
         if rtol is not None and getattr(solve, "takes_rtol", False):
-            return solve(f, g, rtol)
-        return solve(f, g)
+            du, dp, report = solve(f, g, rtol)
+        else:
+            du, dp, report = solve(f, g)
+        self.linear_work.add(report)
+        return du, dp, report
 
     def forget_linearisation(self) -> None:
         """Drop the stored factorisation: the next solve starts with a fresh Jacobian, as after

@@ -4,7 +4,9 @@
 ``step (k,)``, ``t (k,)``, ``position``, ``velocity`` ``(k, n, dim)``, ``orientation``
 (``(k, n)`` angles in 2D, ``(k, n, 4)`` quaternions in 3D), ``angular_velocity``
 (``(k, n)`` / ``(k, n, 3)``), ``force (k, n, dim)``, ``torque (k, n, 3)``,
-``newton_iterations``, ``linear_iterations``, ``flow_solves``, ``contacts`` ``(k,)``; and the
+``newton_iterations``, ``flow_solves`` (coupling iterations), ``linear_solves``,
+``linear_iterations`` (multigrid: cycles), ``linear_sweeps`` (smoothing sweeps on all levels),
+``linear_time_s``, ``contacts`` ``(k,)``; and the
 attributes ``scene``, ``level``, ``params`` (JSON of the resolved scene) and ``fbmflow_version``.
 The file is opened for each appended row and closed again, so a killed run loses at most the
 row being written; a resumed run cuts the rows after its checkpoint before appending.
@@ -16,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-SCALARS = ("step", "t", "newton_iterations", "linear_iterations", "flow_solves", "contacts")
+SCALARS = ("step", "t", "newton_iterations", "flow_solves", "linear_solves", "linear_iterations", "linear_sweeps",
+           "linear_time_s", "contacts")
 ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "torque")
 
 

@@ -159,8 +159,8 @@ class SimulationScene(Scene):
                 fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, rep.force)
             if progress:
                 speed = np.linalg.norm(sim.particles.velocity, axis=1).max(initial=0.0)
-                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations,
-                                                   "linear": rep.linear_iterations, "max|U|": float(speed)})
+                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations, "solves": rep.linear.solves,
+                                                   "linear": rep.linear.iterations, "max|U|": float(speed)})
             if self.stop(params, row):
                 break
             if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
@@ -202,6 +202,9 @@ class SimulationScene(Scene):
                 "force": rep.force if rep is not None else zero[0],
                 "torque": rep.torque if rep is not None else zero[1],
                 "newton_iterations": rep.newton_iterations if rep is not None else 0,
-                "linear_iterations": rep.linear_iterations if rep is not None else 0,
+                "linear_iterations": rep.linear.iterations if rep is not None else 0,
                 "flow_solves": rep.flow_solves if rep is not None else 0,
+                "linear_solves": rep.linear.solves if rep is not None else 0,
+                "linear_sweeps": rep.linear.sweeps if rep is not None else 0,
+                "linear_time_s": rep.linear.time_s if rep is not None else 0.0,
                 "contacts": rep.contact.contacts if rep is not None and rep.contact is not None else 0}

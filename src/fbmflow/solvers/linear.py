@@ -311,6 +311,28 @@ class LinearReport:
     setup_time_s: float = 0.0
 
 
+@dataclass
+class LinearWork:
+    """Linear solves counted together (a flow problem's since its creation; differences of two
+    counts give one time step's): solves, iterations (multigrid: preconditioned FGMRES steps,
+    one cycle each), smoothing sweeps summed over all levels, and wall time including set-up."""
+
+    solves: int = 0
+    iterations: int = 0
+    sweeps: int = 0
+    time_s: float = 0.0
+
+    def add(self, report: LinearReport) -> None:
+        self.solves += 1
+        self.iterations += report.iterations
+        self.sweeps += report.smoothing_sweeps
+        self.time_s += report.wall_time_s
+
+    def since(self, earlier: "LinearWork") -> "LinearWork":
+        return LinearWork(self.solves - earlier.solves, self.iterations - earlier.iterations,
+                          self.sweeps - earlier.sweeps, self.time_s - earlier.time_s)
+
+
 DIRECT_BACKENDS = ("auto", "superlu", "pardiso")
 BACKEND_NAMES = {"superlu": "SuperLU", "pardiso": "PARDISO"}  # for reports
 #: 2D systems from this many unknowns go to PARDISO under ``backend="auto"`` (when installed).
