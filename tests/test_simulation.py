@@ -448,3 +448,29 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
             parts = (hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)[0]
                      + hydrodynamic_forces(space, node_owner(space.V, behind, [disk]), behind, 0 * u, p.ravel(), 0.1)[0])
         np.testing.assert_allclose(F[0], parts[0], rtol=1e-12, atol=1e-12)
+
+
+def test_a_failing_multigrid_solve_stops_the_step_with_a_remedy(tmp_path, monkeypatch):
+    """A multigrid solve that misses its target raises (it used to hand Newton an inexact step in
+    silence); the run names the step and time, suggests the direct solver, and leaves the last
+    good state on disk."""
+    import dataclasses
+
+    from fbmflow.params import SolverParams
+    from fbmflow.scenes.registry import run_scene
+    from fbmflow.solvers import ConvergenceError
+
+    real = SolverParams.linear_solver
+
+    def one_iteration(self):  # one FGMRES step cannot reach 1e-12
+        mg = real(self)
+        mg.settings = dataclasses.replace(mg.settings, max_iterations=1)
+        return mg
+
+    monkeypatch.setattr(SolverParams, "linear_solver", one_iteration)
+    scene = get_scene("glowinski-free-fall")
+    params = from_dict(scene.Params, {"time": {"dt": 0.005, "t_end": 0.01}, "fbm": {"boundary": "sharp"},
+                                      "solver": {"linear": "multigrid", "linear_rtol": 1e-12}})
+    with pytest.raises(ConvergenceError, match=r"step 1 \(t = 0 -> 0\.005\).*multigrid.*direct"):
+        run_scene(scene, params, 0, tmp_path / "run", plot=False)
+    assert (tmp_path / "run" / "checkpoint.h5").is_file()

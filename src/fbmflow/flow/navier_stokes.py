@@ -22,7 +22,7 @@ import scipy.sparse as sp
 from ..fem import FlowSpace, assemble_convection, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
-from ..solvers import NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
+from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.linear import BACKEND_NAMES, LinearWork, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
@@ -324,13 +324,19 @@ class NavierStokesProblem:
     def _linear_solve(self, solve, f, g):
         """``solve(f, g)`` to ``self.newton.linear_rtol`` where the solver takes a target per
         solve (the direct solver's PARDISO refinement), else to the solver's own; counted in
-        :attr:`linear_work`."""
+        :attr:`linear_work`. ConvergenceError when an iterative solver misses its target."""
         rtol = self.newton.linear_rtol
         if rtol is not None and getattr(solve, "takes_rtol", False):
             du, dp, report = solve(f, g, rtol)
         else:
             du, dp, report = solve(f, g)
         self.linear_work.add(report)
+        if not report.converged:
+            reduction = report.residuals[-1] / report.residuals[0] if report.residuals else float("nan")
+            raise ConvergenceError(
+                f"the {report.solver} linear solver did not converge: residual reduced to {reduction:.2e} "
+                f"in {report.iterations} iterations; use solver.linear = \"direct\", a smaller time step, "
+                "or more smoothing (solver.mg_smoothing_steps, solver.mg_cycle = \"W\")")
         return du, dp, report
 
     def forget_linearisation(self) -> None:

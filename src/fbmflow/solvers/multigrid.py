@@ -216,6 +216,8 @@ class MultigridSolver:
             project(x)
         log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
                   time.perf_counter() - t0)
+        converged = bool(residuals[-1] <= s.rtol * residuals[0])  # False for NaN as well
         report = LinearReport(self.name, time.perf_counter() - t0, iterations=cycles,
-                              residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup)
+                              residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup,
+                              converged=converged)
         return x[:system.n_u], x[system.n_u:], report
