@@ -301,3 +301,13 @@ def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     assert rep.iterations <= (2 if dim == 2 else 1.5) * plain + 2, (rep.iterations, plain)
     u, _ = factorize(system, "superlu")(b[:system.n_u], b[system.n_u:])
     assert np.linalg.norm(du - u) <= 1e-6 * np.linalg.norm(u), np.linalg.norm(du - u) / np.linalg.norm(u)
+
+
+def test_settings_refuse_galerkin_rows_with_a_smoother_that_cannot_see_them():
+    """vanka-full / -diagonal re-assemble cell blocks from element matrices, not from the
+    Galerkin rows (measured: overflow on the 3D ball); ``auto`` picks the factored blocks."""
+    with pytest.raises(ValueError, match="vanka-factored"):
+        MultigridSettings(smoother="vanka-full", coarse_obstacle="galerkin")
+    _, system, _ = _ball_system("nodes", n=8, coarse_obstacle="galerkin")
+    assert MultigridSolver(MultigridSettings(coarse_obstacle="galerkin")).smoother_for(system) == "vanka-factored"
+    assert MultigridSolver(MultigridSettings()).smoother_for(system) == "vanka-full"

@@ -44,7 +44,7 @@ class MultigridSettings:
     """Multigrid parameters (see the module docstring)."""
 
     cycle: str = "V"
-    smoother: str = "auto"  # "auto": vanka-factored for systems with row constraints, else vanka-full
+    smoother: str = "auto"  # "auto": vanka-factored with row constraints or Galerkin coarse rows, else vanka-full
     omega: float | None = None  # None: the smoother's default damping
     pre_smooth: int = 2
     post_smooth: int = 2
@@ -61,6 +61,10 @@ class MultigridSettings:
             raise ValueError(f"unknown smoother {self.smoother!r}; choose 'auto' or one of {sorted(VANKA_VARIANTS)}")
         if self.coarse_obstacle not in COARSE_OBSTACLES:
             raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of {COARSE_OBSTACLES}")
+        if self.coarse_obstacle == "galerkin" and self.smoother not in ("auto", "vanka-factored"):
+            # the other smoothers re-assemble cell blocks from the element matrices, not the
+            # Galerkin rows (measured: overflow on the 3D ball, 8^3)
+            raise ValueError(f"coarse_obstacle 'galerkin' needs the vanka-factored smoother, not {self.smoother!r}")
         if self.krylov not in ("fgmres", "none"):
             raise ValueError(f"unknown Krylov method {self.krylov!r}; choose 'fgmres' or 'none'")
 
@@ -114,7 +118,8 @@ class MultigridSolver:
         which only they smooth), else ``vanka-full`` (no stored factors)."""
         if self.settings.smoother != "auto":
             return self.settings.smoother
-        return "vanka-factored" if system.rows is not None else "vanka-full"
+        factored = system.rows is not None or self.settings.coarse_obstacle == "galerkin"
+        return "vanka-factored" if factored else "vanka-full"
 
     def setup(self, system: SaddlePointSystem) -> list[_Level]:
         chain = [system]
