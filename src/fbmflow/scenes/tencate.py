@@ -95,7 +95,7 @@ class TenCateTime(TimeParams):
 class TenCateSolver(SolverParams):
     """Nonlinear and linear solver settings (Newton stops at a 1e-6 residual reduction: in E4 at
     3 cells/d, dt 0.02 s, that takes 27 % fewer Newton iterations than 1e-10 and moves the peak
-    velocity by 3e-7 relative; README, "Newton's stopping rule")."""
+    velocity by 3e-7 relative; docs/method.md on the linear and Newton tolerances)."""
 
     newton_rtol: float = param(1e-6, "Newton stop: residual reduction", positive=True, maximum=1.0)
     linear_rtol: float = param(1e-3, "relative residual per linear solve (the chord-Newton steps "
