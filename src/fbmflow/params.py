@@ -156,6 +156,10 @@ class SolverParams:
                                     choices=("nodes", "galerkin"))
     mg_smoothing_steps: int = param(2, "multigrid pre- and post-smoothing sweeps", minimum=1)
     mg_krylov: str = param("fgmres", "Krylov acceleration of multigrid", choices=("fgmres", "none"))
+    mg_linearisation: str = param("auto", "operator the multigrid hierarchy is built from: newton, picard "
+                                  "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or auto "
+                                  "(picard in time steps, newton in steady solves)",
+                                  choices=("auto", "newton", "picard"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
@@ -169,7 +173,7 @@ class SolverParams:
         return MultigridSolver(MultigridSettings(
             cycle=self.mg_cycle, smoother=self.mg_smoother, pre_smooth=self.mg_smoothing_steps,
             post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov,
-            coarse_obstacle=self.mg_coarse_obstacle))
+            coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation))
 
     def newton_settings(self) -> NewtonSettings:
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,

@@ -245,8 +245,8 @@ class Simulation:
                 self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
         return self._estimator_of
 
-    def _flow_and_forces(self, dt: float):
-        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme)
+    def _flow_and_forces(self, dt: float, guess: np.ndarray | None = None):
+        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess)
         force, torque = self._forces(self._owner(self.flow.space.V), x, dt)
         return x, reports, force, torque
 
@@ -347,7 +347,9 @@ class Simulation:
         constrained by ``v``. Its Jacobian ``I - G S`` is built once per step from the flow's
         response to unit rigid motions of each particle (``S = d f / d v``, the discrete added
         mass and drag, :meth:`NavierStokesProblem.lifting_response`) and the particles' gain
-        ``G = d v_new / d f``; each sub-iteration then costs one flow solve. The iteration stops
+        ``G = d v_new / d f``; each sub-iteration then costs one flow solve, whose Newton iteration
+        starts from the flow those responses predict (``x + step dX``; its stopping rule stays
+        relative to the residual at the step's start). The iteration stops
         when the error left after the next Newton step on ``v`` is below ``coupling_tol`` times
         the velocity scale, estimated from the contraction ``theta = |step_k| / |step_(k-1)|`` as
         ``theta / (1 - theta) |step_k|`` (Deuflhard's estimate; ``|step_0|`` itself for the first).
@@ -413,7 +415,7 @@ class Simulation:
             v_guess[free] += step
             unpack_velocities(guess, v_guess)
             self._constraint_state = guess
-            x, reports, force, torque = self._flow_and_forces(dt)
+            x, reports, force, torque = self._flow_and_forces(dt, guess=x + step @ dX)
             all_reports += reports
             new = self._integrate(force, torque, dt, contact=False)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "

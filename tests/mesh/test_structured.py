@@ -373,3 +373,19 @@ def test_graded_axis_keeps_an_exact_zone_bit_for_bit():
 
     x = graded_axis(0.0, 2.5, (0.4, 0.6), 0.05)
     assert 0.4 in x and 0.45 in x and 0.6 in x
+
+
+def test_graded_axis_rounds_the_cell_count_to_a_multiple():
+    """``multiple`` adds cells to the longer side (a gentler growth, the fine zone untouched) or,
+    without sides, to the zone, so that the mesh coarsens ``log2(multiple)`` times."""
+    from fbmflow.mesh import graded_axis
+
+    plain = graded_axis(0.0, 0.16, (0.0, 0.1425), 0.0025)
+    x = graded_axis(0.0, 0.16, (0.0, 0.1425), 0.0025, multiple=8)
+    assert (plain.size - 1) % 8 != 0 and (x.size - 1) % 8 == 0
+    np.testing.assert_array_equal(x[:58], plain[:58])  # the fine zone [0, 0.1425]
+    assert np.all(np.diff(x) > 0) and np.diff(x).max() <= np.diff(plain).max()
+    zone = graded_axis(0.0, 1.0, (0.0, 1.0), 0.1, multiple=4)
+    assert zone.size - 1 == 12 and np.allclose(np.diff(zone), 1 / 12)
+    with pytest.raises(ValueError, match="even multiple"):
+        graded_axis(0.0, 1.0, (0.2, 0.4), 0.1, multiple=3)

@@ -1,7 +1,10 @@
 """Geometric multigrid (issue 3): grid transfer, Vanka kernels, convergence factors and
 level-independent cycle counts for Stokes and Oseen/Newton systems, periodic directions."""
+import dataclasses
+
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from fbmflow.fem import FlowSpace
 from fbmflow.fem.functions import sample_pressure, sample_velocity
@@ -56,16 +59,22 @@ def _tiny_system(dim, newton):
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("variant", ["vanka-full", "vanka-diagonal", "vanka-factored"])
+@pytest.mark.parametrize("variant", ["vanka-full", "vanka-diagonal", "vanka-factored", "vanka-factored-single"])
 @pytest.mark.parametrize("newton", [True, False], ids=["coupled", "block-diagonal"])
 def test_vanka_corrections_match_numpy(dim, variant, newton):
+    """Each cell's correction solves its local block (single precision storage: to 1e-5)."""
     from fbmflow.solvers import VankaSmoother
     from fbmflow.solvers.vanka import FactoredVankaSmoother
     space, system = _tiny_system(dim, newton)
     K = system.matrix().toarray()[:system.n_u + system.n_p, :system.n_u + system.n_p]
     rng = np.random.default_rng(4)
     b, x = rng.standard_normal(K.shape[0]), rng.standard_normal(K.shape[0])
-    smoother = FactoredVankaSmoother(system) if variant == "vanka-factored" else VankaSmoother(system, variant)
+    if variant.startswith("vanka-factored"):
+        single = variant.endswith("single")
+        smoother = FactoredVankaSmoother(system, precision="single" if single else "double")
+    else:
+        smoother = VankaSmoother(system, variant)
+    rtol = 1e-5 if variant.endswith("single") else 1e-9
     cells = space.vanka_classes[0]
     x_new = x.copy()
     smoother.update(cells, b, x_new, omega=1.0)
@@ -80,7 +89,18 @@ def test_vanka_corrections_match_numpy(dim, variant, newton):
         if variant == "vanka-diagonal":
             Kc[:nu_loc, :nu_loc] = np.diag(diag[idx[:nu_loc]])
         ref = np.linalg.lstsq(Kc, r[idx], rcond=1e-12)[0]
-        assert np.allclose(x_new[idx] - x[idx], ref, rtol=1e-9, atol=1e-10 * np.abs(ref).max()), (c, variant)
+        assert np.allclose(x_new[idx] - x[idx], ref, rtol=rtol, atol=rtol / 10 * np.abs(ref).max()), (c, variant)
+
+
+def test_saddle_point_csr_matches_scipy():
+    from fbmflow.solvers.vanka import saddle_point_csr
+    _, system, _ = _ball_system("sharp")  # ghost rows and a pressure block
+    assert system.pressure_block is not None
+    ptr, idx, val = saddle_point_csr(system, np.float64)
+    n = system.n_u + system.n_p
+    K = sp.csr_matrix((val, idx, ptr), shape=(n, n))
+    ref = sp.bmat([[system.A, system.gradient], [system.BT, system.pressure_block]], format="csr")
+    assert abs(K - ref).max() == 0.0
 
 
 # -- convergence -------------------------------------------------------------------------------
@@ -225,6 +245,28 @@ def _ball_system(fbm, n=16, coarse_obstacle="nodes", dim=2, closed=False):
     return prob, prob.linear_system(x, 100.0, 1.0, con), -F
 
 
+@pytest.mark.parametrize("dim, n", [(2, 32), (3, 8)])
+def test_a_picard_hierarchy_preconditions_the_newton_time_step(dim, n):
+    """In a time step (dt 0.01, Re 100, recirculating flow) the hierarchy of the Picard
+    linearisation, with ``dim`` times fewer velocity entries, takes at most one FGMRES cycle more
+    than the Newton one to solve the Newton system to 1e-8 (measured: 2D 7 against 6, 3D 9 and 9); steady
+    solves keep the Newton hierarchy under ``auto``."""
+    counts = {}
+    for linearisation in ("newton", "picard"):
+        prob, mg, x, con, F = _cavity_system(n, dim, re=100, smoother="vanka-factored", krylov="fgmres")
+        mg.settings = dataclasses.replace(mg.settings, linearisation=linearisation)
+        system = prob.linear_system(x, 100.0, 1.0, con)
+        assert (system.preconditioner is not None) == (linearisation == "picard")
+        if linearisation == "picard":
+            assert system.preconditioner.A.nnz < system.A.nnz / (dim - 0.5)
+        rep, rel = _solve(prob, mg, x, con, F, m=100.0)
+        assert rel < 1e-7
+        counts[linearisation] = rep.iterations
+    assert counts["picard"] <= counts["newton"] + 1, counts
+    prob, mg, x, con, F = _cavity_system(n, dim, re=100, smoother="vanka-factored", krylov="fgmres")
+    assert prob.linear_system(x, 0.0, 1.0, con).preconditioner is None  # steady: auto keeps Newton
+
+
 def test_factored_vanka_takes_the_cycles_of_vanka_full():
     counts = {s: _solve(*_cavity_system(32, re=100, smoother=s, krylov="fgmres"))[0].iterations
               for s in ("vanka-full", "vanka-factored")}
@@ -253,7 +295,8 @@ def test_galerkin_coarse_rows_are_the_truncated_product(fbm):
     """Near the ball the coarse rows are ``P_t^T K P_t`` (elsewhere the re-discretisation equals
     it on nested meshes), and the coarse system is nonsingular."""
     from fbmflow.solvers.galerkin import truncated_prolongation
-    _, fine, _ = _ball_system(fbm, coarse_obstacle="galerkin")
+    _, system, _ = _ball_system(fbm, coarse_obstacle="galerkin")
+    fine = system if system.preconditioner is None else system.preconditioner  # the hierarchy's top
     coarse = fine.coarser
     P = truncated_prolongation(fine, *fine.prolongation)
     G = (P.T @ fine.matrix(bordered=False) @ P).toarray()

@@ -84,3 +84,16 @@ def test_direct_solver_matches_dense_solve():
     sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
     assert np.allclose(du, sol[:system.n_u], atol=1e-10)
     assert np.allclose(dp, sol[system.n_u:-1], atol=1e-10)
+
+
+def test_a_better_guess_keeps_the_stopping_rule_of_the_usual_start():
+    """With ``reference`` the target stays ``rtol`` times the residual at the usual start: a
+    start near the root takes fewer iterations and ends within the same target."""
+    res, step = _scalar_problem(lambda x: x**3 - 2.0, lambda x: 3 * x**2)
+    settings = NewtonSettings(rtol=1e-6)
+    _, usual = solve_newton(res, step, np.array([1.0]), settings)
+    x, near = solve_newton(res, step, np.array([1.26]), settings, reference=usual.residuals[0])
+    assert near.iterations < usual.iterations
+    assert near.residuals[-1] <= 1e-6 * usual.residuals[0]
+    assert near.residuals[-2] > 1e-6 * usual.residuals[0]  # not the (tighter) rule of its own start
+    assert abs(x[0] - 2 ** (1 / 3)) < 1e-6

@@ -226,7 +226,9 @@ class NavierStokesProblem:
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
         """Newton linearisation at ``x`` with constraints applied; with a multigrid solver the
-        system carries its re-discretisations on the coarser levels (``coarser`` chain).
+        system carries its re-discretisations on the coarser levels (``coarser`` chain), or,
+        where the solver builds its hierarchy from the Picard linearisation
+        (:meth:`MultigridSettings.picard_hierarchy`), a ``preconditioner`` system that does.
 
         The velocity blocks live in buffers of the levels and are overwritten by the next call.
         """
@@ -240,6 +242,11 @@ class NavierStokesProblem:
         system = self.fine.system(u, *args, con=con)
         finer_level, finer_system = self.fine, system
         settings = getattr(self.linear_solver, "settings", None)
+        newton = True
+        picard = getattr(settings, "picard_hierarchy", None)
+        if self.coarse and self.convection and a != 0.0 and picard is not None and picard(m != 0.0):
+            newton = False  # the hierarchy of the Picard linearisation preconditions the Newton system
+            finer_system = system.preconditioner = self.fine.system(u, *args, con=con, newton=False, own_buffer=True)
         galerkin = getattr(settings, "coarse_obstacle", "nodes") == "galerkin" and self.extra_constraints is not None
         irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:
@@ -247,10 +254,10 @@ class NavierStokesProblem:
             if galerkin:
                 walls = level.boundary_constraints.homogeneous()
                 coarse_system, irregular = galerkin_coarse_system(
-                    finer_system, level.system(u, *args, con=walls), *finer_level.prolongation, level.injection,
-                    irregular)
+                    finer_system, level.system(u, *args, con=walls, newton=newton), *finer_level.prolongation,
+                    level.injection, irregular)
             else:
-                coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t))
+                coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t), newton=newton)
             finer_system.coarser = coarse_system
             finer_system.prolongation = finer_level.prolongation
             finer_level, finer_system = level, coarse_system
@@ -290,14 +297,18 @@ class NavierStokesProblem:
         return levels
 
     # -- solves -------------------------------------------------------------------------------
-    def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float):
+    def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
+              guess: np.ndarray | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
+        ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
+        the stopping rule stays relative to the residual at ``x0``, so the accuracy is the same.
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t)
         x0 = x0.copy()
         con.apply_to_vector(x0)
+        reference = None
 
         def linear_step(x, F, fresh=True):
             solve = self._linearise(x, m, a, con, t, fresh)
@@ -305,8 +316,12 @@ class NavierStokesProblem:
             return np.concatenate([du, dp]), report
 
         orphans = self.orphans(con)
+        if guess is not None:
+            reference = float(np.linalg.norm(self.residual(x0, m, a, rhs, con, orphans)))
+            x0 = guess.copy()
+            con.apply_to_vector(x0)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
-                                 self.newton)
+                                 self.newton, reference)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
         return x, report
 

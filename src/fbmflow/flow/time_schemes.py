@@ -66,8 +66,12 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
         raise ValueError(f"unknown time scheme {name!r}; choose one of {sorted(TIME_SCHEMES)}") from None
 
 
-def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str):
+def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
+
+    ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
+    only; ignored by the others, whose substeps end at other times). The stopping rule, and so
+    the result up to it, does not depend on it.
 
     Returns
     -------
@@ -87,7 +91,8 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str):
             rhs += sub.implicit * problem.load(t_new)
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
-        x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new)
+        x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
+                                  guess=guess if len(get_scheme(scheme)) == 1 else None)
         reports.append(report)
         t = t_new
     return x, reports

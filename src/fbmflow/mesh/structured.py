@@ -281,7 +281,8 @@ class StructuredMesh:
         return AXES.index(tag[0]), tag[1:]
 
 
-def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float, ratio: float = 1.3) -> np.ndarray:
+def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float, ratio: float = 1.3,
+                multiple: int = 2) -> np.ndarray:
     """Vertex coordinates of one axis of a :meth:`StructuredMesh.rectilinear` mesh: cells of size
     about ``h`` on the interval ``fine = (a, b)``, growing by ``ratio`` per cell towards
     ``lower`` and ``upper``.
@@ -292,19 +293,22 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     than ``n h``). The fine zone gets ``ceil((b - a) / h)`` cells of size ``h``, rounded up to an
     even number (so the mesh coarsens at least once, for multigrid): the zone widens about its
     centre to fit them, shifted to stay inside ``[lower, upper]`` (its cells shrink only when the
-    whole axis is shorter). Returns (n + 1,) float64, strictly increasing.
+    whole axis is shorter). The longer side then gets the extra cells (a gentler growth) that
+    make the cell count a multiple of ``multiple`` (even), so that the mesh coarsens
+    ``log2(multiple)`` times. Returns (n + 1,) float64, strictly increasing.
     """
     a, b = fine
-    if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0):
-        raise ValueError(f"need lower <= a < b <= upper, h > 0 and ratio >= 1; got {lower}, {fine}, "
-                         f"{upper}, h = {h}, ratio = {ratio}")
+    if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0 and multiple >= 2 and multiple % 2 == 0):
+        raise ValueError(f"need lower <= a < b <= upper, h > 0, ratio >= 1 and an even multiple; got {lower}, "
+                         f"{fine}, {upper}, h = {h}, ratio = {ratio}, multiple = {multiple}")
 
-    def side(length):  # cell sizes from the fine zone outwards
+    def side(length, extra=0):  # cell sizes from the fine zone outwards
         if length <= 1e-12 * (upper - lower):
             return np.zeros(0)
         n = 2
         while h * np.sum(ratio ** np.arange(1, n + 1)) < length:
             n += 2
+        n += extra
         lo, hi = 1.0, ratio  # the growth factor that fits the side exactly with n cells
         for _ in range(60):
             mid = 0.5 * (lo + hi)
@@ -320,6 +324,15 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
         b = a + width
     middle = np.linspace(a, b, n_fine + 1)
     left, right = side(a - lower), side(upper - b)
+    deficit = -(n_fine + left.size + right.size) % multiple
+    if deficit and max(a - lower, upper - b) > 1e-12 * (upper - lower):
+        if a - lower > upper - b:
+            left = side(a - lower, deficit)
+        else:
+            right = side(upper - b, deficit)
+    elif deficit:  # no sides: the fine zone takes them (smaller cells)
+        n_fine += deficit
+        middle = np.linspace(a, b, n_fine + 1)
     axis = np.concatenate([a - np.cumsum(left)[::-1], middle, b + np.cumsum(right)])
     axis[0], axis[-1] = lower, upper
     return axis

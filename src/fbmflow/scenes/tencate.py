@@ -150,16 +150,18 @@ class TenCate(SimulationScene):
              height: float = 0.1275) -> StructuredMesh:
         """The box (or its quarter) with cells of ``h = 5 mm / 2^level`` along the sphere's path
         (``kind = "graded"``: only there, within ``diameter`` of the axis and up to ``diameter``
-        above the release height ``height``) [m]."""
+        above the release height ``height``) [m]. Every axis has a multiple of ``2^(level + 1)``
+        cells, so that multigrid coarsens at least ``level + 1`` times."""
         n, h = 2**level, 0.005 / 2**level
         lower = (0.05, 0.05, 0.0) if symmetry == "quarter" else (0.0, 0.0, 0.0)
         if kind == "uniform":
             return StructuredMesh.box((10 * n, 10 * n, 32 * n) if symmetry == "quarter" else (20 * n, 20 * n, 32 * n),
                                       lower=lower, upper=tuple(BOX))
         reach = 0.05 + diameter  # the fine zone about the axis x = y = 50 mm
-        side = [graded_axis(lower[a], BOX[a], (max(lower[a], 0.1 - reach), min(reach, BOX[a])), h) for a in (0, 1)]
+        side = [graded_axis(lower[a], BOX[a], (max(lower[a], 0.1 - reach), min(reach, BOX[a])), h, multiple=2 * n)
+                for a in (0, 1)]
         top = min(height + diameter, BOX[2])
-        return StructuredMesh.rectilinear(side + [graded_axis(0.0, BOX[2], (0.0, top), h)])
+        return StructuredMesh.rectilinear(side + [graded_axis(0.0, BOX[2], (0.0, top), h, multiple=2 * n)])
 
     def build(self, params: TenCateParams, level: int) -> Setup:
         pp, case = params.particle, params.fluid.case

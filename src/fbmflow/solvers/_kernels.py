@@ -234,94 +234,101 @@ def _lu_factor(K, piv):
 @njit
 def _lu_solve(LU, piv, r, out):
     """Solve with the factors of :func:`_lu_factor`; ``r`` is overwritten, the result goes to
-    ``out`` (zero for the unknowns of zeroed pivots)."""
+    ``out`` (zero for the unknowns of zeroed pivots). Both substitutions run along the rows of
+    ``LU`` (contiguous; twice as fast as the column-oriented forward sweep, measured)."""
     n = LU.shape[0]
     for k in range(n):  # the row swaps first: the multipliers moved with later swaps
         p = piv[k]
         if p != k:
             r[k], r[p] = r[p], r[k]
-    for k in range(n):
-        rk = r[k]
-        if rk != 0.0:
-            for i in range(k + 1, n):
-                r[i] -= LU[i, k] * rk
+    for i in range(1, n):
+        s = 0.0
+        for k in range(i):
+            s += LU[i, k] * r[k]
+        r[i] -= s
     for k in range(n - 1, -1, -1):
         if LU[k, k] == 0.0:
             out[k] = 0.0
             continue
-        s = r[k]
+        s = 0.0
         for j in range(k + 1, n):
-            s -= LU[k, j] * out[j]
-        out[k] = s / LU[k, k]
+            s += LU[k, j] * out[j]
+        out[k] = (r[k] - s) / LU[k, k]
 
 
 @njit
-def _row_dot(ptr, idx, val, row, x, offset):
-    s = 0.0
-    for j in range(ptr[row], ptr[row + 1]):
-        s += val[j] * x[offset + idx[j]]
-    return s
+def _copy_row(src_ptr, src_idx, src_val, q, offset, idx, val, pos):
+    for j in range(src_ptr[q], src_ptr[q + 1]):
+        idx[pos] = offset + src_idx[j]
+        val[pos] = src_val[j]
+        pos += 1
+    return pos
 
 
 @njit
-def _patch_residual(dofs, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
-                    c_ptr, c_idx, c_val, n_u):
-    """``r = (b - K x)[dofs]`` for ``K = [[A, G], [D, C]]`` (CSR blocks)."""
+def merge_blocks(a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val,
+                 ptr, idx, val):
+    """The CSR arrays of ``K = [[A, G], [D, C]]`` from those of its blocks (``A`` (n_u, n_u),
+    ``G`` (n_u, n_p), ``D`` (n_p, n_u), ``C`` (n_p, n_p)) into ``ptr (n_u + n_p + 1,)``, ``idx``
+    and ``val`` (nnz of all four), filled in place; row by row, left block first."""
+    n_u, n_p = a_ptr.shape[0] - 1, d_ptr.shape[0] - 1
+    pos = 0
+    ptr[0] = 0
+    for q in range(n_u):
+        pos = _copy_row(a_ptr, a_idx, a_val, q, 0, idx, val, pos)
+        pos = _copy_row(g_ptr, g_idx, g_val, q, n_u, idx, val, pos)
+        ptr[q + 1] = pos
+    for q in range(n_p):
+        pos = _copy_row(d_ptr, d_idx, d_val, q, 0, idx, val, pos)
+        pos = _copy_row(c_ptr, c_idx, c_val, q, n_u, idx, val, pos)
+        ptr[n_u + q + 1] = pos
+
+
+@njit
+def _patch_residual(dofs, b, x, r, k_ptr, k_idx, k_val):
+    """``r = (b - K x)[dofs]`` for ``K`` in CSR."""
     for a in range(dofs.shape[0]):
         g = dofs[a]
-        if g < n_u:
-            r[a] = b[g] - _row_dot(a_ptr, a_idx, a_val, g, x, 0) - _row_dot(g_ptr, g_idx, g_val, g, x, n_u)
-        else:
-            q = g - n_u
-            r[a] = b[g] - _row_dot(d_ptr, d_idx, d_val, q, x, 0) - _row_dot(c_ptr, c_idx, c_val, q, x, n_u)
-
-
-@njit
-def _scatter_row(ptr, idx, val, row, loc, offset, K, a):
-    """Add the entries of CSR row ``row`` whose columns (plus ``offset``) lie in the patch (local
-    position ``loc[col] >= 0``) to row ``a`` of the local block ``K``."""
-    for j in range(ptr[row], ptr[row + 1]):
-        col = loc[offset + idx[j]]
-        if col >= 0:
-            K[a, col] += val[j]
+        s = 0.0
+        for j in range(k_ptr[g], k_ptr[g + 1]):
+            s += k_val[j] * x[k_idx[j]]
+        r[a] = b[g] - s
 
 
 @njit(parallel=True)
-def vanka_factor(ptr, dofs, lu_ptr, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
-                 c_ptr, c_idx, c_val, n_u, n, n_chunks):
-    """LU factors of the local blocks ``K[S_k, S_k]`` of the saddle-point matrix
-    ``K = [[A, G], [D, C]]`` (each block CSR; ``C`` may be empty) for the patches
-    ``S_k = dofs[ptr[k]:ptr[k+1]]``. Returns ``LU`` (flat; patch ``k``'s ``n_k x n_k`` factors at
-    ``lu_ptr[k]``) and ``piv`` (int32, patch ``k``'s at ``ptr[k]``), see :func:`_lu_factor`.
-    ``n = n_u + n_p``."""
+def vanka_factor(LU, ptr, dofs, lu_ptr, k_ptr, k_idx, k_val, n_chunks, width):
+    """LU factors of the local blocks ``K[S_k, S_k]`` of the saddle-point matrix ``K`` (CSR) for
+    the patches ``S_k = dofs[ptr[k]:ptr[k+1]]``, factorised in float64 and stored in ``LU``
+    (flat, float64 or float32, filled in place; patch ``k``'s ``n_k x n_k`` factors at
+    ``lu_ptr[k]``). Returns ``piv`` (int32, patch ``k``'s at ``ptr[k]``), see
+    :func:`_lu_factor`. ``width``: the largest patch size."""
     m = ptr.shape[0] - 1
-    LU = np.zeros(lu_ptr[m])
     piv = np.zeros(ptr[m], dtype=np.int32)
     for t in prange(n_chunks):
-        loc = np.full(n, -1, dtype=np.int32)  # global -> local position in the patch
+        loc = np.full(k_ptr.shape[0] - 1, -1, dtype=np.int32)  # global -> local position in the patch
+        work = np.empty(width * width)
         for k in range(t * m // n_chunks, (t + 1) * m // n_chunks):
             S = dofs[ptr[k]:ptr[k + 1]]
             nk = S.shape[0]
             for a in range(nk):
                 loc[S[a]] = a
-            K = LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk)
+            K = work[:nk * nk].reshape(nk, nk)
+            K[:] = 0.0
             for a in range(nk):
-                g = S[a]
-                if g < n_u:
-                    _scatter_row(a_ptr, a_idx, a_val, g, loc, 0, K, a)
-                    _scatter_row(g_ptr, g_idx, g_val, g, loc, n_u, K, a)
-                else:
-                    _scatter_row(d_ptr, d_idx, d_val, g - n_u, loc, 0, K, a)
-                    _scatter_row(c_ptr, c_idx, c_val, g - n_u, loc, n_u, K, a)
+                for j in range(k_ptr[S[a]], k_ptr[S[a] + 1]):
+                    col = loc[k_idx[j]]
+                    if col >= 0:
+                        K[a, col] += k_val[j]
             for a in range(nk):
                 loc[S[a]] = -1
             _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
-    return LU, piv
+            for a in range(nk * nk):
+                LU[lu_ptr[k] + a] = work[a]
+    return piv
 
 
 @njit(parallel=True)
-def vanka_sweep(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, a_val, g_ptr, g_idx,
-                g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val, n_u, n_chunks, width):
+def vanka_sweep(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val, n_chunks, width):
     """One block update over ``patches (m,)`` that share no DOF: every patch's correction
     ``K[S, S]^-1 (b - K x)[S]`` is computed from the same ``x``, then ``omega`` times the
     corrections are added to ``x`` in place: deterministic whatever the number of threads, even
@@ -334,8 +341,7 @@ def vanka_sweep(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, 
             k = patches[e]
             S = dofs[ptr[k]:ptr[k + 1]]
             nk = S.shape[0]
-            _patch_residual(S, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
-                            c_ptr, c_idx, c_val, n_u)
+            _patch_residual(S, b, x, r, k_ptr, k_idx, k_val)
             _lu_solve(LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, out[e])
     for e in prange(m):
         k = patches[e]
@@ -344,8 +350,7 @@ def vanka_sweep(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, 
 
 
 @njit
-def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_ptr, a_idx, a_val, g_ptr,
-                           g_idx, g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val, n_u, width):
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val, width):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs): each
     correction is added (times ``omega``) before the next patch's residual is taken."""
     r = np.empty(width)
@@ -354,8 +359,7 @@ def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, a_p
         k = patches[e]
         S = dofs[ptr[k]:ptr[k + 1]]
         nk = S.shape[0]
-        _patch_residual(S, b, x, r, a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val,
-                        c_ptr, c_idx, c_val, n_u)
+        _patch_residual(S, b, x, r, k_ptr, k_idx, k_val)
         _lu_solve(LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, out)
         for a in range(nk):
             x[S[a]] += omega * out[a]

@@ -63,6 +63,10 @@ class SaddlePointSystem:
         (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
         are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
         carry no pressure gradient, and no pressure mode counts as seen through them.
+    preconditioner : SaddlePointSystem or None, an approximation of this system with its own
+        ``coarser`` chain (the Picard linearisation of a Newton system) that an iterative solver
+        builds its preconditioner from, applying this system's matrix in the Krylov iteration;
+        None: the system itself.
     """
 
     A: sp.csr_matrix
@@ -77,6 +81,7 @@ class SaddlePointSystem:
     rows: np.ndarray | None = None
     gradient_BT: sp.csr_matrix | None = None
     extension: object = None
+    preconditioner: "SaddlePointSystem | None" = None
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:

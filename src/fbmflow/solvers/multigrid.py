@@ -37,6 +37,9 @@ CYCLES = ("V", "W", "F")
 #: how coarse levels see constraints beyond the walls: each level's own constrained nodes, or
 #: Galerkin rows of the truncated prolongation near them (:mod:`fbmflow.solvers.galerkin`)
 COARSE_OBSTACLES = ("nodes", "galerkin")
+#: the linearisation the hierarchy is built from (the flow problem reads it): the system's own
+#: (Newton), the Picard one (FGMRES applies the Newton matrix), or "auto": Picard in time steps
+LINEARISATIONS = ("auto", "newton", "picard")
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,7 @@ class MultigridSettings:
     krylov: str = "fgmres"  # or "none": multigrid as a stand-alone iteration
     restart: int = 30
     coarse_obstacle: str = "nodes"  # or "galerkin" (solvers/galerkin.py)
+    linearisation: str = "auto"  # of the hierarchy: "newton", "picard" or "auto" (LINEARISATIONS)
 
     def __post_init__(self):
         if self.cycle not in CYCLES:
@@ -67,6 +71,20 @@ class MultigridSettings:
             raise ValueError(f"coarse_obstacle 'galerkin' needs the vanka-factored smoother, not {self.smoother!r}")
         if self.krylov not in ("fgmres", "none"):
             raise ValueError(f"unknown Krylov method {self.krylov!r}; choose 'fgmres' or 'none'")
+        if self.linearisation not in LINEARISATIONS:
+            raise ValueError(f"unknown linearisation {self.linearisation!r}; choose one of {LINEARISATIONS}")
+        if self.linearisation == "picard" and self.krylov != "fgmres":
+            raise ValueError("a Picard hierarchy only preconditions the Newton system inside FGMRES; "
+                             "set krylov = 'fgmres' or linearisation = 'newton'")
+
+    def picard_hierarchy(self, time_step: bool) -> bool:
+        """Whether the hierarchy is built from the Picard linearisation: ``"picard"``, or
+        ``"auto"`` in a time step (``time_step``: the mass term dominates the Newton reaction
+        term it leaves out; the cycles per solve stay, measured, while the velocity blocks get
+        ``dim`` times fewer entries) with FGMRES."""
+        if self.linearisation == "auto":
+            return time_step and self.krylov == "fgmres"
+        return self.linearisation == "picard"
 
 
 class _Level:
@@ -161,6 +179,8 @@ class MultigridSolver:
     def factor(self, system: SaddlePointSystem):
         """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
         returns ``solve(f, g) -> (u, p, LinearReport)``."""
+        if system.preconditioner is not None and self.settings.krylov != "fgmres":
+            raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
         if system.rows is not None and system.mean_weights is not None and self.settings.krylov == "none":
             raise ValueError("stand-alone multigrid cycles cannot solve the sharp fictitious boundary in a "
                              "closed domain (its right-hand side is compatible only up to the mean-pressure "
@@ -170,7 +190,7 @@ class MultigridSolver:
                              f"boundary), not {self.settings.smoother!r}; set solver.mg_smoother = \"auto\" or "
                              "\"vanka-factored\", or use the direct solver")
         t0 = time.perf_counter()
-        levels = self.setup(system)
+        levels = self.setup(system if system.preconditioner is None else system.preconditioner)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
         return lambda f, g: self._solve(system, levels, pending.pop() if pending else 0.0, f, g)
 

@@ -54,7 +54,7 @@ class NewtonReport:
 
 def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
                  linear_step: Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, object]],
-                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings()):
+                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings(), reference: float | None = None):
     """Solve ``F(x) = 0``.
 
     Parameters
@@ -63,6 +63,10 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     linear_step : (x, F, fresh) -> (dx, LinearReport) solving ``J dx = -F``; with ``fresh`` False
         it may use an earlier Jacobian (``settings.reuse_jacobian``)
     x0 : (n,) float64, first iterate (constraints already applied)
+    reference : float, optional
+        The residual norm that ``settings.rtol`` is relative to (default ``|F(x0)|``): a caller
+        that starts from a better guess passes the norm at its usual start, so that the stopping
+        rule, and with it the accuracy, stays the same.
 
     Returns
     -------
@@ -79,7 +83,7 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     F = residual(x)
     norm = float(np.linalg.norm(F))
     report.residuals.append(norm)
-    target = max(settings.atol, settings.rtol * norm)
+    target = max(settings.atol, settings.rtol * (norm if reference is None else reference))
     fresh = not settings.reuse_jacobian
     while norm > target:
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
