@@ -1,5 +1,6 @@
 """The command line and scene contract (issue 2, item 6)."""
 import json
+import os
 import subprocess
 import sys
 
@@ -110,3 +111,28 @@ def test_newton_failure_names_step_time_and_remedy(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code == 1
     assert "step 1 (t = 0" in err and "Remedy" in err and "Traceback" not in err
+
+
+def test_output_paths_that_cannot_hold_a_run_exit_2(tmp_path, capsys):
+    """``--out`` naming a file, lying below a file, empty, or not writable: one line, exit 2."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    cases = [(str(afile), "is a file"), (str(afile / "below"), "cannot write"), ("", "empty")]
+    if os.geteuid() != 0:  # root writes anywhere but /proc
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        cases.append((str(locked / "x"), "cannot write"))
+    cases.append(("/proc/fbmflow-test", "cannot write"))
+    for out, needle in cases:
+        assert main(["run", "taylor-green-2d", "--level", "0", "--out", out, "--quiet", "--no-plot"]) == 2, out
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and needle in err[0], (out, err)
+
+
+def test_plot_of_a_damaged_summary_exits_2(tmp_path, capsys):
+    (tmp_path / "summary.json").write_text("{not json")
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "damaged" in capsys.readouterr().err
+    (tmp_path / "summary.json").write_text(json.dumps({"scene": "glowinski-free-fall"}))
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "does not hold what" in capsys.readouterr().err

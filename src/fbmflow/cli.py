@@ -14,7 +14,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -42,7 +44,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--level", type=int, default=None, help="mesh refinement level (each level halves h)")
     run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                      help="override a scene parameter by its dotted key, e.g. fluid.viscosity=0.01")
-    run.add_argument("--out", type=Path, default=None, help="output directory (default fbmflow-out/SCENE)")
+    run.add_argument("--out", default=None, help="output directory (default fbmflow-out/SCENE)")
     run.add_argument("--quiet", action="store_true", help="no progress output")
     run.add_argument("--no-plot", action="store_true", help="do not write the PNG plot")
     run.add_argument("--checkpoint-every", type=int, default=0, metavar="N",
@@ -82,13 +84,40 @@ def _progress(quiet: bool):
     return report
 
 
+def _stop_on_signals():
+    """Ctrl-C and SIGTERM ask the run to stop after the step under way (it then saves a
+    checkpoint); a second one aborts at once. Returns the ``stop`` callable for ``run_scene`` and
+    a callable that restores the previous handlers."""
+    asked = []
+
+    def handler(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(signum)
+        sys.stderr.write(f"fbmflow: {signal.Signals(signum).name}: stopping after this step "
+                         "(again to abort at once)\n")
+
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, handler)
+
+    def restore():
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+    return (lambda: bool(asked)), restore
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
                         format="%(message)s", stream=sys.stderr)
     from .io import CheckpointError
     from .scenes import SCENES, get_scene, load_scene, resume_scene, run_scene
+    from .scenes.base import RunInterrupted
+    from .scenes.registry import output_directory
 
+    restore = None
     try:
         if args.command == "scenes":
             for name, scene in SCENES.items():
@@ -98,29 +127,45 @@ def main(argv: list[str] | None = None) -> int:
             summary_path = args.directory / "summary.json"
             if not summary_path.is_file():
                 raise ParamError(f"{summary_path} not found; give the --out directory of a finished run")
-            summary = json.loads(summary_path.read_text())
-            scene = get_scene(summary.get("scene", ""))
+            try:
+                summary = json.loads(summary_path.read_text())
+                scene = get_scene(summary["scene"])
+            except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as err:
+                raise ParamError(f"{summary_path} is damaged ({err}); run the scene again") from None
             path = args.directory / f"{scene.name}.png"
-            print(path if scene.plot(summary, path) else f"scene {scene.name} has no plot")
+            try:
+                plotted = scene.plot(summary, path)
+            except (KeyError, TypeError, ValueError, IndexError) as err:
+                raise ParamError(f"{summary_path} does not hold what the {scene.name} plot needs ({err!r}); "
+                                 "run the scene again") from None
+            print(path if plotted else f"scene {scene.name} has no plot")
             return 0
         if args.command == "resume":
             out = args.directory
             log.info("fbmflow %s: resuming %s", __version__, out)
-            summary = resume_scene(out, _progress(args.quiet), plot=not args.no_plot)
+            stop, restore = _stop_on_signals()
+            summary = resume_scene(out, _progress(args.quiet), plot=not args.no_plot, stop=stop)
         else:
             if args.checkpoint_every < 0 or args.fields_every < 0:
                 raise ParamError("--checkpoint-every and --fields-every must be >= 0")
             scene, params, level = load_scene(args.scene, args.level, args.overrides)
-            out = args.out or Path("fbmflow-out") / scene.name
+            out = Path("fbmflow-out") / scene.name if args.out is None else output_directory(args.out)
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
+            stop, restore = _stop_on_signals()
             summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
-                                fields_format=args.fields_format)
+                                fields_format=args.fields_format, stop=stop)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations (%s); summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], summary.get("linear_solver") or "linear solver not recorded",
                  out / "summary.json")
         return 0
+    except RunInterrupted as err:
+        sys.stderr.write(f"fbmflow: {err}\n")
+        return 130
+    except KeyboardInterrupt:
+        sys.stderr.write("fbmflow: aborted; the last checkpoint (if any) is in the output directory\n")
+        return 130
     except (ParamError, CheckpointError) as err:
         sys.stderr.write(f"fbmflow: error: {err}\n")
         return 2
@@ -128,6 +173,9 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: refine the mesh (--level), reduce the "
                          "time step, or relax solver.newton_rtol.\n")
         return 1
+    finally:
+        if restore is not None:
+            restore()
 
 
 if __name__ == "__main__":  # pragma: no cover

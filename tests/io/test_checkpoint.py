@@ -113,3 +113,49 @@ def test_checkpoint_from_before_a_new_parameter_resumes_with_its_default(tmp_pat
     (tmp_path / "run.json").write_text(json.dumps(info))
     assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 2
     assert "another params" in capsys.readouterr().err
+
+
+def test_damaged_or_missing_run_data_and_a_bad_level_are_refused(tmp_path, capsys):
+    """Resume trusts none of its files: a truncated or deleted ``run.h5`` and a level out of
+    range in ``run.json`` exit 2 with one line (before: a traceback, or a run.h5 silently
+    replaced by the rows after the checkpoint)."""
+    _short_run(tmp_path)
+    data = (tmp_path / "run.h5").read_bytes()
+    (tmp_path / "run.h5").write_bytes(data[:len(data) // 3])
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot be read" in err[0]
+    (tmp_path / "run.h5").unlink()
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 2
+    assert "run.h5 is missing" in capsys.readouterr().err
+    (tmp_path / "run.h5").write_bytes(data)
+    info = json.loads((tmp_path / "run.json").read_text())
+    (tmp_path / "run.json").write_text(json.dumps({**info, "level": 99}))
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 2
+    assert "level must be an integer from 0 to" in capsys.readouterr().err
+
+
+def test_an_interrupted_run_saves_its_step_and_resumes(tmp_path, capsys, monkeypatch):
+    """Ctrl-C / SIGTERM stop the run after the step under way: a checkpoint of that step, one
+    line naming it and the resume command, exit 130; resume then finishes the run."""
+    import fbmflow.cli as cli
+
+    stop, restore = cli._stop_on_signals()
+    try:
+        assert not stop()
+        os.kill(os.getpid(), signal.SIGTERM)  # the handler only records it
+        assert stop()
+    finally:
+        restore()
+    assert "SIGTERM: stopping after this step" in capsys.readouterr().err  # at once: a step can be long
+    monkeypatch.setattr(cli, "_stop_on_signals", lambda: ((lambda: True), (lambda: None)))
+    args = ["glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
+            "--quiet", "--no-plot"]
+    assert main(["run", *args, "--out", str(tmp_path)]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "interrupted at step 1" in err[0] and f"fbmflow resume {tmp_path}" in err[0]
+    assert _checkpoint_step(tmp_path / "checkpoint.h5") == 1
+    monkeypatch.setattr(cli, "_stop_on_signals", lambda: ((lambda: False), (lambda: None)))
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 0
+    with h5py.File(tmp_path / "run.h5") as f:
+        assert np.array_equal(f["step"][()], np.arange(7))

@@ -331,6 +331,7 @@ class NavierStokesProblem:
         last = self._linearisation
         if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
+            self._linearisation = last = None  # freed before the next is built (peak memory)
             self._linearisation = (m, a, con, self.linear_solver.factor(self.linear_system(x, m, a, con, t)))
         else:
             self._linearisation = (m, a, con, last[3])

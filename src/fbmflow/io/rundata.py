@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .checkpoint import CheckpointError
+
 SCALARS = ("step", "t", "newton_iterations", "flow_solves", "linear_solves", "linear_iterations", "linear_sweeps",
            "linear_time_s", "contacts")
 ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "torque")
@@ -25,7 +27,8 @@ ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "t
 
 class RunData:
     """Appends rows to ``path`` (created with ``meta`` attributes unless ``resume_step`` is given,
-    in which case rows after that step are dropped)."""
+    in which case rows after that step are dropped; CheckpointError when the file is missing or
+    damaged then)."""
 
     def __init__(self, path, meta: dict, resume_step: int | None = None):
         import h5py
@@ -36,11 +39,14 @@ class RunData:
                 for key, value in meta.items():
                     f.attrs[key] = value if isinstance(value, (int, float, str)) else json.dumps(value)
         else:
-            with h5py.File(self.path, "a") as f:
-                if "step" in f:
-                    keep = int(np.searchsorted(f["step"][()], resume_step, side="right"))
-                    for key in f.keys():
-                        f[key].resize(keep, axis=0)
+            try:
+                with h5py.File(self.path, "r+") as f:
+                    if "step" in f:
+                        keep = int(np.searchsorted(f["step"][()], resume_step, side="right"))
+                        for key in f.keys():
+                            f[key].resize(keep, axis=0)
+            except (OSError, KeyError) as err:
+                raise CheckpointError(f"{self.path} cannot be read ({err}); restore it or start the run again") from None
 
     def append(self, row: dict) -> None:
         """One row: the keys of :data:`SCALARS` and :data:`ARRAYS`."""

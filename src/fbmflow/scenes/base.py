@@ -73,6 +73,16 @@ class RunFiles:
     fields_every: int = 0  # ParaView output every that many steps (0: none)
     fields_format: str = "xdmf"  # or "vtu"
     meta: dict = field(default_factory=dict)  # scene, level, params, fbmflow_version
+    stop: Callable[[], bool] | None = None  # asked after every step: True ends the run (RunInterrupted)
+
+
+class RunInterrupted(RuntimeError):
+    """A run stopped on request (``RunFiles.stop``) after a completed step, its state saved."""
+
+    def __init__(self, step: int, out):
+        self.step, self.out = step, out
+        where = f"; `fbmflow resume {out}` continues" if out is not None else ""
+        super().__init__(f"interrupted at step {step}{where}")
 
 
 class SimulationScene(Scene):
@@ -163,6 +173,10 @@ class SimulationScene(Scene):
                                                    "linear": rep.linear.iterations, "max|U|": float(speed)})
             if self.stop(params, row):
                 break
+            if files.stop is not None and files.stop():
+                if out is not None:
+                    checkpoint(k)
+                raise RunInterrupted(k, out)
             if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
                 sim.flow.forget_linearisation()
                 if out is not None:

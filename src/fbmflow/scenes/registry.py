@@ -74,25 +74,30 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
             raise ParamError(f"--set expects KEY=VALUE, got {item!r}")
         set_dotted(data, key.strip(), parse_value(value.strip()))
     params = from_dict(scene.Params, data)
-    level = scene.default_level if level is None else level
+    return scene, params, check_level(scene, scene.default_level if level is None else level)
+
+
+def check_level(scene: Scene, level) -> int:
+    """``level`` if it is an integer from 0 to the scene's ``max_level``, else ParamError."""
     if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= scene.max_level:
         raise ParamError(f"level must be an integer from 0 to {scene.max_level} for {scene.name}, got {level!r}")
-    return scene, params, level
+    return level
 
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
               checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0,
-              fields_format: str = "xdmf") -> dict:
+              fields_format: str = "xdmf", stop=None) -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
     (what :func:`resume_scene` needs), the per-step particle data ``run.h5`` and its CSV export
     ``particles.csv``, with ``checkpoint_every > 0`` a checkpoint every that many steps and with
     ``fields_every > 0`` ParaView output (:mod:`fbmflow.io.fields`); ``resume`` continues from the
-    checkpoint in ``out``.
+    checkpoint in ``out``. ``stop`` (a callable asked after every step; True ends the run at that
+    step with a checkpoint, :class:`~fbmflow.scenes.base.RunInterrupted`): how the CLI turns
+    Ctrl-C and SIGTERM into a resumable stop.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_directory(out)
     meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
     t0 = time.perf_counter()
     if isinstance(scene, SimulationScene):
@@ -100,7 +105,7 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
             (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every,
                                                       "fields_every": fields_every,
                                                       "fields_format": fields_format}, indent=1))
-        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
+        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta, stop)
         result = scene.run(params, level, progress, files)
         export_csv(out / "run.h5", out / "particles.csv")
     else:
@@ -118,7 +123,25 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     return summary
 
 
-def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
+def output_directory(out) -> Path:
+    """``out`` as a directory, created if missing; ParamError when it is empty, names a file, lies
+    below a file or cannot be created or written."""
+    if str(out).strip() == "":
+        raise ParamError("the output directory is empty; give --out DIR")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ParamError(f"output directory {out} is a file; give another --out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".fbmflow-write-test"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; give another --out") from None
+    return out
+
+
+def resume_scene(out: Path, progress=None, plot: bool = True, stop=None) -> dict:
     """Continue the run in ``out`` (written by :func:`run_scene` with ``checkpoint_every > 0``)
     from its checkpoint; ParamError (CheckpointError) when there is nothing usable to resume."""
     out = Path(out)
@@ -130,9 +153,13 @@ def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
         info = json.loads(info_path.read_text())
         scene = get_scene(info["scene"])
         params = from_dict(scene.Params, info["params"])
-        level, every, fields = int(info["level"]), int(info["checkpoint_every"]), int(info.get("fields_every", 0))
+        level, every, fields = info["level"], int(info["checkpoint_every"]), int(info.get("fields_every", 0))
         fmt = str(info.get("fields_format", "xdmf"))
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as err:
         raise ParamError(f"{info_path} is damaged ({err}); start the run again") from None
+    level = check_level(scene, level)
+    if not (out / "run.h5").is_file():
+        raise ParamError(f"{out / 'run.h5'} is missing: the resumed run would keep only the steps after its "
+                         "checkpoint; restore the file or start the run again")
     return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True,
-                     fields_every=fields, fields_format=fmt)
+                     fields_every=fields, fields_format=fmt, stop=stop)
