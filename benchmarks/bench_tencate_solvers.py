@@ -65,8 +65,10 @@ def main():
     lines = ["# ten-cate E4: direct (PARDISO) against multigrid, first steps "
              "(benchmarks/bench_tencate_solvers.py)", "",
              "Defaults of the scene (sharp boundary, Crank–Nicolson, dt 0.01 s, implicit coupling, linear "
-             "rtol 1e-3). Each solver in its own process, one after the other; step 1 includes JIT "
-             "compilation not yet cached. Iterations: FGMRES steps, one V(2,2) cycle each.", "",
+             "rtol 1e-3; multigrid: FGMRES with V(2,2) cycles of the factored Vanka smoother in single "
+             "precision on the Picard hierarchy). Each solver in its own process, one after the other; step "
+             "1 includes the set-up (and JIT compilation not yet cached). Iterations: FGMRES steps, one "
+             "cycle each.", "",
              "| level | unknowns | solver | step | s | Newton | coupling | solves | iterations | sweeps | linear s "
              "| peak GB | u_max at the end | rel. to direct |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
