@@ -315,9 +315,10 @@ def test_galerkin_coarse_rows_are_the_truncated_product(fbm):
 
 @pytest.mark.parametrize("fbm, coarse_obstacle", [("nodes", "nodes"), ("sharp", "nodes"), ("sharp", "galerkin")])
 def test_multigrid_cycles_with_a_moving_ball(fbm, coarse_obstacle):
-    """FGMRES with V(2,2) cycles on the moving-disk system converges to 1e-8 in at most twice
-    the cycles of the same mesh without the disk plus two (measured at 32^2: 7 without, 11 / 13 /
-    13 with; before the prolongation was truncated on the constrained DOFs: 100, not converged)."""
+    """FGMRES with V(2,2) cycles on the moving-disk system converges to 1e-8 in at most 1.5 times
+    the cycles of the same mesh without the disk (measured at 32^2: 7 without, 8 / 9 / 9 with,
+    thanks to the two extra sweeps at the interface; 11 / 13 / 13 without those; before the
+    prolongation was truncated on the constrained DOFs: 100, not converged)."""
     _, system, b = _ball_system(fbm, n=32, coarse_obstacle=coarse_obstacle)
     mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", coarse_obstacle=coarse_obstacle, rtol=1e-8))
     du, dp, rep = mg.solve(system, b[:system.n_u], b[system.n_u:])
@@ -325,7 +326,7 @@ def test_multigrid_cycles_with_a_moving_ball(fbm, coarse_obstacle):
     assert np.linalg.norm(b - system.apply(x)) <= 1e-7 * np.linalg.norm(b)
     _, plain_system, plain_b = _ball_system("none", n=32)
     plain = mg.solve(plain_system, plain_b[:plain_system.n_u], plain_b[plain_system.n_u:])[2].iterations
-    assert rep.iterations <= 2 * plain + 2, (rep.iterations, plain)
+    assert rep.iterations <= 1.5 * plain, (rep.iterations, plain)
 
 
 @pytest.mark.parametrize("dim, n", [(2, 32), (3, 8)])
@@ -333,15 +334,16 @@ def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     """In a closed box the sharp system's left null vector has components on the ghost rows, so
     the balanced right-hand side still misses the range; FGMRES solves for the mean-pressure
     multiplier as the bordered direct solve does (without it: 100 iterations, reduction 3e-3).
-    The cycles stay within 2x (2D) / 1.5x (3D) of the box without the ball, plus two (measured:
-    2D 32^2 6 / 13, 3D 8^3 8 / 10), and the velocity is the direct solver's."""
+    The cycles stay within 1.5x of the box without the ball (measured: 2D 32^2 6 / 9, 3D 8^3
+    8 / 9; 6 / 13 and 8 / 10 before the extra sweeps at the interface), and the velocity is the
+    direct solver's."""
     _, system, b = _ball_system("sharp", n=n, dim=dim, closed=True)
     assert system.mean_weights is not None and system.rows is not None
     mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", rtol=1e-8))
     du, dp, rep = mg.solve(system, b[:system.n_u], b[system.n_u:])
     _, plain_system, plain_b = _ball_system("none", n=n, dim=dim, closed=True)
     plain = mg.solve(plain_system, plain_b[:plain_system.n_u], plain_b[plain_system.n_u:])[2].iterations
-    assert rep.iterations <= (2 if dim == 2 else 1.5) * plain + 2, (rep.iterations, plain)
+    assert rep.iterations <= 1.5 * plain, (rep.iterations, plain)
     u, _ = factorize(system, "superlu")(b[:system.n_u], b[system.n_u:])
     assert np.linalg.norm(du - u) <= 1e-6 * np.linalg.norm(u), np.linalg.norm(du - u) / np.linalg.norm(u)
 

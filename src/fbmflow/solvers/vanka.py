@@ -100,7 +100,10 @@ class FactoredVankaSmoother:
     whatever their pattern: ghost-node rows, transferred continuity rows, Galerkin coarse rows)
     and factorised once; a sweep then costs a residual and two triangular solves per patch.
     Cell patches go class by class (:attr:`FlowSpace.vanka_classes`), in parallel within a class;
-    the agglomerated patches follow one after the other.
+    then the patches at and inside the fictitious boundaries (those that hold a constrained
+    velocity, fixed or row-constrained, not a wall's; the agglomerated ones among them) get
+    ``interface_sweeps`` more updates one after the other, and the agglomerated patches follow
+    one after the other.
 
     Parameters
     ----------
@@ -110,9 +113,14 @@ class FactoredVankaSmoother:
         Storage of the smoother's copy of the blocks and of the local factors (the factors are
         computed in double; residuals and corrections are always accumulated in double).
         Single halves the memory the sweeps stream through.
+    interface_sweeps : int
+        Extra sequential updates of the patches at the fictitious boundaries per sweep: the
+        error the constraints leave there is local and rough (2D moving disk, sharp boundary:
+        cycles 1.5-1.9x those without the disk with none, 1.2-1.3x with two; see the tests).
     """
 
-    def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single"):
+    def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single",
+                 interface_sweeps: int = 2):
         if precision not in PRECISIONS:
             raise ValueError(f"unknown precision {precision!r}; choose one of {sorted(PRECISIONS)}")
         dtype = PRECISIONS[precision]
@@ -148,6 +156,22 @@ class FactoredVankaSmoother:
         index[cells] = np.arange(cells.size)
         self.classes = [index[c][regular[c]] for c in space.vanka_classes if regular[c].any()]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
+        self.interface_sweeps = interface_sweeps
+        self.interface = self._interface_patches(system)
+
+    def _interface_patches(self, system: SaddlePointSystem) -> np.ndarray:
+        """Patches (cells and agglomerated ones) holding a constrained velocity (fixed or
+        row-constrained, not a wall's), (k,) int64."""
+        constrained = np.zeros(system.n_u + system.n_p, dtype=bool)
+        for dofs in (system.fixed, system.rows):
+            if dofs is not None:
+                constrained[dofs] = True
+        if system.fixed_always is not None:
+            constrained[system.fixed_always] = False
+        if not constrained.any():
+            return np.zeros(0, dtype=np.int64)
+        hits = np.add.reduceat(constrained[self.dofs].astype(np.int64), self.ptr[:-1])
+        return np.flatnonzero(hits > 0).astype(np.int64)
 
     def update(self, patches: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
         """Add ``omega`` times the corrections of ``patches`` (indices of patches that share no
@@ -161,6 +185,9 @@ class FactoredVankaSmoother:
         for _ in range(sweeps):
             for patches in self.classes:
                 self.update(patches, b, x)
+            for _ in range(self.interface_sweeps if self.interface.size else 0):
+                _kernels.vanka_sweep_sequential(self.interface, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
+                                                self.LU, self.piv, *self.K, self.width)
             if self.merged.size:
                 _kernels.vanka_sweep_sequential(self.merged, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
                                                 self.LU, self.piv, *self.K, self.width)
