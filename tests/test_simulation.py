@@ -2,6 +2,8 @@
 import numpy as np
 import pytest
 
+from fbmflow.flow import NoSlip, Slip
+from fbmflow.mesh import StructuredMesh
 from fbmflow.params import ParamError, from_dict
 from fbmflow.scenes import get_scene
 
@@ -477,3 +479,39 @@ def test_a_failing_multigrid_solve_stops_the_step_with_a_remedy(tmp_path, monkey
     with pytest.raises(ConvergenceError, match=r"step 1 \(t = 0 -> 0\.005\).*multigrid.*direct"):
         run_scene(scene, params, 0, tmp_path / "run", plot=False)
     assert (tmp_path / "run" / "checkpoint.h5").is_file()
+
+
+@pytest.mark.parametrize("centres, radius, needle", [
+    ([[0.5, 1.0], [0.6, 1.0]], 0.1, "overlap by"),              # overlapping disks
+    ([[2.5, 1.0]], 0.1, "reaches outside the domain"),          # outside the box
+    ([[0.05, 1.0]], 0.1, "reaches outside the domain"),         # through a wall
+    ([[0.5, 1.0]], 0.01, "smaller than the velocity-node spacing"),  # sub-grid: feels no drag
+])
+def test_placement_is_checked_before_the_first_step(centres, radius, needle):
+    """Before: accepted, then moved without a word (through walls) or left without drag."""
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+    mesh = StructuredMesh.box((16, 32), upper=(1.0, 2.0))
+    shapes = [Ball(radius, 2) for _ in centres]
+    with pytest.raises(ValueError, match=needle):
+        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest(shapes, 1.5, centres), [0.0, -9.8])
+
+
+def test_placement_allows_touching_walls_and_each_other_and_symmetry_planes():
+    from fbmflow.particles import Ball, Particles
+    from fbmflow.simulation import Simulation
+    mesh = StructuredMesh.box((16, 32), upper=(1.0, 2.0))
+    touching = Particles.at_rest([Ball(0.1, 2)] * 2, 1.5, [[0.1, 0.1], [0.3, 0.1]])  # on the floor, in contact
+    Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, touching, [0.0, -9.8])
+    half = Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.0, 1.0]])  # centred on the mirror plane x = 0
+    bc = {t: NoSlip() for t in mesh.tags}
+    bc["xmin"] = Slip()
+    Simulation(mesh, 0.1, bc, half, [0.0, -9.8], symmetry=(0,))
+
+
+def test_a_scene_placed_through_a_wall_exits_2_with_one_line(capsys, tmp_path):
+    from fbmflow.cli import main
+    assert main(["run", "dkt-2d", "--level", "0", "--set", "case.offset=5", "--set", "time.t_end=0.02",
+                 "--out", str(tmp_path), "--quiet", "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "reaches outside the domain" in err[0]

@@ -122,6 +122,7 @@ class Simulation:
         self.symmetry = tuple(symmetry)
         self.repulsion = repulsion
         _check_symmetry(mesh, particles, np.asarray(gravity, dtype=float), self.symmetry)
+        _check_placement(mesh, particles, self.symmetry)
         self.coupling = coupling
         self.coupling_tol = coupling_tol
         self.max_subiterations = max_subiterations
@@ -436,6 +437,54 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
         if gravity[a] != 0.0:
             raise ValueError(f"symmetry plane with normal axis {a}: gravity has a component {gravity[a]} "
                              "across it; the motion would not be symmetric")
+
+
+def _check_placement(mesh, particles: Particles, symmetry: tuple):
+    """Particles must lie in the domain (balls wholly, other shapes with their centre; not across
+    periodic axes or symmetry planes), balls must not overlap (periodic images not checked), and
+    every particle must span the velocity-node spacing (half a cell) where it sits: a smaller one
+    can cover no node and feel no drag. ValueError naming the particles and the remedy."""
+    X, n = particles.position, particles.n
+    if n == 0:
+        return
+    radius = particles.ball_radius
+    reach = np.zeros(n) if radius is None else radius
+    for a in range(mesh.dim):
+        lo, hi = float(mesh.lower[a]), float(mesh.upper[a])
+        tol = 1e-9 * (hi - lo)
+        if mesh.periodic[a]:
+            continue
+        r = np.zeros(n) if a in symmetry else reach
+        out = np.flatnonzero((X[:, a] - r < lo - tol) | (X[:, a] + r > hi + tol))
+        if out.size:
+            k = out[0]
+            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside the "
+                             f"domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
+    if radius is not None and n > 1:
+        from scipy.spatial import cKDTree
+        pairs = cKDTree(X).query_pairs(2.0 * float(radius.max()), output_type="ndarray")
+        if pairs.size:
+            gap = np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1) - radius[pairs].sum(axis=1)
+            bad = np.flatnonzero(gap < -1e-9 * radius[pairs].sum(axis=1))
+            if bad.size:
+                i, j = pairs[bad[0]]
+                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres {X[i].tolist()} "
+                                 f"and {X[j].tolist()}){_more(bad)}; place them at least a diameter apart")
+    axes = mesh.axis_coordinates
+    if axes is not None:  # the local cell size where each particle sits
+        h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
+                    for a, ax in enumerate(axes)], axis=0)
+        small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
+        if small.size:
+            k = small[0]
+            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller than the "
+                             f"velocity-node spacing, half the cell it sits in (cell size {h[k]:.4g}){_more(small)}: it can "
+                             "cover no velocity node and feel no drag; refine the mesh (cells of at most two "
+                             "diameters; 4 or more cells per diameter for accurate forces) or enlarge the particles")
+
+
+def _more(indices: np.ndarray) -> str:
+    return f" (and {indices.size - 1} more)" if indices.size > 1 else ""
 
 
 COUPLINGS = ("explicit", "implicit")

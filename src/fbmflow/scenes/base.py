@@ -117,10 +117,16 @@ class SimulationScene(Scene):
         from pathlib import Path
 
         from ..io import FieldWriter, RunData, save_checkpoint
+        from ..params import ParamError
         from ..solvers import ConvergenceError
 
         files = files or RunFiles()
-        setup = self.build(params, level)
+        try:
+            setup = self.build(params, level)
+        except ParamError:
+            raise
+        except ValueError as err:  # the simulation refused the scene it was given
+            raise ParamError(f"{self.name}: {err}") from None
         sim = setup.sim
         series = {k: [v] for k, v in self.observe(params, sim).items()}
         newton_its = 0
