@@ -477,10 +477,11 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
         small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
         if small.size:
             k = small[0]
-            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller than the "
-                             f"velocity-node spacing, half the cell it sits in (cell size {h[k]:.4g}){_more(small)}: it can "
-                             "cover no velocity node and feel no drag; refine the mesh (cells of at most two "
-                             "diameters; 4 or more cells per diameter for accurate forces) or enlarge the particles")
+            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller than "
+                             f"the velocity-node spacing, half the cell it sits in (cell size {h[k]:.4g})"
+                             f"{_more(small)}: it can cover no velocity node and feel no drag; refine the mesh "
+                             "(cells of at most two diameters; 4 or more cells per diameter for accurate "
+                             "forces) or enlarge the particles")
 
 
 def _more(indices: np.ndarray) -> str:

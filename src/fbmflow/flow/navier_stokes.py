@@ -246,7 +246,8 @@ class NavierStokesProblem:
         picard = getattr(settings, "picard_hierarchy", None)
         if self.coarse and self.convection and a != 0.0 and picard is not None and picard(m != 0.0):
             newton = False  # the hierarchy of the Picard linearisation preconditions the Newton system
-            finer_system = system.preconditioner = self.fine.system(u, *args, con=con, newton=False, own_buffer=True)
+            finer_system = system.preconditioner = self.fine.system(u, *args, con=con, newton=False,
+                                                                    own_buffer=True)
         galerkin = getattr(settings, "coarse_obstacle", "nodes") == "galerkin" and self.extra_constraints is not None
         irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:

@@ -46,7 +46,8 @@ class RunData:
                         for key in f.keys():
                             f[key].resize(keep, axis=0)
             except (OSError, KeyError) as err:
-                raise CheckpointError(f"{self.path} cannot be read ({err}); restore it or start the run again") from None
+                raise CheckpointError(f"{self.path} cannot be read ({err}); restore it or start the run "
+                                      "again") from None
 
     def append(self, row: dict) -> None:
         """One row: the keys of :data:`SCALARS` and :data:`ARRAYS`."""
