@@ -13,7 +13,7 @@ import numpy as np
 from ..fem.functions import sample_velocity
 from ..flow import Dirichlet, NavierStokesProblem, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SolverParams, param, section
+from ..params import SteadySolverParams, param, section
 from .base import Scene, SceneResult
 from .data import ghia1982
 
@@ -43,7 +43,7 @@ class CavityParams:
     """Parameters of ``cavity-2d``."""
 
     fluid: CavityFluid = section(CavityFluid)
-    solver: SolverParams = section(SolverParams)
+    solver: SteadySolverParams = section(SteadySolverParams)
 
 
 class Cavity2D(Scene):

@@ -15,7 +15,7 @@ from ..fem.functions import sample_pressure, sample_velocity
 from ..fem.quadrature import gauss_tensor
 from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SolverParams, param, section
+from ..params import SteadySolverParams, param, section
 from .base import Scene, SceneResult
 
 
@@ -40,7 +40,7 @@ class ChannelParams:
 
     fluid: ChannelFluid = section(ChannelFluid)
     inflow: ChannelInflow = section(ChannelInflow)
-    solver: SolverParams = section(SolverParams)
+    solver: SteadySolverParams = section(SteadySolverParams)
 
 
 class _Channel(Scene):
