@@ -515,3 +515,17 @@ def test_a_scene_placed_through_a_wall_exits_2_with_one_line(capsys, tmp_path):
                  "--out", str(tmp_path), "--quiet", "--no-plot"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "reaches outside the domain" in err[0]
+
+
+def test_a_step_that_moves_a_particle_over_a_cell_warns_once(caplog):
+    """dt 0.05 s at level 0 moves the disk 1.2 cells in step 2 (before: no word of it)."""
+    import logging
+    scene = get_scene("glowinski-free-fall")
+    with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
+        scene.run(from_dict(scene.Params, {"time": {"dt": 0.05, "t_end": 0.2}}), 0)
+    warnings = [r.getMessage() for r in caplog.records if "cells; forces and contact" in r.getMessage()]
+    assert len(warnings) == 1 and "reduce the time step (dt = 0.05 s)" in warnings[0], warnings
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
+        scene.run(from_dict(scene.Params, {"time": {"dt": 0.005, "t_end": 0.02}}), 0)
+    assert not [r for r in caplog.records if "cells; forces and contact" in r.getMessage()]

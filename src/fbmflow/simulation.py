@@ -147,6 +147,7 @@ class Simulation:
         # the first: unknown, the fluid's reaction to the first acceleration is not zero)
         self._last_force: np.ndarray | None = None
         self._last_torque: np.ndarray | None = None
+        self._warned_fast = False  # the warning about particles crossing cells in a step is given once
 
     def owner(self) -> np.ndarray:
         """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
@@ -329,6 +330,7 @@ class Simulation:
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(x))):
             raise ConvergenceError(f"{where}: non-finite state")
         sharp = self._sharp(self.flow.space.V)  # of the positions the flow was solved with
+        self._warn_if_fast(new.position - self.particles.position, dt)
         self.x, self.particles = x, new
         if sharp is not None:  # uncovered ghost nodes start the next step with the solid's velocity
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
@@ -340,6 +342,19 @@ class Simulation:
         return StepReport(self.step_count, self.t, sum(r.iterations for r in reports), force, torque,
                           self.particles.position.copy(), self.particles.velocity.copy(),
                           flow_solves, self._contact_report, self.flow.linear_work.since(work))
+
+    def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:
+        """Warn once when a step moves a particle more than a finest cell: the fictitious
+        boundary jumps over velocity nodes, and forces and contact lose accuracy."""
+        if self._warned_fast or moved.size == 0:
+            return
+        cells = np.linalg.norm(moved, axis=1) / float(np.min(self.flow.mesh.finest_spacing))
+        k = int(np.argmax(cells))
+        if cells[k] > 1.0:
+            self._warned_fast = True
+            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above about "
+                        "one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less", self.step_count + 1,
+                        k, cells[k], dt, dt / cells[k])
 
     def _subiterate(self, dt, x, reports, force, torque):
         """Newton iteration on the particles' new generalised velocities ``v``.
