@@ -66,6 +66,13 @@ class Simulation:
         is second order in time)
     linear_solver, newton : passed to the flow problem
     coupling : ``explicit`` or ``implicit`` (see the module docstring)
+    first_solve_rtol : float or None
+        Implicit coupling: Newton's residual reduction in each step's first flow solve, which
+        only seeds the coupling iteration (its forces give the first velocity update, its
+        linearisation the responses); the later solves, whose flow is kept, use the Newton
+        settings' ``rtol``, and the step always ends on one of them. None: the same for all.
+        (ten Cate E4 at 3 cells/d, 8 steps: 1e-2 takes 30 % fewer linear solves, velocities
+        the same to 1e-9.)
     symmetry : normal axes of mirror planes that cut the domain through every particle centre
         (the domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
         of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
@@ -94,7 +101,7 @@ class Simulation:
                  integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
                  coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
                  symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1,
-                 fbm: str = "nodes", force: str = "volume"):
+                 fbm: str = "nodes", force: str = "volume", first_solve_rtol: float | None = None):
         if coupling not in COUPLINGS:
             raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
         if contact is not None and integrator != "semi-implicit-euler":
@@ -125,6 +132,9 @@ class Simulation:
         _check_placement(mesh, particles, self.symmetry)
         self.coupling = coupling
         self.coupling_tol = coupling_tol
+        if first_solve_rtol is not None and not 0.0 < first_solve_rtol < 1.0:
+            raise ValueError(f"first_solve_rtol must lie in (0, 1), got {first_solve_rtol}")
+        self.first_solve_rtol = first_solve_rtol
         self.max_subiterations = max_subiterations
         self._constraint_state: Particles | None = None
         self._owner_of: np.ndarray | None = None  # positions and orientations of _owner_cache
@@ -247,8 +257,8 @@ class Simulation:
                 self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
         return self._estimator_of
 
-    def _flow_and_forces(self, dt: float, guess: np.ndarray | None = None):
-        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess)
+    def _flow_and_forces(self, dt: float, guess: np.ndarray | None = None, rtol: float | None = None):
+        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol)
         force, torque = self._forces(self._owner(self.flow.space.V), x, dt)
         return x, reports, force, torque
 
@@ -319,9 +329,12 @@ class Simulation:
         self._contact_report = None
         work = dataclasses.replace(self.flow.linear_work)
         try:
-            x, reports, force, torque = self._flow_and_forces(dt)
+            loose = (self.coupling == "implicit" and self.first_solve_rtol is not None
+                     and not self.particles.fixed.all())
+            x, reports, force, torque = self._flow_and_forces(dt, rtol=self.first_solve_rtol if loose else None)
             if self.coupling == "implicit":
-                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque)
+                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque,
+                                                                          exact=not loose)
             new = self._integrate(force, torque, dt)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
@@ -356,7 +369,7 @@ class Simulation:
                         "one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less", self.step_count + 1,
                         k, cells[k], dt, dt / cells[k])
 
-    def _subiterate(self, dt, x, reports, force, torque):
+    def _subiterate(self, dt, x, reports, force, torque, exact: bool = True):
         """Newton iteration on the particles' new generalised velocities ``v``.
 
         The fixed point is ``v = Phi(v)``: integrate the particles with the forces of the flow
@@ -424,7 +437,8 @@ class Simulation:
                 flow_error = 2.0 * drift * size / size_old
             log.debug("coupling sub-iteration %d: relative step %.3e, error after it %.3e, of the "
                       "flow following it %.3e", k, size / scale, error / scale, flow_error / scale)
-            if max(error, flow_error) <= self.coupling_tol * scale:  # the last step, without a solve
+            if (k > 0 or exact) and max(error, flow_error) <= self.coupling_tol * scale:  # the last step,
+                # without a solve (not from a first flow solved to a looser tolerance)
                 return (x + step @ dX, all_reports, force + np.tensordot(step, dF, 1),
                         torque + np.tensordot(step, dT, 1), k + 1)
             res_old, size_old, x_old = res, size, x

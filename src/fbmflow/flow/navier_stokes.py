@@ -13,6 +13,7 @@ velocity component-blocked.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from typing import Callable
 
@@ -299,11 +300,12 @@ class NavierStokesProblem:
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
-              guess: np.ndarray | None = None):
+              guess: np.ndarray | None = None, rtol: float | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
         the stopping rule stays relative to the residual at ``x0``, so the accuracy is the same.
+        ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``).
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t)
@@ -321,8 +323,9 @@ class NavierStokesProblem:
             reference = float(np.linalg.norm(self.residual(x0, m, a, rhs, con, orphans)))
             x0 = guess.copy()
             con.apply_to_vector(x0)
+        settings = self.newton if rtol is None else dataclasses.replace(self.newton, rtol=rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
-                                 self.newton, reference)
+                                 settings, reference)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
         return x, report
 

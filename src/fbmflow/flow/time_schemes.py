@@ -66,12 +66,14 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
         raise ValueError(f"unknown time scheme {name!r}; choose one of {sorted(TIME_SCHEMES)}") from None
 
 
-def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None):
+def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None,
+            rtol: float | None = None):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
 
     ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
-    the result up to it, does not depend on it.
+    the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
+    (default the problem's).
 
     Returns
     -------
@@ -92,7 +94,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
         x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
-                                  guess=guess if len(get_scheme(scheme)) == 1 else None)
+                                  guess=guess if len(get_scheme(scheme)) == 1 else None, rtol=rtol)
         reports.append(report)
         t = t_new
     return x, reports
