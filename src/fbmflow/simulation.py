@@ -424,12 +424,13 @@ class Simulation:
             scale = max(float(np.linalg.norm(pack_velocities(new))), floor)
             if step is not None:  # Broyden's update: contact and nonlinearity bend the map
                 dG = res_old - res
-                J += np.outer(dG - J @ step, step) / (step @ step)
+                if step @ step > 0.0:  # (a zero step, e.g. a particle in balance, teaches nothing)
+                    J += np.outer(dG - J @ step, step) / (step @ step)
                 # the flow's change over the last step that the responses do not explain
                 drift = float(np.abs(x - x_old - step @ dX)[:space.n_u].max())
             step = np.linalg.solve(J, res)
             size = float(np.linalg.norm(step))
-            if k == 0:  # no contraction measured yet: the step itself bounds both errors
+            if k == 0 or size_old == 0.0:  # no contraction measured: the step bounds both errors
                 error = flow_error = size
             else:
                 theta = size / size_old  # contraction of the iteration
