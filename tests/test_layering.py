@@ -1,4 +1,4 @@
-"""Imports point down only (DESIGN.md section 2)."""
+"""Imports point down only (docs/design.md, "Layers")."""
 import ast
 from pathlib import Path
 

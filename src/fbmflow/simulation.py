@@ -1,4 +1,5 @@
-"""The particulate-flow time loop (DESIGN.md section 1): particles -> mesh, flow, forces, particles.
+"""The particulate-flow time loop (docs/design.md, "One time step"): particles -> mesh, flow, forces,
+particles.
 
 Couplings (a registry):
 

@@ -43,7 +43,7 @@ def single_threaded_blas():
     """Context in which BLAS runs on one thread.
 
     The assembly alternates small BLAS GEMMs with Numba parallel loops; with both thread pools
-    active on 2 cores they oversubscribe and each phase slows down several-fold (PERFORMANCE.md).
+    active on 2 cores they oversubscribe and each phase slows down several-fold (measured).
     """
     return _threadpool_controller().limit(limits=1, user_api="blas")
 
