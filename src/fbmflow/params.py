@@ -184,9 +184,7 @@ class SolverParams:
 @dataclasses.dataclass(frozen=True)
 class SteadySolverParams(SolverParams):
     """Solver settings of a steady Newton solve: inexact Newton steps (the stopping rule is on the
-    nonlinear residual). Measured with multigrid against 1e-8: cavity-2d at Re 1000 took 35
-    instead of 33 Newton iterations in 2.7x less time, channel-3d at level 3 the same 6 in 2.5x
-    less; both gave the same results to 1e-11."""
+    nonlinear residual, so the accuracy is Newton's; measured cost: docs/validation.md)."""
 
     linear_rtol: float = param(1e-2, "relative residual per linear solve (inexact Newton steps; the "
                                "Newton stop on the nonlinear residual decides the accuracy)",
@@ -204,8 +202,7 @@ class CouplingParams:
     max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
     first_rtol: float = param(1e-2, "implicit coupling: Newton's residual reduction in each step's first "
                               "flow solve, which only seeds the iteration (the step ends on a solve to "
-                              "solver.newton_rtol); 1e-2 saved 30 % of the solves in ten Cate E4 with the "
-                              "velocities unchanged to 1e-9", positive=True, maximum=0.5)
+                              "solver.newton_rtol)", positive=True, maximum=0.5)
     integrator: str = param("semi-implicit-euler", "particle integrator: semi-implicit-euler (first order) "
                             "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
                             "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))

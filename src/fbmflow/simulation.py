@@ -72,8 +72,7 @@ class Simulation:
         only seeds the coupling iteration (its forces give the first velocity update, its
         linearisation the responses); the later solves, whose flow is kept, use the Newton
         settings' ``rtol``, and the step always ends on one of them. None: the same for all.
-        (ten Cate E4 at 3 cells/d, 8 steps: 1e-2 takes 30 % fewer linear solves, velocities
-        the same to 1e-9.)
+        (Measured effect: docs/validation.md, "Multigrid with fictitious boundaries".)
     symmetry : normal axes of mirror planes that cut the domain through every particle centre
         (the domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
         of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion

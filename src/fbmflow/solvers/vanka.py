@@ -114,9 +114,9 @@ class FactoredVankaSmoother:
         computed in double; residuals and corrections are always accumulated in double).
         Single halves the memory the sweeps stream through.
     interface_sweeps : int
-        Extra sequential updates of the patches at the fictitious boundaries per sweep: the
-        error the constraints leave there is local and rough (2D moving disk, sharp boundary:
-        cycles 1.5-1.9x those without the disk with none, 1.2-1.3x with two; see the tests).
+        Extra sequential updates of the patches at the fictitious boundaries per sweep, where
+        the error the constraints leave is local and rough (the cycle counts they buy:
+        docs/validation.md).
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single",
@@ -185,9 +185,12 @@ class FactoredVankaSmoother:
         for _ in range(sweeps):
             for patches in self.classes:
                 self.update(patches, b, x)
-            for _ in range(self.interface_sweeps if self.interface.size else 0):
-                _kernels.vanka_sweep_sequential(self.interface, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
-                                                self.LU, self.piv, *self.K, self.width)
-            if self.merged.size:
-                _kernels.vanka_sweep_sequential(self.merged, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
-                                                self.LU, self.piv, *self.K, self.width)
+            for _ in range(self.interface_sweeps):
+                self._in_order(self.interface, b, x)
+            self._in_order(self.merged, b, x)
+
+    def _in_order(self, patches: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
+        """Update ``patches`` one after the other (they may share DOFs)."""
+        if patches.size:
+            _kernels.vanka_sweep_sequential(patches, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr, self.LU,
+                                            self.piv, *self.K, self.width)
