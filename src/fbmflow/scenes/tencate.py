@@ -41,9 +41,7 @@ from .data import tencate2002
 CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
 T_END = {"E1": 4.0, "E2": 2.5, "E3": 1.7, "E4": 1.3}  # the experiment's sphere reached the bottom
 #: unknowns above which ``solver.linear = "auto"`` takes multigrid where PARDISO is installed
-#: (always without it). E4, first two steps, one after the other on this machine: level 0 (64 547
-#: unknowns) PARDISO 5.7 / 6.5 s against multigrid 6.4 / 17.9 s; level 1 (270 087) PARDISO
-#: 44.6 / 56.3 s and 10.0 GB against multigrid 25.0 / 57.2 s and 5.1 GB (peak resident set).
+#: (always without it): level 1 and up (the measured costs: benchmarks/results/tencate_solvers.md).
 MULTIGRID_ABOVE = 150_000
 BOX = np.array([0.1, 0.1, 0.16])
 
