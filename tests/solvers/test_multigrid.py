@@ -75,7 +75,7 @@ def test_vanka_corrections_match_numpy(dim, variant, newton):
     else:
         smoother = VankaSmoother(system, variant)
     rtol = 1e-5 if variant.endswith("single") else 1e-9
-    cells = space.vanka_classes[0]
+    cells = space.mesh.cell_parity_classes(3)[0]  # cells that share no matrix row
     x_new = x.copy()
     smoother.update(cells, b, x_new, omega=1.0)
     r = b - K @ x
@@ -153,8 +153,8 @@ def test_cycles_are_level_independent(case):
 @pytest.mark.slow
 def test_newton_re1000_cycles_on_fine_levels():
     counts = [_solve(*_cavity_system(n, re=1000, krylov="fgmres"))[0].iterations for n in (64, 128)]
-    assert max(counts) - min(counts) <= 2, counts
-    assert max(counts) <= 40, counts
+    assert counts[1] <= counts[0] + 2, counts  # no growth under refinement (measured: 18, 15)
+    assert max(counts) <= 20, counts
 
 
 def test_periodic_taylor_green_oseen_system():

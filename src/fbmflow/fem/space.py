@@ -103,13 +103,6 @@ class FlowSpace:
         return rank
 
     @cached_property
-    def vanka_classes(self) -> list[np.ndarray]:
-        """Cells in classes whose DOFs never meet in a matrix row (for cell-wise smoothers): a
-        parallel sweep over one class equals a sequential block Gauss–Seidel sweep. List of
-        (n,) int64."""
-        return self.mesh.cell_parity_classes(3)
-
-    @cached_property
     def batches(self) -> list[np.ndarray]:
         """Cell batches for assembly, each (n_groups, length) int64, padded with -1.
 

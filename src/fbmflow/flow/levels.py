@@ -108,7 +108,7 @@ class FlowLevel:
         con.zero_rows(A)
         if not con.sharp:
             return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
-                                     fixed_always=self.boundary_constraints.dofs)
+                                     fixed_always=self.boundary_constraints.dofs, transient=m != 0.0)
         rows = None
         if con.rows is not None:
             rows = con.rows.dofs
@@ -116,7 +116,7 @@ class FlowLevel:
         return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
-                                 extension=con.extension)
+                                 extension=con.extension, transient=m != 0.0)
 
     def row_scale(self, dofs: np.ndarray, m: float, a: float, rho: float, mu: float) -> np.ndarray:
         """Scale of the momentum equations of the velocity ``dofs`` (component-blocked): the

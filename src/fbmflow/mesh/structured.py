@@ -177,7 +177,7 @@ class StructuredMesh:
         even share a neighbour, so the matrix rows of one cell's DOFs never involve another cell's
         DOFs of the same class. On a periodic axis whose cell count is not a multiple of
         ``modulus`` the trailing layers get classes of their own. Returns a list of (n,) int64
-        arrays (at most ``(modulus + 1)**dim``), used by the cell-wise (Vanka) smoothers.
+        arrays (at most ``(modulus + 1)**dim``).
         """
         idx = self.cell_indices()
         key = np.zeros(self.n_cells, dtype=np.int64)

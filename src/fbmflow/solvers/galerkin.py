@@ -116,7 +116,7 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     BT = zero_columns(K[n_u:, :n_u].tocsr(), fixed)
     gradient_BT = zero_columns(_standard_pattern(gradient.T.tocsr(), coarse), fixed)
     system = SaddlePointSystem(A, BT, coarse.mean_weights, fixed, space, fixed_always=coarse.fixed_always,
-                               gradient_BT=gradient_BT)
+                               gradient_BT=gradient_BT, transient=coarse.transient)
     if system.orphans is not None:  # the orphaned modes' continuity equations drop out
         system.BT = (system.BT - system.orphans @ system.BT).tocsr()
     return system, zone

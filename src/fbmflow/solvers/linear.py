@@ -67,6 +67,7 @@ class SaddlePointSystem:
         ``coarser`` chain (the Picard linearisation of a Newton system) that an iterative solver
         builds its preconditioner from, applying this system's matrix in the Krylov iteration;
         None: the system itself.
+    transient : bool, a time step's system (the mass term is part of ``A``)
     """
 
     A: sp.csr_matrix
@@ -82,6 +83,7 @@ class SaddlePointSystem:
     gradient_BT: sp.csr_matrix | None = None
     extension: object = None
     preconditioner: "SaddlePointSystem | None" = None
+    transient: bool = False
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:

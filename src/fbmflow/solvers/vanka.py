@@ -1,10 +1,10 @@
 """Vanka-type smoothers for the Q2/P1disc saddle-point system.
 
 Each cell's DOFs (its ``dim * nl`` velocity and ``dim + 1`` pressure unknowns) get a correction
-from the local saddle-point problem driven by the current residual. Cells are visited class by
-class (:attr:`FlowSpace.vanka_classes`: cell indices modulo 3, so no cell's residual involves the
-DOFs of another cell of its class): the cells of a class are updated in parallel, and the sweep
-equals a sequential block Gauss–Seidel sweep in class order, whatever the number of threads.
+from the local saddle-point problem driven by the current residual, and the next cell's residual
+sees it: a sweep is a sequential block Gauss–Seidel sweep in slab order
+(:mod:`fbmflow.solvers.ordering`: lexicographic within slabs that threads sweep at the same
+time), the same whatever the number of threads.
 
 Variants (a registry):
 
@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._jit import numba_threads
-from . import _kernels
+from . import _kernels, ordering
 from .linear import SaddlePointSystem, cell_blocks
 
 
@@ -31,9 +31,11 @@ class VankaSmoother:
     system : SaddlePointSystem with ``space`` set
     variant : "vanka-full" or "vanka-diagonal"
     omega : float, damping of the corrections
+    symmetric : bool, every second sweep backwards (symmetric Gauss–Seidel) instead of forwards
     """
 
-    def __init__(self, system: SaddlePointSystem, variant: str = "vanka-full", omega: float = 1.0):
+    def __init__(self, system: SaddlePointSystem, variant: str = "vanka-full", omega: float = 1.0,
+                 symmetric: bool = False):
         if variant not in VANKA_VARIANTS:
             raise ValueError(f"unknown smoother {variant!r}; choose one of {sorted(VANKA_VARIANTS)}")
         self.variant = variant
@@ -56,17 +58,28 @@ class VankaSmoother:
             self._extra = (diag_inv, np.linalg.pinv(S + pblock, rcond=1e-12, hermitian=True))
         else:
             self._extra = (space.slots,)
+        mesh = space.mesh
+        axis = ordering.slab_axis(mesh.shape)
+        planes = ordering.dof_planes(space, axis)
+        period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
+        reach = max(ordering.plane_reach(system.A.indptr, system.A.indices, planes, period),
+                    ordering.plane_reach(system.BT.indptr, system.BT.indices, planes, period, system.n_u))
+        phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells), reach)
+        self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
+        self._kernel = _kernels.vanka_full if variant == "vanka-full" else _kernels.vanka_diagonal
 
     def update(self, cells: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
-        """Add ``omega`` times the local corrections of ``cells`` (one class) to ``x``."""
-        kernel = _kernels.vanka_full if self.variant == "vanka-full" else _kernels.vanka_diagonal
-        kernel(cells, b, x, self.omega if omega is None else omega, *self._common, *self._extra)
+        """Add ``omega`` times the local correction of each of ``cells`` to ``x``, one after the
+        other."""
+        self._kernel(np.array([0, cells.size]), cells, b, x, self.omega if omega is None else omega, *self._common,
+                     *self._extra)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
-        """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
-        for _ in range(sweeps):
-            for cells in self.space.vanka_classes:
-                self.update(cells, b, x)
+        """``sweeps`` smoothing sweeps on ``K x = b`` in slab order (:mod:`fbmflow.solvers.ordering`),
+        updating ``x`` in place."""
+        for k in range(sweeps):
+            for gptr, order in self.sweeps[k % len(self.sweeps)]:
+                self._kernel(gptr, order, b, x, self.omega, *self._common, *self._extra)
 
 
 PRECISIONS = {"single": np.float32, "double": np.float64}
@@ -99,7 +112,8 @@ class FactoredVankaSmoother:
     discretisation. The local blocks ``K[S, S]`` are read from the assembled blocks (CSR rows,
     whatever their pattern: ghost-node rows, transferred continuity rows, Galerkin coarse rows)
     and factorised once; a sweep then costs a residual and two triangular solves per patch.
-    Cell patches go class by class (:attr:`FlowSpace.vanka_classes`), in parallel within a class;
+    Cell patches go in slab order (:mod:`fbmflow.solvers.ordering`: a sequential block
+    Gauss–Seidel sweep in lexicographic order within slabs that threads sweep at once);
     then the patches at and inside the fictitious boundaries (those that hold a constrained
     velocity, fixed or row-constrained, not a wall's; the agglomerated ones among them) get
     ``interface_sweeps`` more updates one after the other, and the agglomerated patches follow
@@ -117,10 +131,11 @@ class FactoredVankaSmoother:
         Extra sequential updates of the patches at the fictitious boundaries per sweep, where
         the error the constraints leave is local and rough (the cycle counts they buy:
         docs/validation.md).
+    symmetric : bool, every second sweep backwards (symmetric Gauss–Seidel) instead of forwards
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single",
-                 interface_sweeps: int = 2):
+                 interface_sweeps: int = 2, symmetric: bool = False):
         if precision not in PRECISIONS:
             raise ValueError(f"unknown precision {precision!r}; choose one of {sorted(PRECISIONS)}")
         dtype = PRECISIONS[precision]
@@ -152,9 +167,12 @@ class FactoredVankaSmoother:
         self.LU = np.empty(self.lu_ptr[-1], dtype=dtype)
         self.piv = _kernels.vanka_factor(self.LU, self.ptr, self.dofs, self.lu_ptr, *self.K, self.n_chunks,
                                          self.width)
-        index = np.full(n_cells, -1, dtype=np.int64)
-        index[cells] = np.arange(cells.size)
-        self.classes = [index[c][regular[c]] for c in space.vanka_classes if regular[c].any()]
+        mesh = space.mesh
+        axis = ordering.slab_axis(mesh.shape)
+        period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
+        reach = ordering.plane_reach(*self.K[:2], ordering.dof_planes(space, axis), period)
+        phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), cells, reach)
+        self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
         self.interface_sweeps = interface_sweeps
         self.interface = self._interface_patches(system)
@@ -174,23 +192,18 @@ class FactoredVankaSmoother:
         return np.flatnonzero(hits > 0).astype(np.int64)
 
     def update(self, patches: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
-        """Add ``omega`` times the corrections of ``patches`` (indices of patches that share no
-        DOF; without a pressure extension, patch ``c`` is cell ``c``), all taken from the same
-        ``x``, to ``x``."""
-        _kernels.vanka_sweep(patches, b, x, self.omega if omega is None else omega, self.ptr, self.dofs,
-                             self.lu_ptr, self.LU, self.piv, *self.K, self.n_chunks, self.width)
+        """Add ``omega`` times the correction of each of ``patches`` to ``x``, one after the
+        other (patches may share DOFs; without a pressure extension, patch ``c`` is cell ``c``)."""
+        if patches.size:
+            _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega, self.ptr,
+                                            self.dofs, self.lu_ptr, self.LU, self.piv, *self.K, self.width)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
-        for _ in range(sweeps):
-            for patches in self.classes:
-                self.update(patches, b, x)
+        for k in range(sweeps):
+            for gptr, order in self.sweeps[k % len(self.sweeps)]:
+                _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
+                                            self.LU, self.piv, *self.K, self.width)
             for _ in range(self.interface_sweeps):
-                self._in_order(self.interface, b, x)
-            self._in_order(self.merged, b, x)
-
-    def _in_order(self, patches: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
-        """Update ``patches`` one after the other (they may share DOFs)."""
-        if patches.size:
-            _kernels.vanka_sweep_sequential(patches, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr, self.LU,
-                                            self.piv, *self.K, self.width)
+                self.update(self.interface, b, x)
+            self.update(self.merged, b, x)
