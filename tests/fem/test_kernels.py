@@ -519,3 +519,53 @@ def test_pressure_mean_weights(case):
     p_one = np.zeros(space.n_p)
     p_one[::space.dim + 1] = 1.0
     assert_rel(w @ p_one, ref.W.sum())
+
+
+# -- matrix-free operators ----------------------------------------------------------------------
+def test_reaction_coefficients(space):
+    d = space.dim
+    u = np.random.default_rng(40).normal(size=(d, space.n_v))
+    react = _kernels.reaction_coefficients(u, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv)
+    gref = np.einsum("icb,qbl->cqil", u[:, space.V.cell_dofs], space.dphi)
+    assert_rel(react, np.einsum("cqil,cqlk,cq->cqik", gref, space.Jinv, space.detJw))
+
+
+def test_apply_scalar_pair(case):
+    from fbmflow.fem import apply_scalar_pair
+    space, ref = case
+    u = np.random.default_rng(43).normal(size=space.n_u)
+    out = apply_scalar_pair(space, 2.0, np.full(space.nnz, 1.5), -0.5,
+                            np.arange(space.nnz, dtype=float), u)
+    S = space.scalar_matrix(3.0 - 0.5 * np.arange(space.nnz, dtype=float))
+    assert_rel(out, (S @ u.reshape(space.dim, -1).T).T.ravel())
+
+
+def test_apply_reaction_is_the_newton_term(case):
+    """``R(u) w`` without a matrix equals the assembled Newton blocks times ``w``, over all cells
+    and over only the cells that touch the support of ``w``."""
+    from fbmflow.fem import apply_reaction, reaction_coefficients
+    space, ref = case
+    rng = np.random.default_rng(41)
+    u, w = rng.normal(size=space.n_u), rng.normal(size=space.n_u)
+    react = reaction_coefficients(space, u)
+    out = rng.normal(size=space.n_u)
+    expected = out + 0.7 * ref.newton(u) @ w
+    apply_reaction(space, react, w, 0.7, out)
+    assert_rel(out, expected)
+    local = np.zeros(space.n_u)
+    local[[0, space.n_v + 1]] = 1.0  # two nodes of a corner cell
+    cells = np.flatnonzero(np.isin(space.V.cell_dofs, [0, 1]).any(axis=1))
+    out = np.zeros(space.n_u)
+    apply_reaction(space, react, local, 1.0, out, cells=cells)
+    assert_rel(out, ref.newton(u) @ local)
+
+
+def test_apply_convection_is_n_of_u_times_u(case):
+    from fbmflow.fem import apply_convection
+    space, ref = case
+    d, n = space.dim, space.n_v
+    u = np.random.default_rng(42).normal(size=space.n_u)
+    out = np.ones(space.n_u)
+    apply_convection(space, u, -1.5, out)
+    expected = 1.0 - 1.5 * (ref.convection(u) @ u.reshape(d, n).T).T.ravel()
+    assert_rel(out, expected)

@@ -94,7 +94,7 @@ def test_vanka_corrections_match_numpy(dim, variant, newton):
 
 def test_saddle_point_csr_matches_scipy():
     from fbmflow.solvers.vanka import saddle_point_csr
-    _, system, _ = _ball_system("sharp")  # ghost rows and a pressure block
+    _, system, _ = _ball_system("sharp", linearisation="newton")  # ghost rows and a pressure block
     assert system.pressure_block is not None
     ptr, idx, val = saddle_point_csr(system, np.float64)
     n = system.n_u + system.n_p
@@ -211,10 +211,12 @@ def test_scenes_agree_with_the_direct_solver(scene, level):
 
 
 # -- fictitious boundaries -----------------------------------------------------------------------
-def _ball_system(fbm, n=16, coarse_obstacle="nodes", dim=2, closed=False):
+def _ball_system(fbm, n=16, coarse_obstacle="nodes", dim=2, closed=False, linearisation="auto"):
     """First Newton system of a backward-Euler step (dt 0.01) with a disk of radius 0.15 moving
     down at 1 in the unit square (no-slip walls, do-nothing top unless ``closed``, a smooth body
-    force; ``fbm`` "none": no disk): (problem, system, rhs)."""
+    force; ``fbm`` "none": no disk): (problem, system, rhs). ``linearisation`` of the multigrid
+    hierarchy: "auto" gives the Picard hierarchy and a matrix-free Newton block, "newton" an
+    assembled Newton system."""
     from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
     from fbmflow.particles import Ball
     mesh = StructuredMesh.box((n,) * dim)
@@ -233,7 +235,9 @@ def _ball_system(fbm, n=16, coarse_obstacle="nodes", dim=2, closed=False):
             return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
         return rigid
 
-    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", coarse_obstacle=coarse_obstacle))
+    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", coarse_obstacle=coarse_obstacle,
+                                           linearisation=linearisation))
+
     def force(x, t):  # smooth, so that the system without the disk has a right-hand side too
         return np.stack([np.sin(3 * x[:, 0] + 1) * np.cos(2 * x[:, 1])]
                         + [np.cos(4 * x[:, k] * x[:, 0]) for k in range(1, dim)], axis=1)
@@ -257,8 +261,12 @@ def test_a_picard_hierarchy_preconditions_the_newton_time_step(dim, n):
         mg.settings = dataclasses.replace(mg.settings, linearisation=linearisation)
         system = prob.linear_system(x, 100.0, 1.0, con)
         assert (system.preconditioner is not None) == (linearisation == "picard")
-        if linearisation == "picard":
-            assert system.preconditioner.A.nnz < system.A.nnz / (dim - 0.5)
+        if linearisation == "picard":  # the matrix-free Newton block is the assembled one
+            v = np.random.default_rng(3).standard_normal(system.n_u + system.n_p)
+            assert np.allclose(system.apply(v), newton_system.apply(v), rtol=1e-12, atol=1e-12 * np.abs(v).max())
+            assert system.preconditioner.A.nnz < newton_system.A.nnz / (dim - 0.5)
+        else:
+            newton_system = dataclasses.replace(system, A=system.A.copy())  # the next call overwrites A
         rep, rel = _solve(prob, mg, x, con, F, m=100.0)
         assert rel < 1e-7
         counts[linearisation] = rep.iterations
@@ -278,7 +286,7 @@ def test_factored_vanka_smooths_the_sharp_boundary():
     reduces the residual of the sharp system (cell patches alone made it grow 10^3-fold per
     sweep, measured), the first two by a factor above three (the rough part)."""
     from fbmflow.solvers.vanka import FactoredVankaSmoother
-    _, system, b = _ball_system("sharp")
+    _, system, b = _ball_system("sharp", linearisation="newton")
     smoother = FactoredVankaSmoother(system)
     assert smoother.merged.size > 0
     x = np.zeros_like(b)
@@ -344,7 +352,8 @@ def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     _, plain_system, plain_b = _ball_system("none", n=n, dim=dim, closed=True)
     plain = mg.solve(plain_system, plain_b[:plain_system.n_u], plain_b[plain_system.n_u:])[2].iterations
     assert rep.iterations <= 1.5 * plain, (rep.iterations, plain)
-    u, _ = factorize(system, "superlu")(b[:system.n_u], b[system.n_u:])
+    _, newton_system, _ = _ball_system("sharp", n=n, dim=dim, closed=True, linearisation="newton")
+    u, _ = factorize(newton_system, "superlu")(b[:system.n_u], b[system.n_u:])
     assert np.linalg.norm(du - u) <= 1e-6 * np.linalg.norm(u), np.linalg.norm(du - u) / np.linalg.norm(u)
 
 

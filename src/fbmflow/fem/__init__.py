@@ -1,6 +1,7 @@
 """Reference elements, quadrature, DOF maps, Numba kernels and assembly of Q2/P1disc."""
-from .assembly import (assemble_convection, assemble_divergence, assemble_laplace, assemble_load,
-                       assemble_mass, expand_to_coupled, pressure_mean_weights)
+from .assembly import (apply_convection, apply_reaction, apply_scalar_pair, assemble_convection, assemble_divergence,
+                       assemble_laplace, assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights,
+                       reaction_coefficients)
 from .dofmap import DofMap, PressureDofMap
 from .elements import ElementP1Disc, ElementQ1, ElementQ2
 from .quadrature import gauss_tensor
@@ -8,4 +9,5 @@ from .space import FlowSpace
 
 __all__ = ["FlowSpace", "DofMap", "PressureDofMap", "ElementQ1", "ElementQ2", "ElementP1Disc",
            "gauss_tensor", "assemble_mass", "assemble_laplace", "assemble_convection",
-           "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights"]
+           "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights",
+           "apply_convection", "apply_reaction", "apply_scalar_pair", "reaction_coefficients"]

@@ -285,3 +285,144 @@ def replace_rows(indptr, indices, data, rows, r_indptr, r_indices, r_data):
                 q += 1
             data[q] += r_data[k]
     return True
+
+
+# -- matrix-free operators: values at the quadrature points, tested with the Q2 basis ----------
+@njit
+def _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq):
+    """Velocity ``uq (nq, d)`` and gradient ``gq (nq, d, d)`` (``d u_i / d x_k``) of ``u (d, n_v)``
+    at the quadrature points of cell ``c``; ``ul (d, nl)`` work."""
+    nq, nl = phi.shape
+    d = u.shape[0]
+    for a in range(nl):
+        dof = cell_dofs[c, a]
+        for i in range(d):
+            ul[i, a] = u[i, dof]
+    gref = np.empty((d, d))
+    for q in range(nq):
+        for i in range(d):
+            s = 0.0
+            for a in range(nl):
+                s += ul[i, a] * phi[q, a]
+            uq[q, i] = s
+            for l in range(d):
+                s = 0.0
+                for a in range(nl):
+                    s += ul[i, a] * dphi[q, a, l]
+                gref[i, l] = s
+        for i in range(d):
+            for k in range(d):
+                s = 0.0
+                for l in range(d):
+                    s += gref[i, l] * Jinv[c, q, l, k]
+                gq[q, i, k] = s
+
+
+@njit(parallel=True)
+def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv):
+    """``|det J| w_q d u_i / d x_k`` at every cell's quadrature points, (n_cells, nq, d, d)
+    float64, for ``u (d, n_v)``; cell_dofs (n_cells, nl) int64, phi (nq, nl), dphi (nq, nl, d)
+    reference tabulation, detJw (n_cells, nq), Jinv (n_cells, nq, d, d)."""
+    n_cells, nl = cell_dofs.shape
+    nq = phi.shape[0]
+    d = u.shape[0]
+    react = np.empty((n_cells, nq, d, d))
+    for c in prange(n_cells):
+        ul = np.empty((d, nl))
+        uq = np.empty((nq, d))
+        _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, react[c])
+        for q in range(nq):
+            for i in range(d):
+                for k in range(d):
+                    react[c, q, i, k] *= detJw[c, q]
+    return react
+
+
+@njit
+def _test(c, fq, phi, cell_dofs, scale, out):
+    """``out[i, dof(c, a)] += scale sum_q phi[q, a] fq[q, i]`` (``fq (nq, d)`` already weighted)."""
+    nq, nl = phi.shape
+    d = fq.shape[1]
+    for a in range(nl):
+        dof = cell_dofs[c, a]
+        for i in range(d):
+            s = 0.0
+            for q in range(nq):
+                s += phi[q, a] * fq[q, i]
+            out[i, dof] += scale * s
+
+
+@njit(parallel=True)
+def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
+    """Add ``scale R(u) w`` to ``out``: the Newton term ``R_ik[a, b] = int phi_a phi_b d u_i/d x_k``
+    applied without a matrix, ``out[i, a] += scale sum_q phi_a(q) sum_k react[c, q, i, k] w_k(q)``.
+
+    cells (n_groups, length) int64, -1 = padding, groups DOF-disjoint (they run in parallel, each
+    sequentially); react (n_cells, nq, d, d) float64, ``|det J| w_q d u_i / d x_k``; cell_dofs
+    (n_cells, nl) int64; phi (nq, nl); w (d, n_v) float64; out (d, n_v) float64, updated in place.
+    """
+    n_groups, length = cells.shape
+    nq, nl = phi.shape
+    d = w.shape[0]
+    for g in prange(n_groups):
+        wq = np.empty((nq, d))
+        fq = np.empty((nq, d))
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            wq[:, :] = 0.0
+            for b in range(nl):
+                dof = cell_dofs[c, b]
+                for k in range(d):
+                    wb = w[k, dof]
+                    if wb != 0.0:
+                        for q in range(nq):
+                            wq[q, k] += phi[q, b] * wb
+            for q in range(nq):
+                for i in range(d):
+                    s = 0.0
+                    for k in range(d):
+                        s += react[c, q, i, k] * wq[q, k]
+                    fq[q, i] = s
+            _test(c, fq, phi, cell_dofs, scale, out)
+
+
+@njit(parallel=True)
+def apply_convection(cells, u, cell_dofs, phi, dphi, detJw, Jinv, scale, out):
+    """Add ``scale N(u) u`` to ``out``: ``out[i, a] += scale int phi_a (u . grad) u_i``, for
+    ``u (d, n_v)``; cells as in :func:`apply_reaction`; out (d, n_v) float64, updated in place."""
+    n_groups, length = cells.shape
+    nq, nl = phi.shape
+    d = u.shape[0]
+    for g in prange(n_groups):
+        ul = np.empty((d, nl))
+        uq = np.empty((nq, d))
+        gq = np.empty((nq, d, d))
+        fq = np.empty((nq, d))
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq)
+            for q in range(nq):
+                for i in range(d):
+                    s = 0.0
+                    for k in range(d):
+                        s += uq[q, k] * gq[q, i, k]
+                    fq[q, i] = detJw[c, q] * s
+            _test(c, fq, phi, cell_dofs, scale, out)
+
+
+@njit(parallel=True)
+def apply_scalar_pair(indptr, indices, X, alpha, Y, beta, u, out):
+    """``out[i] = (alpha X + beta Y) u[i]`` for every component ``i``: two matrices on one scalar
+    CSR pattern ``(indptr, indices)`` (data ``X``, ``Y`` (nnz,)) applied to ``u (d, n)`` without
+    forming their combination; out (d, n) float64, overwritten."""
+    d = u.shape[0]
+    for r in prange(indptr.shape[0] - 1):
+        for i in range(d):
+            s = 0.0
+            for j in range(indptr[r], indptr[r + 1]):
+                s += (alpha * X[j] + beta * Y[j]) * u[i, indices[j]]
+            out[i, r] = s

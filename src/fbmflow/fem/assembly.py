@@ -142,3 +142,46 @@ def assemble_load(space: FlowSpace, values: np.ndarray) -> np.ndarray:
 def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
     """``int psi_j dx`` for every pressure DOF: (n_p,) float64 (so ``w . p = int p``)."""
     return np.einsum("cq,cqm->cm", space.detJw, space.psi).ravel()
+
+
+def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndarray) -> None:
+    """Add ``scale N(u) u``, ``int phi_a (u . grad) u_i`` per velocity DOF, to ``out``
+    (dim * n_v,) float64 in place, without assembling ``N(u)``."""
+    uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
+    target = out.reshape(space.dim, space.n_v)
+    for cells in space.batches:
+        _kernels.apply_convection(cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv,
+                                  scale, target)
+
+
+def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
+    """``|det J| w_q d u_i / d x_k`` at every quadrature point, (n_cells, nq, dim, dim) float64:
+    what :func:`apply_reaction` needs of the velocity ``u`` (dim * n_v,)."""
+    uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
+    return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv)
+
+
+def apply_scalar_pair(space: FlowSpace, alpha: float, X: np.ndarray, beta: float, Y: np.ndarray,
+                      u: np.ndarray) -> np.ndarray:
+    """``(alpha X + beta Y) u`` per velocity component, for scalar-pattern data ``X``, ``Y``
+    (nnz,) and ``u`` (dim * n_v,) -> (dim * n_v,), without forming the combination."""
+    uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
+    out = np.empty_like(uu)
+    _kernels.apply_scalar_pair(space.indptr, space.indices, X, alpha, Y, beta, uu, out)
+    return out.ravel()
+
+
+def apply_reaction(space: FlowSpace, react: np.ndarray, w: np.ndarray, scale: float, out: np.ndarray,
+                   cells: np.ndarray | None = None) -> None:
+    """Add ``scale R(u) w`` to ``out`` in place, the Newton term ``R_ik(u)[a, b] = int phi_a phi_b
+    d u_i / d x_k`` applied without a matrix (``react``: :func:`reaction_coefficients` of ``u``).
+
+    w, out : (dim * n_v,) float64
+    cells : (m,) int64, optional: only these cells' contributions (sequentially), e.g. the cells
+        where ``w`` is non-zero; default all cells (in parallel).
+    """
+    ww = np.ascontiguousarray(w.reshape(space.dim, space.n_v))
+    target = out.reshape(space.dim, space.n_v)
+    batches = space.batches if cells is None else [np.asarray(cells, dtype=np.int64)[None, :]]
+    for batch in batches:
+        _kernels.apply_reaction(batch, react, space.V.cell_dofs, space.phi, ww, scale, target)

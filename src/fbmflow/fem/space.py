@@ -103,6 +103,15 @@ class FlowSpace:
         return rank
 
     @cached_property
+    def node_cells(self) -> sp.csr_matrix:
+        """Incidence of Q2 nodes and cells, (n_v, n_cells) CSR: row ``a`` lists the cells that
+        hold node ``a``."""
+        n_cells, nl = self.V.cell_dofs.shape
+        return sp.csr_matrix((np.ones(n_cells * nl, dtype=np.int8),
+                              (self.V.cell_dofs.ravel(), np.repeat(np.arange(n_cells), nl))),
+                             shape=(self.n_v, n_cells))
+
+    @cached_property
     def batches(self) -> list[np.ndarray]:
         """Cell batches for assembly, each (n_groups, length) int64, padded with -1.
 

@@ -2,14 +2,15 @@
 multigrid solver works on (re-discretisation on nested meshes)."""
 from __future__ import annotations
 
+import copy
 import logging
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
-                   assemble_mass, expand_to_coupled, pressure_mean_weights)
+from ..fem import (FlowSpace, apply_reaction, assemble_convection, assemble_divergence, assemble_laplace,
+                   assemble_mass, expand_to_coupled, pressure_mean_weights, reaction_coefficients)
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
@@ -17,6 +18,57 @@ from ..solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q
 from .boundary import build_constraints
 
 log = logging.getLogger(__name__)
+
+
+class NewtonBlock:
+    """The velocity block ``A + s R(u)`` of a Newton system: ``A`` the assembled Picard block
+    ``m rho M + a (mu L + rho N(u))`` with its constraint rows, and the Newton term ``s R(u)``,
+    ``s = a rho``, applied without a matrix (:func:`~fbmflow.fem.apply_reaction`) and left out on
+    the ``constrained`` rows. An iterative solver needs only its products; it stores ``dim``
+    times fewer entries than the assembled Newton block.
+
+    Parameters
+    ----------
+    picard : (n_u, n_u) CSR
+    space : FlowSpace
+    react : (n_cells, nq, dim, dim) float64, :func:`~fbmflow.fem.reaction_coefficients` of ``u``
+    scale : float, ``s``
+    constrained : (k,) int64, rows without the Newton term
+    """
+
+    def __init__(self, picard: sp.csr_matrix, space: FlowSpace, react: np.ndarray, scale: float,
+                 constrained: np.ndarray):
+        self.picard, self.space, self.react, self.scale = picard, space, react, scale
+        self.constrained = constrained
+        self.shape = picard.shape
+        self.dtype = picard.dtype
+
+    def __matmul__(self, v):
+        """Product with a vector (n_u,), or with a dense or sparse matrix (n_u, k) (dense result;
+        sparse columns only visit the cells that touch their non-zeros)."""
+        if sp.issparse(v):
+            return self._sparse(sp.csc_matrix(v))
+        v = np.asarray(v)
+        if v.ndim == 2:
+            return np.column_stack([self @ v[:, k] for k in range(v.shape[1])])
+        reaction = np.zeros(v.size)
+        apply_reaction(self.space, self.react, v, self.scale, reaction)
+        reaction[self.constrained] = 0.0
+        return self.picard @ v + reaction
+
+    def _sparse(self, W: sp.csc_matrix) -> np.ndarray:
+        out = (self.picard @ W).toarray()
+        s = self.space
+        for k in range(W.shape[1]):
+            rows = W.indices[W.indptr[k]:W.indptr[k + 1]]
+            if rows.size == 0:
+                continue
+            cells = np.unique(s.node_cells[np.unique(rows % s.n_v)].indices)
+            reaction = np.zeros(W.shape[0])
+            apply_reaction(s, self.react, W[:, k].toarray().ravel(), self.scale, reaction, cells=cells)
+            reaction[self.constrained] = 0.0
+            out[:, k] += reaction
+        return out
 
 
 class FlowLevel:
@@ -117,6 +169,17 @@ class FlowLevel:
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
                                  extension=con.extension, transient=m != 0.0)
+
+    def newton_system(self, picard: SaddlePointSystem, u: np.ndarray, a: float, rho: float) -> SaddlePointSystem:
+        """The Newton system of the Picard system ``picard`` (this level's, linearised at ``u``
+        with weight ``a``): the same blocks and constraints, the velocity block a
+        :class:`NewtonBlock` (no hierarchy of its own; ``picard`` is its preconditioner)."""
+        constrained = np.concatenate([d for d in (picard.fixed, picard.rows) if d is not None] or
+                                     [np.zeros(0, dtype=np.int64)])
+        system = copy.copy(picard)  # shares the blocks and the derived ones already computed
+        system.A = NewtonBlock(picard.A, self.space, reaction_coefficients(self.space, u), a * rho, constrained)
+        system.preconditioner, system.coarser, system.prolongation = picard, None, None
+        return system
 
     def row_scale(self, dofs: np.ndarray, m: float, a: float, rho: float, mu: float) -> np.ndarray:
         """Scale of the momentum equations of the velocity ``dofs`` (component-blocked): the

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ..fem import FlowSpace, assemble_convection, assemble_load
+from ..fem import FlowSpace, apply_convection, apply_scalar_pair, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
@@ -110,7 +110,7 @@ class NavierStokesProblem:
         self.coarse: list[FlowLevel] | None = None  # built at the first linearisation
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
-        self._linearisation = None  # (m, a, constraints, solve) of the last Newton step
+        self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
 
     # -- data ---------------------------------------------------------------------------------
@@ -164,12 +164,13 @@ class NavierStokesProblem:
         return x
 
     # -- operators ----------------------------------------------------------------------------
-    def _scalar_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
-        """Data of the Picard operator ``m rho M + a (mu L + rho N(u))`` on the scalar pattern."""
-        S = (m * self.rho) * self.M + (a * self.mu) * self.L
+    def _apply_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
+        """``(m rho M + a (mu L + rho N(u))) u`` for a velocity (dim * n_v,) -> (dim * n_v,); the
+        convection term without a matrix (:func:`~fbmflow.fem.apply_convection`)."""
+        out = apply_scalar_pair(self.space, m * self.rho, self.M, a * self.mu, self.L, u)
         if self.convection and a != 0.0:
-            assemble_convection(self.space, u, a * self.rho, scalar_out=S)
-        return S
+            apply_convection(self.space, u, a * self.rho, out)
+        return out
 
     def _apply_scalar(self, S: np.ndarray, u: np.ndarray) -> np.ndarray:
         s = self.space
@@ -177,7 +178,7 @@ class NavierStokesProblem:
 
     def apply_spatial(self, u: np.ndarray) -> np.ndarray:
         """``mu L u + rho N(u) u`` for a velocity (dim * n_v,) -> (dim * n_v,)."""
-        return self._apply_scalar(self._scalar_operator(u, 0.0, 1.0), u)
+        return self._apply_operator(u, 0.0, 1.0)
 
     def residual(self, x: np.ndarray, m: float, a: float, rhs: np.ndarray,
                  con: DirichletConstraints, orphans: sp.csr_matrix | None = None) -> np.ndarray:
@@ -191,7 +192,7 @@ class NavierStokesProblem:
         """
         n_u = self.space.n_u
         u, p = x[:n_u], x[n_u:]
-        Fu = self._apply_scalar(self._scalar_operator(u, m, a), u) + self.BT.T @ p - rhs
+        Fu = self._apply_operator(u, m, a) + self.BT.T @ p - rhs
         Fu[con.dofs] = 0.0
         Fp = self._continuity(u[:, None], con, orphans)[:, 0]
         if con.rows is not None:  # row constraints, scaled as in the linear system
@@ -240,15 +241,16 @@ class NavierStokesProblem:
             limit = self._coarse_spacing_limit(u)
             self.coarse = [lv for lv in self.coarse if float(np.max(lv.mesh.spacing)) <= limit]
         args = (m, a, self.rho, self.mu, self.convection)
-        system = self.fine.system(u, *args, con=con)
-        finer_level, finer_system = self.fine, system
         settings = getattr(self.linear_solver, "settings", None)
-        newton = True
         picard = getattr(settings, "picard_hierarchy", None)
-        if self.coarse and self.convection and a != 0.0 and picard is not None and picard(m != 0.0):
-            newton = False  # the hierarchy of the Picard linearisation preconditions the Newton system
-            finer_system = system.preconditioner = self.fine.system(u, *args, con=con, newton=False,
-                                                                    own_buffer=True)
+        newton = not (self.coarse and self.convection and a != 0.0 and picard is not None and picard(m != 0.0))
+        if newton:
+            system = finer_system = self.fine.system(u, *args, con=con)
+        else:  # the hierarchy of the Picard linearisation preconditions the Newton system, whose
+            # Newton term is applied without a matrix
+            finer_system = self.fine.system(u, *args, con=con, newton=False)
+            system = self.fine.newton_system(finer_system, u, a, self.rho)
+        finer_level = self.fine
         galerkin = getattr(settings, "coarse_obstacle", "nodes") == "galerkin" and self.extra_constraints is not None
         irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:
@@ -336,16 +338,18 @@ class NavierStokesProblem:
         if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
             self._linearisation = last = None  # freed before the next is built (peak memory)
-            self._linearisation = (m, a, con, self.linear_solver.factor(self.linear_system(x, m, a, con, t)))
+            system = self.linear_system(x, m, a, con, t)
+            self._linearisation = (m, a, con, self.linear_solver.factor(system), system)
         else:
-            self._linearisation = (m, a, con, last[3])
+            self._linearisation = (m, a, con) + last[3:]
         return self._linearisation[3]
 
-    def _linear_solve(self, solve, f, g):
-        """``solve(f, g)`` to ``self.newton.linear_rtol`` where the solver takes a target per
-        solve (the direct solver's PARDISO refinement), else to the solver's own; counted in
-        :attr:`linear_work`. ConvergenceError when an iterative solver misses its target."""
-        rtol = self.newton.linear_rtol
+    def _linear_solve(self, solve, f, g, rtol=None):
+        """``solve(f, g)`` to ``rtol`` (default ``self.newton.linear_rtol``) where the solver
+        takes a target per solve (multigrid; the direct solver's PARDISO refinement), else to the
+        solver's own; counted in :attr:`linear_work`. ConvergenceError when an iterative solver
+        misses its target."""
+        rtol = self.newton.linear_rtol if rtol is None else rtol
         if rtol is not None and getattr(solve, "takes_rtol", False):
             du, dp, report = solve(f, g, rtol)
         else:
@@ -384,12 +388,10 @@ class NavierStokesProblem:
         ``g`` of the row constraints change with each lifting, on their DOFs; the response then
         keeps ``C dx = dg`` there. Returns (k, n_dofs) float64.
         """
-        m, a, con, solve = self._linearisation
-        n_u = self.space.n_u
-        none = DirichletConstraints(np.zeros(0, dtype=np.int64), np.zeros(0))
-        J = self.fine.system(x[:n_u], m, a, self.rho, self.mu, self.convection, con=none, own_buffer=True)
+        m, a, con, solve, system = self._linearisation
         W = sp.csc_matrix(liftings)  # (n_u, k)
-        Ju = np.asarray((J.A @ W).todense())
+        Ju = system.A @ W  # the free rows of the Jacobian's product (the constrained ones follow)
+        Ju = Ju.toarray() if sp.issparse(Ju) else np.asarray(Ju)
         Ju[con.dofs] = 0.0
         Wd = W.toarray()
         if con.rows is not None:

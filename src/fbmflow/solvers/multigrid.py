@@ -198,7 +198,8 @@ class MultigridSolver:
 
     def factor(self, system: SaddlePointSystem):
         """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
-        returns ``solve(f, g) -> (u, p, LinearReport)``."""
+        returns ``solve(f, g, rtol=None) -> (u, p, LinearReport)`` (``rtol``: this solve's target,
+        default ``settings.rtol``)."""
         if system.preconditioner is not None and self.settings.krylov != "fgmres":
             raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
         if system.rows is not None and system.mean_weights is not None and self.settings.krylov == "none":
@@ -212,7 +213,12 @@ class MultigridSolver:
         t0 = time.perf_counter()
         levels = self.setup(system if system.preconditioner is None else system.preconditioner)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
-        return lambda f, g: self._solve(system, levels, pending.pop() if pending else 0.0, f, g)
+
+        def solve(f, g, rtol=None):
+            return self._solve(system, levels, pending.pop() if pending else 0.0, f, g, rtol)
+
+        solve.takes_rtol = True
+        return solve
 
     def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
         """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
@@ -233,10 +239,11 @@ class MultigridSolver:
         e[system.n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
         return e
 
-    def _solve(self, system, levels, setup, f, g):
+    def _solve(self, system, levels, setup, f, g, rtol=None):
         t0 = time.perf_counter() - setup
         self._sweeps = 0
         s = self.settings
+        rtol = s.rtol if rtol is None else rtol
         b = np.concatenate([f, system.balance(g)])
         x = np.zeros_like(b)
         if system.fixed is not None:
@@ -246,12 +253,12 @@ class MultigridSolver:
             def precondition(r):
                 return self.cycle(levels, r, np.zeros_like(r))
 
-            x, residuals, cycles = fgmres(system.apply, precondition, b, x, s.rtol, s.max_iterations,
+            x, residuals, cycles = fgmres(system.apply, precondition, b, x, rtol, s.max_iterations,
                                           s.restart, project, self._border(system))
         else:
             r0 = float(np.linalg.norm(b - system.apply(x)))
             residuals, cycles = [r0], 0
-            while residuals[-1] > s.rtol * r0 and cycles < s.max_iterations:
+            while residuals[-1] > rtol * r0 and cycles < s.max_iterations:
                 x = self.cycle(levels, b, x)
                 if project is not None:
                     project(x)
@@ -261,7 +268,7 @@ class MultigridSolver:
             project(x)
         log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
                   time.perf_counter() - t0)
-        converged = bool(residuals[-1] <= s.rtol * residuals[0])  # False for NaN as well
+        converged = bool(residuals[-1] <= rtol * residuals[0])  # False for NaN as well
         report = LinearReport(self.name, time.perf_counter() - t0, iterations=cycles,
                               residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup,
                               converged=converged)
