@@ -207,16 +207,16 @@ def scatter_into_pattern(indptr, indices, data, p_indptr, p_indices, out):
 
 # -- Vanka on general CSR blocks: patches of one cell, local factors stored -------------------
 @njit
-def _lu_factor(K, piv):
+def _lu_factor(K, piv, rel=1e-13):
     """LU with partial pivoting of ``K (n, n)`` in place (unit lower part below the diagonal),
-    row swaps in ``piv (n,)``. A pivot below ``1e-13 max|K|`` (a locally singular pressure mode)
+    row swaps in ``piv (n,)``. A pivot below ``rel max|K|`` (a locally singular pressure mode)
     is set to zero with no multipliers below it: :func:`_lu_solve` gives that unknown zero."""
     n = K.shape[0]
     scale = 0.0
     for i in range(n):
         for j in range(n):
             scale = max(scale, abs(K[i, j]))
-    tol = 1e-13 * scale
+    tol = rel * scale
     for k in range(n):
         p = k
         for i in range(k + 1, n):
@@ -276,16 +276,18 @@ def _copy_row(src_ptr, src_idx, src_val, q, offset, idx, val, pos):
 
 @njit
 def merge_blocks(a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val,
-                 ptr, idx, val):
+                 keep_u, ptr, idx, val):
     """The CSR arrays of ``K = [[A, G], [D, C]]`` from those of its blocks (``A`` (n_u, n_u),
     ``G`` (n_u, n_p), ``D`` (n_p, n_u), ``C`` (n_p, n_p)) into ``ptr (n_u + n_p + 1,)``, ``idx``
-    and ``val`` (nnz of all four), filled in place; row by row, left block first."""
+    and ``val``, filled in place; row by row, left block first. Velocity rows with ``keep_u``
+    (n_u,) False stay empty."""
     n_u, n_p = a_ptr.shape[0] - 1, d_ptr.shape[0] - 1
     pos = 0
     ptr[0] = 0
     for q in range(n_u):
-        pos = _copy_row(a_ptr, a_idx, a_val, q, 0, idx, val, pos)
-        pos = _copy_row(g_ptr, g_idx, g_val, q, n_u, idx, val, pos)
+        if keep_u[q]:
+            pos = _copy_row(a_ptr, a_idx, a_val, q, 0, idx, val, pos)
+            pos = _copy_row(g_ptr, g_idx, g_val, q, n_u, idx, val, pos)
         ptr[q + 1] = pos
     for q in range(n_p):
         pos = _copy_row(d_ptr, d_idx, d_val, q, 0, idx, val, pos)
@@ -294,53 +296,180 @@ def merge_blocks(a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val, 
 
 
 @njit
-def _patch_residual(dofs, b, x, r, k_ptr, k_idx, k_val):
-    """``r = (b - K x)[dofs]`` for ``K`` in CSR."""
-    for a in range(dofs.shape[0]):
-        g = dofs[a]
-        s = 0.0
-        for j in range(k_ptr[g], k_ptr[g + 1]):
+def regular_nodes(a_ptr, a_idx, a_val, n_v, d):
+    """Nodes whose ``d`` velocity rows of the CSR block ``A`` (n_u, n_u, component-blocked, sorted
+    columns) are one scalar row: row ``(i, a)`` has the entries of row ``(0, a)`` in the columns
+    shifted by ``i n_v``. (n_v,) bool."""
+    out = np.ones(n_v, dtype=np.bool_)
+    for a in range(n_v):
+        start, ln = a_ptr[a], a_ptr[a + 1] - a_ptr[a]
+        for i in range(1, d):
+            r = i * n_v + a
+            if a_ptr[r + 1] - a_ptr[r] != ln:
+                out[a] = False
+                break
+            for k in range(ln):
+                if a_idx[a_ptr[r] + k] != a_idx[start + k] + i * n_v or a_val[a_ptr[r] + k] != a_val[start + k]:
+                    out[a] = False
+                    break
+            if not out[a]:
+                break
+        if out[a]:
+            for k in range(ln):  # component 0 only: a block-diagonal row
+                if a_idx[start + k] >= n_v:
+                    out[a] = False
+                    break
+    return out
+
+
+# A factored Vanka operator ("op" below) is the saddle-point matrix in three CSR parts:
+#   regular (n_v,) bool; (s_ptr, s_idx, s_val): scalar rows (node columns) of the regular nodes;
+#   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
+#   velocity rows; (k_ptr, k_idx, k_val): every other row of K (irregular velocity rows, A and G,
+#   and the pressure rows), global columns. Velocity row (i, a) is i n_v + a.
+@njit
+def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+    """``(K x)[q]``."""
+    s = 0.0
+    if q < n_u and regular[q % n_v]:
+        a, off = q % n_v, q - q % n_v
+        for j in range(s_ptr[a], s_ptr[a + 1]):
+            s += s_val[j] * x[off + s_idx[j]]
+        for j in range(g_ptr[q], g_ptr[q + 1]):
+            s += g_val[j] * x[n_u + g_idx[j]]
+    else:
+        for j in range(k_ptr[q], k_ptr[q + 1]):
             s += k_val[j] * x[k_idx[j]]
-        r[a] = b[g] - s
+    return s
+
+
+@njit
+def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+    """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
+    n = S.shape[0]
+    K[:, :] = 0.0
+    for a in range(n):
+        q = S[a]
+        if q < n_u and regular[q % n_v]:
+            node, off = q % n_v, q - q % n_v
+            for j in range(s_ptr[node], s_ptr[node + 1]):
+                col = loc[off + s_idx[j]]
+                if col >= 0:
+                    K[a, col] += s_val[j]
+            for j in range(g_ptr[q], g_ptr[q + 1]):
+                col = loc[n_u + g_idx[j]]
+                if col >= 0:
+                    K[a, col] += g_val[j]
+        else:
+            for j in range(k_ptr[q], k_ptr[q + 1]):
+                col = loc[k_idx[j]]
+                if col >= 0:
+                    K[a, col] += k_val[j]
+
+
+@njit
+def _inverse(K, piv, inv, rel):
+    """``inv = K^-1`` through :func:`_lu_factor` with pivot tolerance ``rel`` (``K``
+    overwritten; the unknowns of zeroed pivots get zero rows and columns)."""
+    n = K.shape[0]
+    _lu_factor(K, piv, rel)
+    e = np.empty(n)
+    col = np.empty(n)
+    for j in range(n):
+        e[:] = 0.0
+        e[j] = 1.0
+        _lu_solve(K, piv, e, col)
+        for i in range(n):
+            inv[i, j] = col[i]
 
 
 @njit(parallel=True)
-def vanka_factor(LU, ptr, dofs, lu_ptr, k_ptr, k_idx, k_val, n_chunks, width):
-    """LU factors of the local blocks ``K[S_k, S_k]`` of the saddle-point matrix ``K`` (CSR) for
-    the patches ``S_k = dofs[ptr[k]:ptr[k+1]]``, factorised in float64 and stored in ``LU``
-    (flat, float64 or float32, filled in place; patch ``k``'s ``n_k x n_k`` factors at
-    ``lu_ptr[k]``). Returns ``piv`` (int32, patch ``k``'s at ``ptr[k]``), see
-    :func:`_lu_factor`. ``width``: the largest patch size."""
+def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular, s_ptr,
+                 s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+    """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
+    (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
+    ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
+
+    * ``schur[k]`` False: the LU factors of ``K[S, S]`` (:func:`_lu_factor`), ``n_k^2`` values;
+    * ``schur[k]`` True, a cell whose nodes are all regular (``S`` = its ``nl`` nodes per
+      component, then its ``d + 1`` pressures): ``K[S, S] = [[I (x) A, B], [D, C]]`` with the
+      scalar block ``A`` (nl, nl) is solved through its Schur complement; stored are ``A^-1``
+      (nl, nl), ``Y = (I (x) A^-1) B`` (d nl, d + 1), ``D`` (d + 1, d nl) and
+      ``(C - D Y)^-1`` (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
+      ``schur_tol``: a pressure mode that the cell's free velocities barely see (a cell with one
+      free node among constrained ones) is left uncorrected, as an orphaned one, rather than
+      amplifying the rounding of stored factors (measured: with float32 storage and 1e-13, a
+      coarse level's such cell stalled FGMRES).
+    """
     m = ptr.shape[0] - 1
-    piv = np.zeros(ptr[m], dtype=np.int32)
+    npl = d + 1
+    nu = d * nl
     for t in prange(n_chunks):
         loc = np.full(k_ptr.shape[0] - 1, -1, dtype=np.int32)  # global -> local position in the patch
-        work = np.empty(width * width)
+        work = np.empty((width, width))
+        A = np.empty((nl, nl))
+        Ainv = np.empty((nl, nl))
+        Y = np.empty((nu, npl))
+        Sc = np.empty((npl, npl))
+        Sinv = np.empty((npl, npl))
+        p_work = np.empty(width, dtype=np.int32)
         for k in range(t * m // n_chunks, (t + 1) * m // n_chunks):
             S = dofs[ptr[k]:ptr[k + 1]]
             nk = S.shape[0]
             for a in range(nk):
                 loc[S[a]] = a
-            K = work[:nk * nk].reshape(nk, nk)
-            K[:] = 0.0
-            for a in range(nk):
-                for j in range(k_ptr[S[a]], k_ptr[S[a] + 1]):
-                    col = loc[k_idx[j]]
-                    if col >= 0:
-                        K[a, col] += k_val[j]
+            K = work[:nk, :nk]
+            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx,
+                          k_val)
             for a in range(nk):
                 loc[S[a]] = -1
-            _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
-            for a in range(nk * nk):
-                LU[lu_ptr[k] + a] = work[a]
-    return piv
+            base = lu_ptr[k]
+            if schur[k]:
+                A[:, :] = K[:nl, :nl]
+                _inverse(A, p_work[:nl], Ainv, 1e-13)
+                for i in range(d):
+                    for a in range(nl):
+                        for mm in range(npl):
+                            s = 0.0
+                            for b in range(nl):
+                                s += Ainv[a, b] * K[i * nl + b, nu + mm]
+                            Y[i * nl + a, mm] = s
+                for mm in range(npl):
+                    for q in range(npl):
+                        s = K[nu + mm, nu + q]
+                        for j in range(nu):
+                            s -= K[nu + mm, j] * Y[j, q]
+                        Sc[mm, q] = s
+                _inverse(Sc, p_work[:npl], Sinv, schur_tol)
+                pos = base
+                for a in range(nl):
+                    for b in range(nl):
+                        store[pos] = Ainv[a, b]
+                        pos += 1
+                for j in range(nu):
+                    for mm in range(npl):
+                        store[pos] = Y[j, mm]
+                        pos += 1
+                for mm in range(npl):
+                    for j in range(nu):
+                        store[pos] = K[nu + mm, j]
+                        pos += 1
+                for mm in range(npl):
+                    for q in range(npl):
+                        store[pos] = Sinv[mm, q]
+                        pos += 1
+            else:
+                _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
+                for a in range(nk):
+                    for b in range(nk):
+                        store[base + a * nk + b] = K[a, b]
 
 
 @njit(fastmath=True)
 def _lu_solve_stored(LU, piv, r, w, out):
     """:func:`_lu_solve` in the storage precision of ``LU`` (``w`` work of that dtype; ``r``
     float64, overwritten; the result goes to ``out``). fastmath lets the row dot products
-    vectorise (measured 1.3x faster in single precision)."""
+    vectorise."""
     n = LU.shape[0]
     for k in range(n):
         p = piv[k]
@@ -365,52 +494,116 @@ def _lu_solve_stored(LU, piv, r, w, out):
         out[i] = w[i]
 
 
+@njit(fastmath=True)
+def _schur_solve(store, base, nl, d, r, w, out):
+    """The correction of a Schur patch (see :func:`vanka_factor`) from its residual ``r``
+    (d nl + d + 1,) float64 into ``out``; ``w`` float64 work, (d nl + d + 1,). Accumulated in
+    float64 whatever the storage: the continuity rows ``r_p - D z`` cancel (in float32 the cycles
+    grew by half, measured)."""
+    npl = d + 1
+    nu = d * nl
+    y0 = base + nl * nl
+    d0 = y0 + nu * npl
+    s0 = d0 + npl * nu
+    for i in range(d):  # z = (I (x) A^-1) r_u into w[:nu]
+        for a in range(nl):
+            s = 0.0
+            row = base + a * nl
+            for b in range(nl):
+                s += store[row + b] * r[i * nl + b]
+            w[i * nl + a] = s
+    for mm in range(npl):  # t = r_p - D z into w[nu:]
+        s = 0.0
+        for j in range(nu):
+            s += store[d0 + mm * nu + j] * w[j]
+        w[nu + mm] = r[nu + mm] - s
+    for mm in range(npl):  # p = (C - D Y)^-1 t
+        s = 0.0
+        for q in range(npl):
+            s += store[s0 + mm * npl + q] * w[nu + q]
+        out[nu + mm] = s
+    for j in range(nu):  # u = z - Y p
+        s = w[j]
+        for mm in range(npl):
+            s -= store[y0 + j * npl + mm] * out[nu + mm]
+        out[j] = s
+
+
 @njit
-def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val, width):
+def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
+                     regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
     residual is taken."""
     r = np.empty(width)
-    w = np.empty(width, dtype=LU.dtype)
+    w = np.empty(width, dtype=store.dtype)
+    w64 = np.empty(width)
     out = np.empty(width)
+    nu = d * nl
     for e in range(start, end):
         k = order[e]
         S = dofs[ptr[k]:ptr[k + 1]]
         nk = S.shape[0]
-        _patch_residual(S, b, x, r, k_ptr, k_idx, k_val)
-        _lu_solve_stored(LU[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, w, out)
+        if schur[k]:  # the scalar rows of a node serve its d components at once
+            for a in range(nl):
+                node = S[a]
+                for i in range(d):
+                    r[i * nl + a] = 0.0
+                for j in range(s_ptr[node], s_ptr[node + 1]):
+                    v = s_val[j]
+                    col = s_idx[j]
+                    for i in range(d):
+                        r[i * nl + a] += v * x[i * n_v + col]
+                for i in range(d):
+                    q = i * n_v + node
+                    s = r[i * nl + a]
+                    for j in range(g_ptr[q], g_ptr[q + 1]):
+                        s += g_val[j] * x[n_u + g_idx[j]]
+                    r[i * nl + a] = b[q] - s
+            for a in range(nu, nk):
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
+                                             k_ptr, k_idx, k_val)
+            _schur_solve(store, lu_ptr[k], nl, d, r, w64, out)
+        else:
+            for a in range(nk):
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
+                                             k_ptr, k_idx, k_val)
+            _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, w,
+                             out)
         for a in range(nk):
             x[S[a]] += omega * out[a]
 
 
 @njit(parallel=True)
-def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val, width):
+def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
+                       regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
-        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx,
-                         k_val, width)
+        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d,
+                         width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
 
 
 @njit
-def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val, width):
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
+                           regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
-    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, LU, piv, k_ptr, k_idx, k_val,
-                     width)
+    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d,
+                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
 
 
 @njit
-def plane_reach(k_ptr, k_idx, planes, period, row_offset):
-    """Largest ``|planes[k_idx[j]] - planes[row_offset + row]|`` over the entries of the CSR
-    pattern ``(k_ptr, k_idx)`` (the difference taken modulo ``period``, into
+def plane_reach(k_ptr, k_idx, planes, period, row_offset, col_offset):
+    """Largest ``|planes[col_offset + k_idx[j]] - planes[row_offset + row]|`` over the entries of
+    the CSR pattern ``(k_ptr, k_idx)`` (the difference taken modulo ``period``, into
     ``[-period/2, period/2)``, when ``period > 0``)."""
     reach = 0
     for row in range(k_ptr.shape[0] - 1):
         p = planes[row_offset + row]
         for j in range(k_ptr[row], k_ptr[row + 1]):
-            diff = planes[k_idx[j]] - p
+            diff = planes[col_offset + k_idx[j]] - p
             if period > 0:
                 diff = (diff + period // 2) % period - period // 2
             reach = max(reach, abs(diff))

@@ -60,10 +60,8 @@ class VankaSmoother:
             self._extra = (space.slots,)
         mesh = space.mesh
         axis = ordering.slab_axis(mesh.shape)
-        planes = ordering.dof_planes(space, axis)
         period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
-        reach = max(ordering.plane_reach(system.A.indptr, system.A.indices, planes, period),
-                    ordering.plane_reach(system.BT.indptr, system.BT.indices, planes, period, system.n_u))
+        reach = ordering.system_reach(system, ordering.dof_planes(space, axis), period)
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells), reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
         self._kernel = _kernels.vanka_full if variant == "vanka-full" else _kernels.vanka_diagonal
@@ -86,20 +84,34 @@ PRECISIONS = {"single": np.float32, "double": np.float64}
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.7}  # name -> default damping
 
 
-def saddle_point_csr(system: SaddlePointSystem, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(indptr, indices, data)`` of ``K = [[A, G], [D, C]]`` (the system's blocks, whatever
     their row patterns; ``C`` may be None): int64 row pointers, int32 column indices, ``dtype``
-    values, (n_u + n_p + 1,), (nnz,), (nnz,)."""
+    values, (n_u + n_p + 1,), (nnz,), (nnz,). Velocity rows where ``keep_u`` (n_u,) bool is
+    False are left empty."""
     n_u, n_p = system.n_u, system.n_p
+    keep_u = np.ones(n_u, dtype=bool) if keep_u is None else keep_u
     blocks = []
     for M, shape in ((system.A, (n_u, n_u)), (system.gradient, (n_u, n_p)), (system.BT, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else sp.csr_matrix(M)
         blocks += [M.indptr, M.indices, M.data]
-    nnz = sum(b.size for b in blocks[2::3])
+    lengths = np.diff(blocks[0]) + np.diff(blocks[3])
+    nnz = int(lengths[keep_u].sum()) + blocks[8].size + blocks[11].size
     ptr, idx, val = np.empty(n_u + n_p + 1, dtype=np.int64), np.empty(nnz, dtype=np.int32), np.empty(nnz, dtype=dtype)
-    _kernels.merge_blocks(*blocks, ptr, idx, val)
+    _kernels.merge_blocks(*blocks, keep_u, ptr, idx, val)
     return ptr, idx, val
+
+
+def _rows_of(M: sp.csr_matrix, keep: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR arrays of the rows ``keep`` (n_rows,) bool of ``M`` (the other rows empty): int64
+    pointers, int32 indices, ``dtype`` values."""
+    lengths = np.diff(M.indptr[:keep.size + 1])
+    sel = np.repeat(keep, lengths)
+    ptr = np.concatenate([[0], np.cumsum(np.where(keep, lengths, 0))]).astype(np.int64)
+    end = M.indptr[keep.size]
+    return ptr, M.indices[:end][sel].astype(np.int32), M.data[:end][sel].astype(dtype)
 
 
 class FactoredVankaSmoother:
@@ -140,42 +152,58 @@ class FactoredVankaSmoother:
             raise ValueError(f"unknown precision {precision!r}; choose one of {sorted(PRECISIONS)}")
         dtype = PRECISIONS[precision]
         space = system.space
-        d, npl, n_u = space.dim, space.dim + 1, system.n_u
+        d, npl, n_u, n_v = space.dim, space.dim + 1, system.n_u, space.n_v
         cd = space.V.cell_dofs
-        n_cells = cd.shape[0]
-        cell_dofs = np.concatenate([cd + i * space.n_v for i in range(d)]
+        n_cells, nl = cd.shape
+        cell_dofs = np.concatenate([cd + i * n_v for i in range(d)]
                                    + [n_u + np.arange(n_cells)[:, None] * npl + np.arange(npl)], axis=1)
-        regular = np.ones(n_cells, dtype=bool)
+        plain = np.ones(n_cells, dtype=bool)
         merged = []
         if system.extension is not None:
             E = system.extension.matrix.tocsr()
             rows = system.extension.dofs[::npl]  # first pressure DOF of every continued cell
             source, target = rows // npl, E.indices[E.indptr[rows]] // npl
-            regular[source] = regular[target] = False
+            plain[source] = plain[target] = False
             for t in np.unique(target):
                 cells = np.concatenate([[t], source[target == t]])
                 merged.append(np.unique(cell_dofs[cells].ravel()))
-        cells = np.flatnonzero(regular)
+        cells = np.flatnonzero(plain)
+        # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
+        # and every other row (the kernels' "op")
+        A = sp.csr_matrix(system.A)
+        regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
+        regular_u = np.tile(regular, d)
+        self.op = (regular, *_rows_of(A, regular, dtype), *_rows_of(system.gradient, regular_u, dtype),
+                   *saddle_point_csr(system, dtype, ~regular_u))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]), [m.size for m in merged]]).astype(np.int64)
+        self.schur = np.concatenate([regular[cd[cells]].all(axis=1), np.zeros(len(merged), dtype=bool)])
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int64)
-        self.lu_ptr = np.concatenate([[0], np.cumsum(sizes**2)]).astype(np.int64)
+        schur_size = nl * nl + 2 * d * nl * npl + npl * npl
+        self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.schur, schur_size, sizes**2))]).astype(np.int64)
         self.width = int(sizes.max())
-        self.K = saddle_point_csr(system, dtype)
-        self.n_chunks = 4 * numba_threads()
+        self.shape = (nl, d, self.width, n_v, n_u)
         self.omega = omega
-        self.LU = np.empty(self.lu_ptr[-1], dtype=dtype)
-        self.piv = _kernels.vanka_factor(self.LU, self.ptr, self.dofs, self.lu_ptr, *self.K, self.n_chunks,
-                                         self.width)
+        self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
+        self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
+        schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
+        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
+                              4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
         mesh = space.mesh
         axis = ordering.slab_axis(mesh.shape)
         period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
-        reach = ordering.plane_reach(*self.K[:2], ordering.dof_planes(space, axis), period)
+        reach = ordering.system_reach(system, ordering.dof_planes(space, axis), period)
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), cells, reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
         self.interface_sweeps = interface_sweeps
         self.interface = self._interface_patches(system)
+
+    @property
+    def _patches(self) -> tuple:
+        """The kernels' patch arguments (:func:`~fbmflow.solvers._kernels.vanka_sweep_groups`)."""
+        nl, d, width, n_v, n_u = self.shape
+        return self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.schur, nl, d, width, n_v, n_u
 
     def _interface_patches(self, system: SaddlePointSystem) -> np.ndarray:
         """Patches (cells and agglomerated ones) holding a constrained velocity (fixed or
@@ -195,15 +223,14 @@ class FactoredVankaSmoother:
         """Add ``omega`` times the correction of each of ``patches`` to ``x``, one after the
         other (patches may share DOFs; without a pressure extension, patch ``c`` is cell ``c``)."""
         if patches.size:
-            _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega, self.ptr,
-                                            self.dofs, self.lu_ptr, self.LU, self.piv, *self.K, self.width)
+            _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega, *self._patches,
+                                            *self.op)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
         for k in range(sweeps):
             for gptr, order in self.sweeps[k % len(self.sweeps)]:
-                _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, self.ptr, self.dofs, self.lu_ptr,
-                                            self.LU, self.piv, *self.K, self.width)
+                _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
             for _ in range(self.interface_sweeps):
                 self.update(self.interface, b, x)
             self.update(self.merged, b, x)
