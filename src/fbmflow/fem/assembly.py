@@ -149,7 +149,7 @@ def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndar
     (dim * n_v,) float64 in place, without assembling ``N(u)``."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     target = out.reshape(space.dim, space.n_v)
-    for cells in space.batches:
+    for cells in space.colour_groups:
         _kernels.apply_convection(cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv,
                                   scale, target)
 
@@ -182,6 +182,6 @@ def apply_reaction(space: FlowSpace, react: np.ndarray, w: np.ndarray, scale: fl
     """
     ww = np.ascontiguousarray(w.reshape(space.dim, space.n_v))
     target = out.reshape(space.dim, space.n_v)
-    batches = space.batches if cells is None else [np.asarray(cells, dtype=np.int64)[None, :]]
+    batches = space.colour_groups if cells is None else [np.asarray(cells, dtype=np.int64)[None, :]]
     for batch in batches:
         _kernels.apply_reaction(batch, react, space.V.cell_dofs, space.phi, ww, scale, target)

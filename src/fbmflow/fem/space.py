@@ -120,17 +120,27 @@ class FlowSpace:
         DOF, so kernels run the rows in parallel and each row sequentially, in lexicographic
         order, which keeps the matrix rows being written in cache.
         """
+        return self._colour_batches(max(1, self.batch_size // max(1, numba_threads())))
+
+    @cached_property
+    def colour_groups(self) -> list[np.ndarray]:
+        """The cells of every colour in one batch (as :attr:`batches`, unlimited length): for
+        kernels that need no work array per batch (matrix-free products), one parallel loop per
+        colour."""
+        return self._colour_batches(None)
+
+    def _colour_batches(self, length: int | None) -> list[np.ndarray]:
         n_groups = max(1, numba_threads())
-        length = max(1, self.batch_size // n_groups)
         out = []
         for slabs in self.mesh.cell_colours():
             parts = np.array_split(np.arange(len(slabs)), min(n_groups, len(slabs)))
             seqs = [np.concatenate([slabs[i] for i in part]) for part in parts]
             longest = max(len(q) for q in seqs)
-            for start in range(0, longest, length):
-                batch = np.full((len(seqs), length), -1, dtype=np.int64)
+            step = longest if length is None else length
+            for start in range(0, longest, step):
+                batch = np.full((len(seqs), step), -1, dtype=np.int64)
                 for g, q in enumerate(seqs):
-                    piece = q[start:start + length]
+                    piece = q[start:start + step]
                     batch[g, :len(piece)] = piece
                 out.append(batch)
         return out

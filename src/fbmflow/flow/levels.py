@@ -95,7 +95,6 @@ class FlowLevel:
         self._diagonals: tuple | None = None  # diagonals of M and L (row_scale)
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
-        self._node_graph: sp.csr_matrix | None = None  # Q2 nodes sharing a cell (pocket search)
 
     def homogeneous_constraints(self, t: float = 0.0) -> DirichletConstraints:
         """Which DOFs are constrained on this level (values zero): the box faces plus the extra
@@ -115,11 +114,14 @@ class FlowLevel:
         velocity; the pressure modes of the cells they leave orphaned drop out."""
         s = self.space
         free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
-        if self._node_graph is None:
-            self._node_graph = sp.csr_matrix((np.ones(s.nnz, dtype=np.int8), s.indices, s.indptr),
-                                             shape=(s.n_v, s.n_v))
-        n_parts, labels = connected_components(self._node_graph[free][:, free], directed=False)
-        if n_parts <= 1:
+        # the graph of the nodes that share a cell, free ones only (masking the scalar pattern's
+        # entries is cheaper than slicing a matrix by rows and columns)
+        keep = np.repeat(free, np.diff(s.indptr)) & free[s.indices]
+        indptr = np.concatenate([[0], np.cumsum(np.add.reduceat(keep, s.indptr[:-1], dtype=np.int64))])
+        graph = sp.csr_matrix((np.ones(int(indptr[-1]), dtype=np.int8), s.indices[keep], indptr), shape=(s.n_v, s.n_v))
+        _, labels = connected_components(graph, directed=False)
+        labels = labels[free]
+        if len(np.unique(labels)) <= 1:
             return con
         pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
         log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
