@@ -8,7 +8,7 @@ from fbmflow.solvers import ConvergenceError, LinearReport, NewtonSettings, solv
 
 
 def _scalar_problem(f, df):
-    def step(x, F, fresh=True):
+    def step(x, F, fresh=True, rtol=None):
         return -F / df(x), LinearReport("scalar", 0.0, 1)
     return (lambda x: f(x)), step
 
@@ -19,7 +19,7 @@ def test_reused_jacobian_converges_to_the_same_root_and_refreshes_when_slow():
     calls = {"fresh": 0}
     slope = {}
 
-    def step(x, F, fresh=True):
+    def step(x, F, fresh=True, rtol=None):
         if fresh or "d" not in slope:
             slope["d"] = 3 * x**2
             calls["fresh"] += 1
@@ -29,6 +29,25 @@ def test_reused_jacobian_converges_to_the_same_root_and_refreshes_when_slow():
     assert abs(x[0] - 2 ** (1 / 3)) < 1e-10
     assert calls["fresh"] < report.iterations  # some steps reused the derivative
     assert report.iterations <= 12
+
+
+def test_adaptive_forcing_terms_tighten_near_the_root():
+    """Eisenstat-Walker: the linear steps are asked for ``linear_rtol`` at first and for far less
+    near the root, where an inexact step would make Newton merely linear (each step here leaves
+    exactly the relative residual asked of it)."""
+    counts = {}
+    for adaptive in (False, True):
+        asked = []
+
+        def step(x, F, fresh=True, rtol=None):
+            asked.append(rtol)
+            return -F / (3 * x**2) * (1 - (1e-2 if rtol is None else rtol)), LinearReport("scalar", 0.0, 1)
+        settings = NewtonSettings(rtol=1e-12, linear_rtol=1e-2, adaptive_linear_rtol=adaptive)
+        x, report = solve_newton(lambda x: x**3 - 2.0, step, np.array([1.0]), settings)
+        assert abs(x[0] - 2 ** (1 / 3)) < 1e-10
+        counts[adaptive] = report.iterations
+    assert asked[0] == 1e-2 and min(asked) < 1e-4
+    assert counts[True] < counts[False], counts
 
 
 def test_quadratic_convergence_on_a_scalar_equation():

@@ -315,9 +315,9 @@ class NavierStokesProblem:
         con.apply_to_vector(x0)
         reference = None
 
-        def linear_step(x, F, fresh=True):
+        def linear_step(x, F, fresh=True, rtol=None):
             solve = self._linearise(x, m, a, con, t, fresh)
-            du, dp, report = self._linear_solve(solve, -F[:self.space.n_u], -F[self.space.n_u:])
+            du, dp, report = self._linear_solve(solve, -F[:self.space.n_u], -F[self.space.n_u:], rtol)
             return np.concatenate([du, dp]), report
 
         orphans = self.orphans(con)

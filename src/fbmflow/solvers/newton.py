@@ -25,9 +25,15 @@ class NewtonSettings:
     the mass term dominates and the Jacobian changes little from step to step.
 
     ``linear_rtol``: the relative residual asked of each linear step from a linear solver that
-    takes one per solve (the direct solver's PARDISO refinement; None: the solver's own target).
-    A Newton (or chord) step needs no more than a small fraction of the residual it reduces; the
-    stopping rule above, on the nonlinear residual, decides the accuracy of the solution.
+    takes one per solve (multigrid; the direct solver's PARDISO refinement; None: the solver's
+    own target). A Newton (or chord) step needs no more than a small fraction of the residual it
+    reduces; the stopping rule above, on the nonlinear residual, decides the accuracy of the
+    solution.
+
+    ``adaptive_linear_rtol``: Eisenstat and Walker's forcing terms (1996, choice 2) instead:
+    ``eta_k = 0.9 (|F_k| / |F_(k-1)|)^2``, safeguarded by ``0.9 eta_(k-1)^2`` where that exceeds
+    0.1, at most ``linear_rtol`` and at least half the final target over ``|F_k|``: loose solves
+    far from the solution, tight ones where Newton converges quadratically.
     """
 
     rtol: float = 1e-10
@@ -38,6 +44,7 @@ class NewtonSettings:
     reuse_jacobian: bool = False
     reuse_contraction: float = 10.0
     linear_rtol: float | None = None
+    adaptive_linear_rtol: bool = False
 
 
 @dataclass
@@ -60,8 +67,9 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     Parameters
     ----------
     residual : x -> F(x), both (n,) float64
-    linear_step : (x, F, fresh) -> (dx, LinearReport) solving ``J dx = -F``; with ``fresh`` False
-        it may use an earlier Jacobian (``settings.reuse_jacobian``)
+    linear_step : (x, F, fresh, rtol) -> (dx, LinearReport) solving ``J dx = -F``; with ``fresh``
+        False it may use an earlier Jacobian (``settings.reuse_jacobian``); ``rtol``: the relative
+        residual asked of the solve (None: ``settings.linear_rtol``, or the solver's own)
     x0 : (n,) float64, first iterate (constraints already applied)
     reference : float, optional
         The residual norm that ``settings.rtol`` is relative to (default ``|F(x0)|``): a caller
@@ -85,12 +93,15 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     report.residuals.append(norm)
     target = max(settings.atol, settings.rtol * (norm if reference is None else reference))
     fresh = not settings.reuse_jacobian
+    eta = None  # the forcing term of the last step (adaptive_linear_rtol)
     while norm > target:
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
             raise ConvergenceError(
                 f"Newton did not converge: residual {norm:.3e} after {report.iterations} iterations "
                 f"(started at {report.residuals[0]:.3e}, target {target:.3e})")
-        dx, lin = linear_step(x, F, fresh)
+        if settings.adaptive_linear_rtol and settings.linear_rtol is not None:
+            eta = _forcing_term(eta, report.residuals, settings.linear_rtol, target)
+        dx, lin = linear_step(x, F, fresh, eta)
         report.linear_iterations += lin.iterations
         report.linear_time_s += lin.wall_time_s
         if np.linalg.norm(dx) <= settings.step_tol * max(np.linalg.norm(x), 1.0):
@@ -119,3 +130,15 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
         log.debug("newton %d: |F| = %.3e (step %.3g)", report.iterations, norm, step)
     report.converged = True
     return x, report
+
+
+def _forcing_term(eta: float | None, residuals: list[float], eta_max: float, target: float) -> float:
+    """Eisenstat–Walker choice 2 (gamma 0.9, alpha 2) with its safeguards; ``residuals``: the
+    nonlinear residual norms so far, the current one last."""
+    if eta is None or len(residuals) < 2:
+        new = eta_max
+    else:
+        new = 0.9 * (residuals[-1] / residuals[-2]) ** 2
+        if 0.9 * eta**2 > 0.1:
+            new = max(new, 0.9 * eta**2)
+    return float(max(min(new, eta_max), 0.5 * target / residuals[-1]))

@@ -1,0 +1,170 @@
+"""Linear solvers on the built-in scenes: one row per scene, level and solver.
+
+For every case (a steady scene solved to its end, or the first steps of a particle scene) and
+every solver (SuperLU, PARDISO when installed, multigrid with the scene's settings) one process
+runs the case and reports: unknowns, Newton iterations, linear solves, multigrid cycles per
+solve, matvec-equivalents per solve (linear time over the time of one product with the fine
+system), seconds per solve, per step (particle scenes) or in all (steady scenes), and the
+process's peak resident memory. The processes run one after the other; the JIT-compiled kernels
+come from the Numba cache (run once before to fill it). Combinations that cannot run here are
+listed with the reason (SuperLU's fill in 3D above a few 10^4 unknowns; PARDISO's memory).
+
+    python benchmarks/bench_solver_table.py                  # every case
+    python benchmarks/bench_solver_table.py --cases cavity-re400 channel-3d-4
+
+writes benchmarks/results/solver_table.{json,md} (rows of cases not run are kept from the last
+file).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).parent / "results"
+#: name -> (scene, level, overrides, steps; None: a steady scene run to its end)
+CASES = {
+    "cavity-re400": ("cavity-2d", 3, ["fluid.re=400"], None),
+    "cavity-re1000": ("cavity-2d", 3, ["fluid.re=1000"], None),
+    "channel-3d-4": ("channel-3d", 4, [], None),
+    "dfg-3d-1z-3": ("dfg-3d-1z", 3, [], None),
+    "ten-cate-1": ("ten-cate", 1, [], 3),
+    "ten-cate-2": ("ten-cate", 2, [], 2),
+}
+SOLVERS = ("superlu", "pardiso", "multigrid")
+#: combinations not run, with the reason (measured or estimated on this 24 GB machine)
+SKIP = {
+    ("channel-3d-4", "superlu"): "SuperLU fill in 3D (infeasible above a few 10^4 unknowns)",
+    ("dfg-3d-1z-3", "superlu"): "SuperLU fill in 3D (infeasible above a few 10^4 unknowns)",
+    ("ten-cate-1", "superlu"): "SuperLU fill in 3D (infeasible above a few 10^4 unknowns)",
+    ("ten-cate-2", "superlu"): "SuperLU fill in 3D (infeasible above a few 10^4 unknowns)",
+    ("channel-3d-4", "pardiso"): "PARDISO: more than the machine's 24 GB (487 000 unknowns)",
+    ("ten-cate-2", "pardiso"): "PARDISO: more than the machine's 24 GB (2.1 M unknowns)",
+}
+
+
+def run_case(case: str, solver: str) -> dict:
+    """Run ``case`` with ``solver`` in this process; the row's figures."""
+    import numpy as np
+
+    import fbmflow.flow.navier_stokes as ns
+    import fbmflow.solvers.linear as linear
+    from fbmflow.scenes.registry import load_scene
+
+    scene_name, level, overrides, steps = CASES[case]
+    if solver != "multigrid":
+        backend = solver
+        linear.auto_backend = ns.auto_backend = lambda dim, n: backend  # the direct backend of this row
+    reports, newton, problems = [], [], []
+    linear_solve, solve_newton = ns.NavierStokesProblem._linear_solve, ns.solve_newton
+
+    def counted_solve(self, solve, f, g, rtol=None):
+        out = linear_solve(self, solve, f, g, rtol)
+        reports.append(out[2])
+        if not problems or problems[-1] is not self:
+            problems.append(self)
+        return out
+
+    def counted_newton(*args, **kwargs):
+        x, report = solve_newton(*args, **kwargs)
+        newton.append(report.iterations)
+        return x, report
+
+    ns.NavierStokesProblem._linear_solve = counted_solve
+    ns.solve_newton = counted_newton
+    scene, params, level = load_scene(scene_name, level,
+                                      [f"solver.linear={'multigrid' if solver == 'multigrid' else 'direct'}"]
+                                      + overrides)
+    t0 = time.perf_counter()
+    step_times = []
+    if steps is None:
+        scene.run(params, level)
+    else:
+        setup = scene.build(params, level)
+        for _ in range(steps):
+            t1 = time.perf_counter()
+            setup.sim.step(setup.dt)
+            step_times.append(time.perf_counter() - t1)
+    total = time.perf_counter() - t0
+    problem = problems[-1]
+    system = problem._linearisation[4]
+    x = np.random.default_rng(0).standard_normal(system.n_u + system.n_p)
+    times = []
+    for _ in range(3):
+        t1 = time.perf_counter()
+        system.apply(x)
+        times.append(time.perf_counter() - t1)
+    matvec = float(np.median(times))
+    linear_s = sum(r.wall_time_s for r in reports)
+    per_step = step_times[1:] or step_times
+    cycles = sum(r.iterations for r in reports)
+    return dict(case=case, scene=scene_name, level=level, overrides=overrides, solver=solver,
+                description=problem.linear_solver_description, unknowns=problem.n_dofs,
+                newton=sum(newton), solves=len(reports), cycles_per_solve=cycles / len(reports) if solver ==
+                "multigrid" else None, matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s /
+                len(reports), total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
+                first_step_s=step_times[0] if step_times else None,
+                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["# Linear solvers on the built-in scenes (benchmarks/bench_solver_table.py)", "",
+             "One process per row, one after the other. Steady scenes: the whole run (cavity: continuation "
+             "in Re from 100); particle scenes: the first steps (s per step: the mean over the steps after "
+             "the first, which includes the set-up). Cycles: FGMRES iterations, one multigrid cycle each. "
+             "Matvec-equivalents: linear time per solve over one product with the fine system.", "",
+             "| case | scene | level | unknowns | solver | Newton | solves | cycles / solve | matvec-eq / solve "
+             "| s / solve | s / step | total s | peak GB |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "skipped" in r:
+            lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | not run: {r['skipped']} "
+                         "| | | | | | | |")
+            continue
+        cyc = f"{r['cycles_per_solve']:.1f}" if r["cycles_per_solve"] is not None else ""
+        step = f"{r['s_per_step']:.1f}" if r["s_per_step"] else ""
+        lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | {r['unknowns']} | {r['description']} | "
+                     f"{r['newton']} | {r['solves']} | {cyc} | {r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
+                     f"{step} | {r['total_s']:.1f} | {r['peak_gb']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--solvers", nargs="+", default=list(SOLVERS), choices=SOLVERS)
+    ap.add_argument("--one", nargs=2, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one:
+        print(json.dumps(run_case(*args.one)))
+        return
+    from fbmflow.solvers.linear import pardiso_available
+    path = RESULTS / "solver_table.json"
+    old = json.loads(path.read_text()) if path.exists() else []
+    rows = {(r["case"], r["solver"]): r for r in old}
+    for case in args.cases:
+        for solver in args.solvers:
+            scene, level = CASES[case][:2]
+            reason = SKIP.get((case, solver)) or (None if solver != "pardiso" or pardiso_available()
+                                                   else "PARDISO not installed")
+            if reason:
+                rows[case, solver] = dict(case=case, scene=scene, level=level, solver=solver, skipped=reason)
+                continue
+            proc = subprocess.run([sys.executable, __file__, "--one", case, solver], capture_output=True, text=True)
+            if proc.returncode:
+                rows[case, solver] = dict(case=case, scene=scene, level=level, solver=solver,
+                                          skipped=f"failed: {proc.stderr.strip().splitlines()[-1][:120]}")
+            else:
+                rows[case, solver] = json.loads(proc.stdout.strip().splitlines()[-1])
+            print(rows[case, solver], flush=True)
+    ordered = [rows[c, s] for c in CASES for s in SOLVERS if (c, s) in rows]
+    path.write_text(json.dumps(ordered, indent=1))
+    (RESULTS / "solver_table.md").write_text(table(ordered))
+
+
+if __name__ == "__main__":
+    main()
