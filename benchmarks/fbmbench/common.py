@@ -1,0 +1,179 @@
+"""What every benchmark needs: running a scene through the command line, the JIT warm-up,
+the results files and the speed-against-accuracy plot.
+
+A scene runs in a child process, ``python -m fbmflow.cli run SCENE --level L --set KEY=VALUE
+--out DIR``, which writes ``DIR/summary.json`` (resolved parameters, unknowns, steps, Newton
+iterations, the linear solver, the wall time of the run itself and the scene's ``quantities``).
+The wall time is the run's, without the Python start-up; the Numba kernels come from the cache
+that :func:`warm_up` fills first, so it excludes the JIT compilation as the old scripts did.
+
+Results: ``benchmarks/results/<name>.json`` holds a list of rows, one per configuration; a new
+run replaces the row of its configuration and keeps the others (runs measured earlier, by other
+commands or sessions), and the tables and plots are redrawn from all rows.
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from datetime import date
+from pathlib import Path
+
+BENCHMARKS = Path(__file__).resolve().parents[1]
+ROOT = BENCHMARKS.parent
+RESULTS = Path(os.environ.get("FBMFLOW_BENCH_RESULTS", BENCHMARKS / "results"))
+RUNS = Path(os.environ.get("FBMFLOW_BENCH_RUNS", ROOT / "out" / "bench"))
+
+
+def bound(measured: float) -> float:
+    """The bound that a benchmark asserts for a relative error whose measured value is
+    ``measured``: 1.1 |measured| + 0.001, rounded up to 0.001 (0.1 percentage point). The runs are
+    deterministic to far better than that; the margin absorbs solver tolerances, not regressions."""
+    return math.ceil(round((1.1 * abs(measured) + 0.001) * 1000, 6)) / 1000
+
+
+class RunFailed(RuntimeError):
+    """A scene run that exited with a non-zero status."""
+
+
+def cli_value(value) -> str:
+    """``value`` as the command line's ``--set KEY=VALUE`` parses it back."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def slug(scene: str, level: int, settings: dict) -> str:
+    """A folder name for one run: scene, level and the settings in order."""
+    parts = [scene, f"level{level}"] + [f"{k}={cli_value(v)}" for k, v in sorted(settings.items())]
+    return "-".join(p.replace("/", "_") for p in parts)
+
+
+def run_scene(scene: str, level: int, settings: dict | None = None, out: Path | None = None,
+              checkpoint_every: int = 0) -> dict:
+    """Run ``scene`` at ``level`` with the ``settings`` (``{"time.dt": 0.004, ...}``) and return
+    its ``summary.json`` with ``wall_s`` added.
+
+    With ``checkpoint_every > 0`` the run checkpoints into ``out`` and a later call with the same
+    arguments continues it (``fbmflow resume``) when it was interrupted: a long run can span
+    sessions. ``wall_s`` then sums the pieces, each counted to its last checkpoint (the
+    checkpoint file's time) or to its end. A finished run in ``out`` is run again.
+    """
+    settings = dict(settings or {})
+    out = Path(out) if out is not None else RUNS / slug(scene, level, settings)
+    out.mkdir(parents=True, exist_ok=True)
+    pieces_file = out / "bench-pieces.json"
+    summary_file = out / "summary.json"
+    resumable = (checkpoint_every > 0 and (out / "checkpoint.h5").is_file() and (out / "run.json").is_file()
+                 and not summary_file.is_file() and pieces_file.is_file())
+    pieces = json.loads(pieces_file.read_text()) if resumable else []
+    if resumable and pieces and "wall_s" not in pieces[-1]:  # the piece that stopped: to its checkpoint
+        pieces[-1]["wall_s"] = max(0.0, (out / "checkpoint.h5").stat().st_mtime - pieces[-1]["start"])
+    summary_file.unlink(missing_ok=True)
+    if resumable:
+        args = ["resume", str(out), "--no-plot"]
+    else:
+        args = ["run", scene, "--level", str(level), "--out", str(out), "--no-plot"]
+        args += [a for k, v in settings.items() for a in ("--set", f"{k}={cli_value(v)}")]
+        if checkpoint_every:
+            args += ["--checkpoint-every", str(checkpoint_every)]
+    pieces.append({"start": time.time(), "command": "fbmflow " + " ".join(args)})
+    pieces_file.write_text(json.dumps(pieces, indent=1))
+    done = subprocess.run([sys.executable, "-m", "fbmflow.cli", *args], cwd=ROOT)
+    if done.returncode != 0 or not summary_file.is_file():
+        raise RunFailed(f"fbmflow {' '.join(args)} exited with status {done.returncode}")
+    summary = json.loads(summary_file.read_text())
+    pieces[-1]["wall_s"] = summary["wall_time_s"]
+    pieces_file.write_text(json.dumps(pieces, indent=1))
+    summary["wall_s"] = sum(p["wall_s"] for p in pieces)
+    summary["pieces"] = len(pieces)
+    return summary
+
+
+@functools.lru_cache(maxsize=None)
+def _warm(scene: str, level: int, items: tuple) -> None:
+    run_scene(scene, level, dict(items), out=RUNS / f"warm-up-{scene}")
+
+
+def warm_up(scene: str, level: int = 0, **settings) -> None:
+    """Run a tiny case of ``scene`` once per process, so that the Numba cache holds its kernels
+    and the timed runs after it exclude the JIT compilation."""
+    _warm(scene, level, tuple(sorted(settings.items())))
+
+
+def commit() -> str:
+    """The git commit of the working tree (``+`` when it has changes), or ``""``."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "src"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return head + ("+" if dirty else "")
+
+
+def provenance() -> dict:
+    """What a new row records about where it was measured."""
+    return {"date": date.today().isoformat(), "commit": commit(), "cpus": os.cpu_count()}
+
+
+def load_rows(name: str) -> list[dict]:
+    path = RESULTS / f"{name}.json"
+    return json.loads(path.read_text()) if path.is_file() else []
+
+
+def save_rows(name: str, rows: list[dict]) -> None:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(rows))
+    os.replace(tmp, path)
+
+
+def merge_row(name: str, row: dict, same) -> list[dict]:
+    """Put ``row`` into ``results/<name>.json`` in place of the rows ``same(old, row)`` holds for;
+    returns all rows. The file is read again just before writing: runs that another process
+    recorded meanwhile stay."""
+    rows = [r for r in load_rows(name) if not same(r, row)] + [row]
+    save_rows(name, rows)
+    return rows
+
+
+def write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def percent(value, spec: str = "+.2f") -> str:
+    return "–" if value is None else f"{100 * value:{spec}} %"
+
+
+def tradeoff_plot(path: Path, curves: dict, ylabel: str, title: str) -> None:
+    """Error against wall time, one line per ``curves[label] = [(wall_s, |error|, point label)]``
+    (points in order of refinement), both axes logarithmic."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for k, (label, points) in enumerate(curves.items()):
+        points = [p for p in points if p[0] > 0 and p[1] is not None and p[1] > 0]
+        if not points:
+            continue
+        ax.loglog([p[0] for p in points], [p[1] for p in points], "o-", color=f"C{k % 10}", label=label)
+        for wall, err, text in points:
+            ax.annotate(text, (wall, err), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.set_xlabel("wall time per run [s] (2-core machine)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=8.5)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
