@@ -330,13 +330,12 @@ def test_surface_force_of_exact_fields_is_the_divergence_theorem(dim):
 
 def test_surface_force_is_for_balls_with_the_sharp_boundary():
     from fbmflow.coupling import SurfaceForces
-    from fbmflow.flow import NoSlip
+    from fbmflow.params import FictitiousBoundaryParams, FluidParams
     from fbmflow.simulation import Simulation
     space = FlowSpace(StructuredMesh.box((4, 4)))
     with pytest.raises(ValueError, match="balls"):
         SurfaceForces(space, [[0.5, 0.5]], [Box((0.1, 0.1))])
     mesh = StructuredMesh.box((4, 4))
-    bc = {t: NoSlip() for t in mesh.tags}
-    with pytest.raises(ValueError, match="fbm='sharp'"):
-        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), [0.0, -9.8],
-                   fbm="nodes", force="surface")
+    with pytest.raises(ValueError, match="fbm.boundary = 'sharp'"):
+        Simulation(mesh, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), FluidParams(),
+                   fbm=FictitiousBoundaryParams(boundary="nodes", force="surface"))

@@ -233,28 +233,25 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
     derivative of the solved flow (central differences), in a closed box, where the sharp
     boundary's continuity rows make the pressure border's left null vector unknown and the
     direct solver solves the bordered system exactly (balancing alone was 2-35 % off)."""
-    from fbmflow.coupling import rigid_liftings
-    from fbmflow.flow.time_schemes import advance
+    from fbmflow.params import CouplingParams, FictitiousBoundaryParams, FluidParams, SolverParams, TimeParams
     from fbmflow.particles import Particles
     from fbmflow.simulation import Simulation
 
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
-    sim = Simulation(mesh, 0.5, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
-                     [0.0, -9.81], coupling="implicit", fbm="sharp")
+    sim = Simulation(mesh, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
+                     FluidParams(density=1.0, viscosity=0.5), time=TimeParams(scheme="backward-euler"),
+                     solver=SolverParams(linear="direct", newton_reuse_jacobian=False),
+                     coupling=CouplingParams(first_rtol=1e-10), fbm=FictitiousBoundaryParams(boundary="sharp"))
     sim.step(0.01)
-    p, space = sim.particles, sim.flow.space
+    p = sim.particles
 
     def flow(vy):
         state = p.copy()
         state.velocity = p.velocity + [0.0, vy]
-        sim._constraint_state = state
-        x, _ = advance(sim.flow, sim.x, sim.t, 0.01, sim.scheme)
-        sim._constraint_state = None
-        return x
+        return sim.flow_and_forces(0.01, velocities=state)[0]
 
     x0 = flow(0.0)
     free = np.array([[False, True, False]])
-    dX = sim.flow.lifting_response(x0, rigid_liftings(space.V, sim._owner(space.V), p.position, free),
-                                   sim._sharp(space.V).ghosts.liftings(free))[0]
+    dX = sim.rigid_responses(x0, free, 0.01)[0][0]
     fd = (flow(1e-4) - flow(-1e-4)) / 2e-4
     assert np.abs(dX - fd).max() < 1e-7 * np.abs(fd).max()

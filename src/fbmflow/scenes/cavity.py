@@ -11,10 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fem.functions import sample_velocity
-from ..flow import Dirichlet, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SteadySolverParams, param, section
+from ..params import Section, SteadySolverParams, param, section
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 from .data import ghia1982
 
 
@@ -32,14 +33,14 @@ def recirculating_state(problem) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CavityFluid:
+class CavityFluid(Section):
     """Fluid of the cavity (density 1, lid speed 1, side 1, so viscosity = 1 / re)."""
 
     re: float = param(100.0, "Reynolds number U L / nu", positive=True, maximum=5000.0)
 
 
 @dataclass(frozen=True)
-class CavityParams:
+class CavityParams(Section):
     """Parameters of ``cavity-2d``."""
 
     fluid: CavityFluid = section(CavityFluid)
@@ -64,8 +65,7 @@ class Cavity2D(Scene):
         re_path = [params.fluid.re]
         while re_path[0] > 100.0:
             re_path.insert(0, max(100.0, re_path[0] / 2))
-        problem = NavierStokesProblem(mesh, 1.0 / re_path[0], bcs, linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, 1.0 / re_path[0], bcs, params.solver)
         x, newton_its = None, 0
         for k, re in enumerate(re_path):
             problem.mu = 1.0 / re
@@ -83,8 +83,7 @@ class Cavity2D(Scene):
         if re_int in ghia1982.U and abs(params.fluid.re - re_int) < 1e-12:
             q["ghia_max_deviation_u"] = float(np.max(np.abs(np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int])))
             q["ghia_max_deviation_v"] = float(np.max(np.abs(np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int])))
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=0, newton_iterations=newton_its,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, newton_its)
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib

@@ -13,14 +13,15 @@ import numpy as np
 
 from ..fem.functions import sample_pressure, sample_velocity
 from ..fem.quadrature import gauss_tensor
-from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SteadySolverParams, param, section
+from ..params import Section, SteadySolverParams, param, section
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 
 
 @dataclass(frozen=True)
-class ChannelFluid:
+class ChannelFluid(Section):
     """Newtonian fluid."""
 
     density: float = param(1.0, "density rho", "kg/m^3", positive=True)
@@ -28,14 +29,14 @@ class ChannelFluid:
 
 
 @dataclass(frozen=True)
-class ChannelInflow:
+class ChannelInflow(Section):
     """Inflow profile."""
 
     max_velocity: float = param(1.0, "centre-line inflow velocity U", "m/s", positive=True)
 
 
 @dataclass(frozen=True)
-class ChannelParams:
+class ChannelParams(Section):
     """Parameters of ``channel-2d`` and ``channel-3d``."""
 
     fluid: ChannelFluid = section(ChannelFluid)
@@ -62,9 +63,7 @@ class _Channel(Scene):
         bcs = {t: NoSlip() for t in mesh.tags}
         bcs["xmin"] = Dirichlet(self.profile(params.inflow.max_velocity))
         bcs["xmax"] = DoNothing()
-        problem = NavierStokesProblem(mesh, params.fluid.viscosity, bcs, density=params.fluid.density,
-                                      linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, params.fluid.viscosity, bcs, params.solver, density=params.fluid.density)
         x, report = problem.solve_steady()
         return mesh, problem, x, report
 
@@ -85,8 +84,7 @@ class Channel2D(_Channel):
         q = {"max_velocity_error": float(np.max(np.abs(u - exact))),
              "pressure_drop": float(drop[0] - drop[1]),
              "pressure_drop_exact": 32.0 * params.fluid.viscosity * params.inflow.max_velocity}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, report.iterations)
 
 
 class Channel3D(_Channel):
@@ -115,5 +113,4 @@ class Channel3D(_Channel):
         q = {"flow_rate_in": flux(0.0), "flow_rate_out": flux(4.0),
              "flow_rate_exact": 4.0 * params.inflow.max_velocity / 9.0,
              "centerline_velocity_out": float(centre)}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, report.iterations)

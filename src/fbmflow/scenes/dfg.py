@@ -20,14 +20,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner, TestFunctionForces
+from ..coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
-from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import NodalBoundaryParams, SolverParams, param, section
+from ..params import NodalBoundaryParams, Section, SolverParams, param, section
 from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 
 REFERENCE = {"drag_coefficient": 5.57953523384, "lift_coefficient": 0.010618948146,
              "pressure_difference": 0.11752016697}
@@ -37,7 +38,7 @@ DIRECT_LIMIT = {2: 400_000, 3: 300_000}  # unknowns up to which solver.linear = 
 
 
 @dataclass(frozen=True)
-class DFGFluid:
+class DFGFluid(Section):
     """Fluid of the DFG 2D benchmark."""
 
     density: float = param(1.0, "density rho", "kg/m^3", positive=True)
@@ -46,7 +47,7 @@ class DFGFluid:
 
 
 @dataclass(frozen=True)
-class DFGParams:
+class DFGParams(Section):
     """Parameters of ``dfg-2d-1``."""
 
     fluid: DFGFluid = section(DFGFluid)
@@ -108,9 +109,8 @@ class _DFGScene(Scene):
             linear = "direct" if sharp or FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
-        problem = NavierStokesProblem(mesh, f.viscosity, bcs, density=f.density, linear_solver=linear,
-                                      newton=params.solver.newton_settings(), extra_constraints=obstacle,
-                                      coarse_cells=mesh.n_cells // 2**(dim * max(level - 2, 0)))
+        problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density, linear=linear,
+                               extra_constraints=obstacle, coarse_cells=mesh.n_cells // 2**(dim * max(level - 2, 0)))
         x, report = problem.solve_steady()
         space = problem.space
         u, p = x[:space.n_u], x[space.n_u:]
@@ -135,8 +135,7 @@ class _DFGScene(Scene):
              "cells_per_diameter": self.cells_per_diameter(mesh)}
         for key, ref in self.reference.items():
             q[f"{key}_error"] = abs(q[key] - ref) / abs(ref)
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, report.iterations)
 
     def cells_per_diameter(self, mesh: StructuredMesh) -> float:
         """Cells across the diameter along x at the cylinder centre."""

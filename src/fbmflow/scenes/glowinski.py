@@ -25,27 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..flow import NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SecondOrderCouplingParams,
-                      SolverParams, TimeParams, param, section)
+from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SCHEMES, SecondOrderCouplingParams,
+                      Section, SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from .base import Setup, SimulationScene
+from .builder import CgsFluid, Layout, ParticleScene
 from .data import koblitz2017
 
 
 @dataclass(frozen=True)
-class GlowinskiFluid:
-    """Fluid (CGS units)."""
-
-    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
-    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
-    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
-
-
-@dataclass(frozen=True)
-class GlowinskiParticle:
+class GlowinskiParticle(Section):
     """The disk."""
 
     diameter: float = param(0.25, "disk diameter", "cm", positive=True)
@@ -55,7 +44,7 @@ class GlowinskiParticle:
 
 
 @dataclass(frozen=True)
-class GlowinskiDomain:
+class GlowinskiDomain(Section):
     """Mesh."""
 
     mesh: str = param("graded", "graded: uniform cells along the disk's path, growing towards the "
@@ -71,15 +60,14 @@ class GlowinskiTime(TimeParams):
     t_end: float = param(0.65, "final time (the settling velocity peaks between about 0.45 and 0.6 s; "
                          "the disk lands at about 0.75 s)", "s", positive=True)
     scheme: str = param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal "
-                        "particle integrator: second order)",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+                        "particle integrator: second order)", choices=SCHEMES)
 
 
 @dataclass(frozen=True)
-class GlowinskiParams:
+class GlowinskiParams(Section):
     """Parameters of ``glowinski-free-fall``."""
 
-    fluid: GlowinskiFluid = section(GlowinskiFluid)
+    fluid: CgsFluid = section(CgsFluid)
     particle: GlowinskiParticle = section(GlowinskiParticle)
     domain: GlowinskiDomain = section(GlowinskiDomain)
     time: GlowinskiTime = section(GlowinskiTime)
@@ -95,7 +83,7 @@ class GlowinskiParams:
                              "inside the 2 x 6 cm box; move it inside")
 
 
-class GlowinskiFreeFall(SimulationScene):
+class GlowinskiFreeFall(ParticleScene):
     name = "glowinski-free-fall"
     description = "2D disk settling in a closed 2 x 6 cm channel (Glowinski et al.)"
     Params = GlowinskiParams
@@ -114,19 +102,10 @@ class GlowinskiFreeFall(SimulationScene):
         top = min(particle.y + d, 6.0)
         return StructuredMesh.rectilinear([graded_axis(0.0, 2.0, fine_x, h), graded_axis(0.0, 6.0, (0.0, top), h)])
 
-    def build(self, params: GlowinskiParams, level: int) -> Setup:
-        f, pp = params.fluid, params.particle
-        mesh = self.mesh(level, params.domain.mesh, pp)
+    def layout(self, params: GlowinskiParams, level: int) -> Layout:
+        pp = params.particle
         particles = Particles.at_rest([Ball(pp.diameter / 2, 2)], pp.density, [[pp.x, pp.y]])
-        linear = params.solver.linear_solver()
-        sim = Simulation(mesh, f.viscosity, {t: NoSlip() for t in mesh.tags}, particles,
-                         [0.0, -f.gravity], density=f.density, scheme=params.time.scheme,
-                         linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         repulsion=params.repulsion.make(mesh))
-        n_steps = params.time.n_steps
-        return Setup(sim, params.time.t_end / n_steps, n_steps)
+        return Layout(self.mesh(level, params.domain.mesh, pp), particles, params.fluid)
 
     def observe(self, params: GlowinskiParams, sim) -> dict:
         p = sim.particles

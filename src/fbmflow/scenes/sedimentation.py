@@ -30,20 +30,10 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams, ParamError,
-                      SolverParams, TimeParams, param, section)
+from ..params import (SCHEMES, ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams,
+                      ParamError, Section, SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from .base import Setup, SimulationScene
-
-
-@dataclass(frozen=True)
-class ManyFluid:
-    """Fluid (CGS units)."""
-
-    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
-    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
-    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
+from .builder import CgsFluid, Layout, ParticleScene
 
 
 @dataclass(frozen=True)
@@ -52,12 +42,11 @@ class ManyTime(TimeParams):
 
     dt: float = param(0.005, "time step", "s", positive=True)
     t_end: float = param(1.0, "final time", "s", positive=True)
-    scheme: str = param("backward-euler", "implicit time scheme",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+    scheme: str = param("backward-euler", "implicit time scheme", choices=SCHEMES)
 
 
 @dataclass(frozen=True)
-class ManyParticles:
+class ManyParticles(Section):
     """The particles."""
 
     count: int = param(100, "number of particles", minimum=1)
@@ -83,17 +72,17 @@ class BedParticles(ManyParticles):
 
 
 @dataclass(frozen=True)
-class BedInflow:
+class BedInflow(Section):
     """Inflow through the bottom."""
 
     velocity: float = param(1.0, "uniform inflow velocity", "cm/s", positive=True)
 
 
 @dataclass(frozen=True)
-class Sedimentation2DParams:
+class Sedimentation2DParams(Section):
     """Parameters of ``sedimentation-2d``."""
 
-    fluid: ManyFluid = section(ManyFluid)
+    fluid: CgsFluid = section(CgsFluid)
     particles: ManyParticles = section(ManyParticles)
     time: ManyTime = section(ManyTime)
     coupling: CouplingParams = section(CouplingParams)
@@ -153,7 +142,7 @@ def max_overlap(p: Particles, lower, upper) -> float:
     return max(worst, float(np.max(wall / R[:, None])), 0.0)
 
 
-class _ManyParticles(SimulationScene):
+class _ManyParticles(ParticleScene):
     """Shared set-up and loop of the many-particle scenes."""
 
     dim = 2
@@ -167,8 +156,9 @@ class _ManyParticles(SimulationScene):
     def mesh(self, level: int) -> StructuredMesh:
         return StructuredMesh.box(tuple(n * 2**level for n in self.cells_level0), upper=self.box)
 
-    def boundary(self, mesh, params) -> dict:
-        return {t: NoSlip() for t in mesh.tags}
+    def boundary(self, mesh, params) -> dict | None:
+        """The flow's boundary conditions (None: no-slip walls all round)."""
+        return None
 
     def initial_positions(self, params) -> np.ndarray:
         pp = params.particles
@@ -177,24 +167,12 @@ class _ManyParticles(SimulationScene):
         lower[-1], upper[-1] = self.fill[0] * self.box[-1], self.fill[1] * self.box[-1]
         return lattice(pp.count, pp.diameter, lower, upper, pp.seed)
 
-    def build(self, params, level: int) -> Setup:
-        f, pp = params.fluid, params.particles
+    def layout(self, params, level: int) -> Layout:
+        pp = params.particles
+        particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density,
+                                      self.initial_positions(params))
         mesh = self.mesh(level)
-        X = self.initial_positions(params)
-        particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density, X)
-        gravity = np.zeros(self.dim)
-        gravity[-1] = -f.gravity
-        linear = params.solver.linear_solver()
-        sim = Simulation(mesh, f.viscosity, self.boundary(mesh, params), particles, gravity,
-                         density=f.density, scheme=params.time.scheme,
-                         linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         repulsion=params.repulsion.make(mesh),
-                         contact=params.contact.make(mesh, viscosity=f.viscosity),
-                         contact_substeps=params.contact.substeps)
-        n_steps = params.time.n_steps
-        return Setup(sim, params.time.t_end / n_steps, n_steps)
+        return Layout(mesh, particles, params.fluid, self.boundary(mesh, params))
 
     def observe(self, params, sim) -> dict:
         p, mesh = sim.particles, sim.flow.mesh

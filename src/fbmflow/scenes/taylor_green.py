@@ -10,12 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fem.functions import error_norms
-from ..flow import NavierStokesProblem
 from ..flow.time_schemes import advance
-from ..solvers import ConvergenceError
 from ..mesh import StructuredMesh
-from ..params import SolverParams, TimeParams, param, section
+from ..params import Section, SolverParams, TimeParams, param, section
+from ..solvers import ConvergenceError
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 
 TWO_PI = 2.0 * np.pi
 
@@ -40,7 +40,7 @@ def taylor_green_gradient(x: np.ndarray, t: float, nu: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class TaylorGreenFluid:
+class TaylorGreenFluid(Section):
     """Fluid (density 1)."""
 
     viscosity: float = param(0.01, "kinematic viscosity nu", "m^2/s", positive=True)
@@ -55,7 +55,7 @@ class TaylorGreenTime(TimeParams):
 
 
 @dataclass(frozen=True)
-class TaylorGreenParams:
+class TaylorGreenParams(Section):
     """Parameters of ``taylor-green-2d``."""
 
     fluid: TaylorGreenFluid = section(TaylorGreenFluid)
@@ -85,8 +85,7 @@ class TaylorGreen2D(Scene):
     def run(self, params: TaylorGreenParams, level: int, progress=None) -> SceneResult:
         nu = params.fluid.viscosity
         mesh = self.mesh(level)
-        problem = NavierStokesProblem(mesh, nu, {}, linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, nu, {}, params.solver)
         x = self.initial_state(problem, nu)
         n_steps = params.time.n_steps
         dt = params.time.t_end / n_steps
@@ -115,8 +114,7 @@ class TaylorGreen2D(Scene):
         exact_energy = 0.25 * np.exp(-4.0 * TWO_PI**2 * nu * np.array(times))
         q = {"velocity_l2_error": err["u_l2"], "kinetic_energy": energies, "t": times,
              "kinetic_energy_exact": exact_energy.tolist()}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=n_steps, newton_iterations=newton_its,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, newton_its, steps=n_steps)
 
     def plot(self, summary: dict, path) -> bool:
         import matplotlib

@@ -27,27 +27,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fem import FlowSpace
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SecondOrderCouplingParams,
-                      SolverParams, TimeParams, param, section)
+from ..params import (SCHEMES, FictitiousBoundaryParams, FluidParams, ParamError, RepulsionParams,
+                      SecondOrderCouplingParams, Section, SolverParams, TimeParams, param, section)
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from ..solvers.linear import pardiso_available
-from .base import Setup, SimulationScene
+from .builder import Layout, ParticleScene
 from .data import tencate2002
 
 CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
 T_END = {"E1": 4.0, "E2": 2.5, "E3": 1.7, "E4": 1.3}  # the experiment's sphere reached the bottom
-#: unknowns above which ``solver.linear = "auto"`` takes multigrid where PARDISO is installed
-#: (always without it): level 1 and up (the measured costs: benchmarks/results/tencate_solvers.md).
-MULTIGRID_ABOVE = 150_000
 BOX = np.array([0.1, 0.1, 0.16])
 
 
 @dataclass(frozen=True)
-class TenCateFluid:
+class TenCateFluid(Section):
     """Fluid (silicone oil) and gravity."""
 
     case: str = param("E4", "experiment: E1 | E2 | E3 | E4 sets (density, viscosity)",
@@ -56,7 +50,7 @@ class TenCateFluid:
 
 
 @dataclass(frozen=True)
-class TenCateParticle:
+class TenCateParticle(Section):
     """The sphere."""
 
     diameter: float = param(0.015, "sphere diameter", "m", positive=True)
@@ -67,7 +61,7 @@ class TenCateParticle:
 
 
 @dataclass(frozen=True)
-class TenCateDomain:
+class TenCateDomain(Section):
     """Domain."""
 
     symmetry: str = param("quarter", "quarter box with two mirror planes, or the whole box",
@@ -85,8 +79,7 @@ class TenCateTime(TimeParams):
     t_end: float = param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True)
     scheme: str = param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal "
                         "particle integrator: second order for a fixed boundary, lower with the sphere "
-                        "crossing the mesh)",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+                        "crossing the mesh)", choices=SCHEMES)
 
 
 @dataclass(frozen=True)
@@ -103,7 +96,7 @@ class TenCateSolver(SolverParams):
 
 
 @dataclass(frozen=True)
-class TenCateParams:
+class TenCateParams(Section):
     """Parameters of ``ten-cate``."""
 
     fluid: TenCateFluid = section(TenCateFluid)
@@ -136,7 +129,7 @@ def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0,
     return float(np.max(np.abs(sim - ref[sel, 1]) / ref[sel, 1])) if sel.any() else float("nan")
 
 
-class TenCate(SimulationScene):
+class TenCate(ParticleScene):
     name = "ten-cate"
     description = "3D sphere settling in a closed box, ten Cate et al. (2002) E1-E4"
     Params = TenCateParams
@@ -161,30 +154,20 @@ class TenCate(SimulationScene):
         top = min(height + diameter, BOX[2])
         return StructuredMesh.rectilinear(side + [graded_axis(0.0, BOX[2], (0.0, top), h, multiple=2 * n)])
 
-    def build(self, params: TenCateParams, level: int) -> Setup:
-        pp, case = params.particle, params.fluid.case
-        rho_f, mu = CASES[case]
-        quarter = params.domain.symmetry == "quarter"
+    def layout(self, params: TenCateParams, level: int) -> Layout:
+        pp, quarter = params.particle, params.domain.symmetry == "quarter"
+        rho_f, mu = CASES[params.fluid.case]
         mesh = self.mesh(level, params.domain.symmetry, params.domain.mesh, pp.diameter, pp.height)
         bc = {t: NoSlip() for t in mesh.tags}
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
         particles = Particles.at_rest([Ball(pp.diameter / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
-        linear = params.solver.linear_solver()
-        if linear == "auto":  # SuperLU's 3D fill exhausts the memory here: PARDISO or multigrid
-            small = FlowSpace.estimate_dofs(mesh) <= MULTIGRID_ABOVE
-            linear = "direct" if small and pardiso_available() else dataclasses.replace(
-                params.solver, linear="multigrid").linear_solver()
-        sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
-                         scheme=params.time.scheme, linear_solver=linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         symmetry=(0, 1) if quarter else (),
-                         repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
-                                                         else None))
-        t_end = params.time.t_end or T_END[case]
-        n_steps = max(1, int(round(t_end / params.time.dt)))
-        return Setup(sim, t_end / n_steps, n_steps)
+        fluid = FluidParams(density=rho_f, viscosity=mu, gravity=params.fluid.gravity)
+        return Layout(mesh, particles, fluid, bc, (0, 1) if quarter else ())
+
+    def time(self, params: TenCateParams) -> TimeParams:
+        """``params.time`` with the case's final time where it leaves it 0."""
+        return dataclasses.replace(params.time, t_end=params.time.t_end or T_END[params.fluid.case])
 
     def observe(self, params: TenCateParams, sim) -> dict:
         d, p = params.particle.diameter, sim.particles
