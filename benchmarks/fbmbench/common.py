@@ -106,9 +106,12 @@ def warm_up(scene: str, level: int = 0, **settings) -> None:
 
 
 def commit() -> str:
-    """The git commit of the working tree (``+`` when it has changes), or ``""``."""
+    """The last commit that changed ``src/`` (``+`` when ``src/`` has changes since), or
+    ``FBMFLOW_BENCH_COMMIT`` when set (for runs of a source snapshot outside the repository)."""
+    if os.environ.get("FBMFLOW_BENCH_COMMIT"):
+        return os.environ["FBMFLOW_BENCH_COMMIT"]
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+        head = subprocess.run(["git", "log", "-1", "--format=%h", "--", "src"], cwd=ROOT, capture_output=True,
                               text=True, check=True).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "src"], cwd=ROOT,
                                capture_output=True, text=True, check=True).stdout.strip()
