@@ -7,6 +7,7 @@ Run:  python benchmarks/bench_dfg.py [--scene dfg-2d-1] [--levels 1 2 3 4] [--so
 Each level's row goes into ``benchmarks/results/<scene>.json`` (see fbmbench.dfg); the table,
 ``<scene>.png`` and ``<scene>-tradeoff.png`` are redrawn from all rows there.
 """
+
 from __future__ import annotations
 
 import argparse

@@ -7,6 +7,7 @@ Each level's row goes into ``benchmarks/results/dkt.json`` (see fbmbench.dkt); `
 ``dkt.png`` (positions over the digitised curves of the shared reference folder, when present)
 and ``dkt-tradeoff.png`` are redrawn from all rows there.
 """
+
 from __future__ import annotations
 
 import argparse

@@ -9,6 +9,7 @@ Each run's row goes into ``benchmarks/results/glowinski*.json`` (see fbmbench.gl
 tables and plots are redrawn from all rows there. With ``--reuse`` a configuration already in the
 results file is not run again.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,9 +27,12 @@ def main(argv=None):
     ap.add_argument("--t-end", type=float, default=0.65, help="past the peak, before the landing")
     ap.add_argument("--mesh", default="graded", choices=("graded", "uniform"), help="domain.mesh")
     ap.add_argument("--boundary", default="sharp", choices=("sharp", "nodes"), help="fbm.boundary")
-    ap.add_argument("--scheme", choices=tuple(glowinski.INTEGRATOR),
-                    help="time.scheme (with the trapezoidal / semi-implicit Euler particle integrator); default: "
-                         "crank-nicolson for the sharp boundary, backward-euler for the nodal one")
+    ap.add_argument(
+        "--scheme",
+        choices=tuple(glowinski.INTEGRATOR),
+        help="time.scheme (with the trapezoidal / semi-implicit Euler particle integrator); default: "
+        "crank-nicolson for the sharp boundary, backward-euler for the nodal one",
+    )
     ap.add_argument("--reuse", action="store_true", help="skip configurations already in the results file")
     args = ap.parse_args(argv)
     scheme = args.scheme or ("crank-nicolson" if args.boundary == "sharp" else "backward-euler")
@@ -36,8 +40,15 @@ def main(argv=None):
     runs = sorted(dict.fromkeys(runs), key=lambda r: (r[0], -r[1]))  # cheapest first, no repeats
     name = glowinski.stem(args.mesh, args.boundary, scheme)
     for level, dt in runs:
-        want = dict(level=level, dt=dt, t_end=args.t_end, mesh=args.mesh, boundary=args.boundary, scheme=scheme,
-                    pressure_lag=glowinski.pressure_lag(scheme))
+        want = dict(
+            level=level,
+            dt=dt,
+            t_end=args.t_end,
+            mesh=args.mesh,
+            boundary=args.boundary,
+            scheme=scheme,
+            pressure_lag=glowinski.pressure_lag(scheme),
+        )
         if args.reuse and any(glowinski.key(r) == glowinski.key(want) for r in load_rows(name)):
             print(f"level {level} dt {dt}: in results/{name}.json already")
             continue

@@ -5,7 +5,8 @@ quick`` (coarse levels and short times, a few minutes on 2 cores).
 run when their folder is named. Each benchmark runs one configuration, asserts its accuracy
 against the reference within a stated bound, merges its row into ``benchmarks/results/<name>.json``
 and redraws that benchmark's tables and plots. The bound is taken from the measured result at
-that configuration (:func:`fbmbench.common.bound`): a change of the numerics that makes the result worse fails.
+that configuration (:func:`fbmbench.common.bound`): a change of the numerics that makes the
+result worse fails.
 
 Every benchmark records what it measured with the ``bench`` fixture; the terminal summary lists
 the figures and wall times, and ``benchmarks/results/suite.md`` / ``.json`` keep the latest
@@ -13,6 +14,7 @@ outcome of every benchmark with the date and commit.
 
 Options: ``--bench-runs DIR`` (where the runs write their output, default ``out/bench``).
 """
+
 from __future__ import annotations
 
 import json
@@ -29,12 +31,15 @@ sys.path.insert(0, str(HERE))
 
 
 def pytest_addoption(parser):
-    parser.addoption("--bench-runs", default=None, help="output folder of the benchmark runs (default out/bench)")
+    parser.addoption(
+        "--bench-runs", default=None, help="output folder of the benchmark runs (default out/bench)"
+    )
 
 
 def pytest_configure(config):
-    config.addinivalue_line("markers", "quick: coarse levels and short times; `-m quick` runs in a few minutes "
-                                       "on 2 cores")
+    config.addinivalue_line(
+        "markers", "quick: coarse levels and short times; `-m quick` runs in a few minutes on 2 cores"
+    )
     if config.getoption("--bench-runs", None):
         os.environ["FBMFLOW_BENCH_RUNS"] = str(Path(config.getoption("--bench-runs")).resolve())
     _SESSION["start"] = time.time()
@@ -45,8 +50,10 @@ def bench(request):
     """``bench(**figures)`` records what a benchmark measured (its run's wall time ``wall_s`` and
     its accuracy figures); they appear in the terminal summary, ``results/suite.md`` and JUnit
     XML."""
+
     def record(**figures):
         request.node.user_properties.extend(figures.items())
+
     return record
 
 
@@ -55,8 +62,12 @@ _SESSION: dict = {"rows": {}, "start": time.time()}
 
 def pytest_runtest_logreport(report):
     if report.when == "call" or (report.when == "setup" and report.outcome != "passed"):
-        _SESSION["rows"][report.nodeid] = {"test": report.nodeid, "outcome": report.outcome,
-                                           "test_s": round(report.duration, 1), **dict(report.user_properties)}
+        _SESSION["rows"][report.nodeid] = {
+            "test": report.nodeid,
+            "outcome": report.outcome,
+            "test_s": round(report.duration, 1),
+            **dict(report.user_properties),
+        }
 
 
 def _fmt(value) -> str:
@@ -74,8 +85,9 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     for r in rows:
         figures = ", ".join(f"{k} {_fmt(v)}" for k, v in r.items() if k not in ("test", "outcome", "test_s"))
         terminalreporter.write_line(f"{r['outcome']:7s} {r['test_s']:8.1f} s  {r['test']}  {figures}")
-    terminalreporter.write_line(f"session {total:.0f} s (wall times: the run itself; test_s adds the warm-up and "
-                                "process start)")
+    terminalreporter.write_line(
+        f"session {total:.0f} s (wall times: the run itself; test_s adds the warm-up and process start)"
+    )
     _write_suite(rows, total, config)
 
 
@@ -91,22 +103,48 @@ def _write_suite(rows, total, config) -> None:
     selection = config.getoption("markexpr") or "all"
     if config.getoption("keyword"):
         selection += f", -k {config.getoption('keyword')}"
-    data["sessions"] = (data["sessions"] + [{"date": stamp["date"], "commit": commit(), "selection": selection,
-                                             "tests": len(rows), "failed": sum(r["outcome"] != "passed" for r in rows),
-                                             "session_s": round(total)}])[-20:]
+    data["sessions"] = (
+        data["sessions"]
+        + [
+            {
+                "date": stamp["date"],
+                "commit": commit(),
+                "selection": selection,
+                "tests": len(rows),
+                "failed": sum(r["outcome"] != "passed" for r in rows),
+                "session_s": round(total),
+            }
+        ]
+    )[-20:]
     RESULTS.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=1))
-    lines = ["# Benchmark suite: latest outcome of each benchmark", "",
-             "Written by `python -m pytest benchmarks` (benchmarks/conftest.py). 'test s': the test's time "
-             "with its warm-up and process start; 'wall_s': the run itself. 2-core machine; runs niced beside "
-             "other jobs are slower than alone.", "",
-             "| benchmark | outcome | test s | figures | date | commit |", "|---|---|---|---|---|---|"]
+    lines = [
+        "# Benchmark suite: latest outcome of each benchmark",
+        "",
+        "Written by `python -m pytest benchmarks` (benchmarks/conftest.py). 'test s': the test's time "
+        "with its warm-up and process start; 'wall_s': the run itself. 2-core machine; runs niced beside "
+        "other jobs are slower than alone.",
+        "",
+        "| benchmark | outcome | test s | figures | date | commit |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, r in sorted(data["tests"].items()):
-        figures = ", ".join(f"{k} {_fmt(v)}" for k, v in r.items()
-                            if k not in ("test", "outcome", "test_s", "date", "commit"))
-        lines.append(f"| `{name}` | {r['outcome']} | {r['test_s']} | {figures} | {r['date']} | {r['commit']} |")
-    lines += ["", "## Sessions", "", "| date | commit | selection | tests | failed | session s |",
-              "|---|---|---|---|---|---|"]
-    lines += [f"| {s['date']} | {s['commit']} | {s['selection']} | {s['tests']} | {s['failed']} | {s['session_s']} |"
-              for s in data["sessions"]]
+        figures = ", ".join(
+            f"{k} {_fmt(v)}" for k, v in r.items() if k not in ("test", "outcome", "test_s", "date", "commit")
+        )
+        lines.append(
+            f"| `{name}` | {r['outcome']} | {r['test_s']} | {figures} | {r['date']} | {r['commit']} |"
+        )
+    lines += [
+        "",
+        "## Sessions",
+        "",
+        "| date | commit | selection | tests | failed | session s |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {s['date']} | {s['commit']} | {s['selection']} | {s['tests']} | {s['failed']} | "
+        f"{s['session_s']} |"
+        for s in data["sessions"]
+    ]
     (RESULTS / "suite.md").write_text("\n".join(lines) + "\n")

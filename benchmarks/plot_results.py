@@ -4,6 +4,7 @@ the speed-against-accuracy plots (error against wall time over the mesh levels,
 
 Run:  python benchmarks/plot_results.py
 """
+
 from __future__ import annotations
 
 from fbmbench import dfg, dkt, glowinski, sphere_array, tencate
@@ -20,7 +21,9 @@ def main():
         dfg.write(scene, load_rows(scene))
     dkt.write(load_rows("dkt"))
     sphere_array.write(load_rows("sphere_array"))
-    print("\n".join(sorted(str(p.relative_to(RESULTS.parent.parent)) for p in RESULTS.glob("*-tradeoff.png"))))
+    print(
+        "\n".join(sorted(str(p.relative_to(RESULTS.parent.parent)) for p in RESULTS.glob("*-tradeoff.png")))
+    )
 
 
 if __name__ == "__main__":

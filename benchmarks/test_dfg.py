@@ -5,16 +5,18 @@ each test asserts ``|error| <= bound(measured)`` (fbmbench.common.bound). Times 
 machine: 2D levels 1-4 0.1-18 s, level 5 95 s (7.1 GB, needs the ``pardiso`` extra); 3D levels
 1-2 3-13 s, level 3 133 s (13 GB, ``pardiso``).
 """
+
 import importlib.util
 
 import pytest
-
 from fbmbench import dfg
 from fbmbench.common import bound
 
 quick = pytest.mark.quick
-needs_pardiso = pytest.mark.skipif(importlib.util.find_spec("pypardiso") is None,
-                                   reason="needs the pardiso extra (SuperLU cannot factorise this size)")
+needs_pardiso = pytest.mark.skipif(
+    importlib.util.find_spec("pypardiso") is None,
+    reason="needs the pardiso extra (SuperLU cannot factorise this size)",
+)
 
 # scene, level, measured |C_D error|, measured |dp error| (None: not asserted)
 CASES = [
@@ -33,8 +35,13 @@ CASES = [
 def test_dfg(scene, level, drag, dp, bench):
     row = dfg.run(scene, level)
     dfg.record(scene, row)
-    bench(wall_s=round(row["wall_s"], 1), n_dofs=row["n_dofs"], C_D_error=row["drag_coefficient_error"],
-          C_D_bound=bound(drag), dp_error=row["pressure_difference_error"] if dp is not None else None)
+    bench(
+        wall_s=round(row["wall_s"], 1),
+        n_dofs=row["n_dofs"],
+        C_D_error=row["drag_coefficient_error"],
+        C_D_bound=bound(drag),
+        dp_error=row["pressure_difference_error"] if dp is not None else None,
+    )
     assert abs(row["drag_coefficient_error"]) <= bound(drag)
     if dp is not None:
         assert abs(row["pressure_difference_error"]) <= bound(dp)

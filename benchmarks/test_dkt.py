@@ -5,8 +5,8 @@ Measured values from ``benchmarks/results/dkt.md``; each error is asserted withi
 ``bound(measured)`` (fbmbench.common.bound). Times on the 2-core machine: level 1 (2 cells/d)
 about 45 s, level 2 (4 cells/d, the default) about 400 s.
 """
-import pytest
 
+import pytest
 from fbmbench import dkt
 from fbmbench.common import bound
 
@@ -21,8 +21,14 @@ CASES = [
 def test_dkt(level, kiss, tumble, bench):
     row = dkt.run(level)
     dkt.record(row)
-    bench(wall_s=round(row["wall_s"]), n_dofs=row["n_dofs"], t_kiss=row["t_kiss"], t_tumble=row["t_tumble"],
-          t_kiss_error=row.get("t_kiss_error"), t_tumble_error=row.get("t_tumble_error"))
+    bench(
+        wall_s=round(row["wall_s"]),
+        n_dofs=row["n_dofs"],
+        t_kiss=row["t_kiss"],
+        t_tumble=row["t_tumble"],
+        t_kiss_error=row.get("t_kiss_error"),
+        t_tumble_error=row.get("t_tumble_error"),
+    )
     assert row["t_kiss"] is not None and row["t_tumble"] is not None, "no kiss or no tumble"
     assert abs(row["t_kiss_error"]) <= bound(kiss)
     assert abs(row["t_tumble_error"]) <= bound(tumble)

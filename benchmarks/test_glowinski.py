@@ -7,8 +7,8 @@ fall); each error is asserted within ``bound(measured)`` (fbmflow.common.bound).
 default) with dt 4 ms about 70 s, with dt 2 ms (the scene's default) 3-4 min, with dt 1 ms about
 8 min; the nodal boundary with backward Euler at level 2 / 3 about 2 / 9 min.
 """
-import pytest
 
+import pytest
 from fbmbench import glowinski
 from fbmbench.common import bound
 
@@ -31,8 +31,13 @@ def test_glowinski(level, dt, boundary, vmax, curve, bench):
     scheme = "crank-nicolson" if boundary == "sharp" else "backward-euler"
     row = glowinski.run(level, dt, boundary=boundary, scheme=scheme)
     glowinski.record(row)
-    bench(wall_s=round(row["wall_s"], 1), n_dofs=row["n_dofs"], v_max=row["max_settling_velocity"],
-          v_max_error=row["vs_koblitz"], curve_deviation=row["curve_deviation"])
+    bench(
+        wall_s=round(row["wall_s"], 1),
+        n_dofs=row["n_dofs"],
+        v_max=row["max_settling_velocity"],
+        v_max_error=row["vs_koblitz"],
+        curve_deviation=row["curve_deviation"],
+    )
     assert abs(row["vs_koblitz"]) <= bound(vmax)
     if curve is not None:
         assert row["curve_deviation"] <= bound(curve)

@@ -5,8 +5,8 @@ Measured values from ``benchmarks/results/sphere_array.md``; each error is asser
 ``bound(measured)`` (fbmbench.common.bound). Times on the 2-core machine: 4-8 cells/d 0.4-3 s,
 12 cells/d 22 s, 16 cells/d 90 s.
 """
-import pytest
 
+import pytest
 from fbmbench import sphere_array
 from fbmbench.common import bound
 

@@ -20,8 +20,8 @@ Times on the 2-core machine (the level-1 runs are hours; run one with ``-k``):
 | E2 level 1, dt 0.02 | 10021 s on PARDISO (multigrid not yet measured) |
 | E1 level 1, dt 0.02, to t = 2.3 s | 5747 s on PARDISO (multigrid not yet measured) |
 """
-import pytest
 
+import pytest
 from fbmbench import tencate
 from fbmbench.common import bound
 
@@ -40,8 +40,14 @@ CASES = [
 def test_tencate(case, level, dt, settings, u_max, gap, bench):
     row = tencate.run(case, level, dt, settings)
     tencate.record(row)
-    bench(wall_s=round(row["wall_s"]), steps=row["steps"], n_dofs=row["n_dofs"], u_max=row["u_max"],
-          u_max_error=row["u_max_error"], gap_deviation=row["gap_deviation"])
+    bench(
+        wall_s=round(row["wall_s"]),
+        steps=row["steps"],
+        n_dofs=row["n_dofs"],
+        u_max=row["u_max"],
+        u_max_error=row["u_max_error"],
+        gap_deviation=row["gap_deviation"],
+    )
     assert abs(row["u_max_error"]) <= bound(u_max)
     assert row["gap_deviation"] <= bound(gap)
 
@@ -53,6 +59,10 @@ def test_tencate_quick(bench):
     row = tencate.run("E4", 0, 0.02, {"time.t_end": 0.2})
     tencate.record(row)
     deviation = tencate.curve_deviation(row)
-    bench(wall_s=round(row["wall_s"]), steps=row["steps"], u_at_end=row["settling_velocity"][-1],
-          curve_deviation=deviation)
+    bench(
+        wall_s=round(row["wall_s"]),
+        steps=row["steps"],
+        u_at_end=row["settling_velocity"][-1],
+        curve_deviation=deviation,
+    )
     assert deviation <= bound(0.094)

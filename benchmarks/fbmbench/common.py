@@ -4,13 +4,15 @@ the results files and the speed-against-accuracy plot.
 A scene runs in a child process, ``python -m fbmflow.cli run SCENE --level L --set KEY=VALUE
 --out DIR``, which writes ``DIR/summary.json`` (resolved parameters, unknowns, steps, Newton
 iterations, the linear solver, the wall time of the run itself and the scene's ``quantities``).
-The wall time is the run's, without the Python start-up; the Numba kernels come from the cache
-that :func:`warm_up` fills first, so it excludes the JIT compilation as the old scripts did.
+The wall time is the run's, without the Python start-up and without the time the process was
+stopped by other jobs (:func:`monitored`); the Numba kernels come from the cache that
+:func:`warm_up` fills first, so it excludes the JIT compilation as the old scripts did.
 
 Results: ``benchmarks/results/<name>.json`` holds a list of rows, one per configuration; a new
 run replaces the row of its configuration and keeps the others (runs measured earlier, by other
 commands or sessions), and the tables and plots are redrawn from all rows.
 """
+
 from __future__ import annotations
 
 import functools
@@ -53,10 +55,45 @@ def slug(scene: str, level: int, settings: dict) -> str:
     return "-".join(p.replace("/", "_") for p in parts)
 
 
-def run_scene(scene: str, level: int, settings: dict | None = None, out: Path | None = None,
-              checkpoint_every: int = 0) -> dict:
+def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]]]:
+    """Run ``cmd`` and return its exit status and the intervals ``[t0, t1]`` (epoch seconds) in
+    which it was stopped (state T: another job's timing run can SIGSTOP the others on this
+    shared machine). ``record(intervals)`` is called every 30 s and at the end."""
+    proc = subprocess.Popen(cmd, cwd=ROOT)
+    stat = Path(f"/proc/{proc.pid}/stat")
+    intervals: list[list[float]] = []
+    last_save = time.time()
+    while proc.poll() is None:
+        now = time.time()
+        try:
+            state = stat.read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            state = "?"
+        if state in "Tt":
+            if intervals and now - intervals[-1][1] < 1.0:
+                intervals[-1][1] = now
+            else:
+                intervals.append([now, now])
+        if record is not None and now - last_save > 30:
+            record(intervals)
+            last_save = now
+        time.sleep(0.25)
+    if record is not None:
+        record(intervals)
+    return proc.returncode, intervals
+
+
+def overlap(intervals: list[list[float]], start: float, end: float) -> float:
+    """Seconds of ``intervals`` within ``[start, end]``."""
+    return sum(max(0.0, min(b, end) - max(a, start)) for a, b in intervals)
+
+
+def run_scene(
+    scene: str, level: int, settings: dict | None = None, out: Path | None = None, checkpoint_every: int = 0
+) -> dict:
     """Run ``scene`` at ``level`` with the ``settings`` (``{"time.dt": 0.004, ...}``) and return
-    its ``summary.json`` with ``wall_s`` added.
+    its ``summary.json`` with ``wall_s`` added: the run's wall time less the time its process was
+    stopped by other jobs (``stopped_s``, see :func:`monitored`).
 
     With ``checkpoint_every > 0`` the run checkpoints into ``out`` and a later call with the same
     arguments continues it (``fbmflow resume``) when it was interrupted: a long run can span
@@ -68,11 +105,18 @@ def run_scene(scene: str, level: int, settings: dict | None = None, out: Path | 
     out.mkdir(parents=True, exist_ok=True)
     pieces_file = out / "bench-pieces.json"
     summary_file = out / "summary.json"
-    resumable = (checkpoint_every > 0 and (out / "checkpoint.h5").is_file() and (out / "run.json").is_file()
-                 and not summary_file.is_file() and pieces_file.is_file())
+    resumable = (
+        checkpoint_every > 0
+        and (out / "checkpoint.h5").is_file()
+        and (out / "run.json").is_file()
+        and not summary_file.is_file()
+        and pieces_file.is_file()
+    )
     pieces = json.loads(pieces_file.read_text()) if resumable else []
     if resumable and pieces and "wall_s" not in pieces[-1]:  # the piece that stopped: to its checkpoint
-        pieces[-1]["wall_s"] = max(0.0, (out / "checkpoint.h5").stat().st_mtime - pieces[-1]["start"])
+        last, end = pieces[-1], (out / "checkpoint.h5").stat().st_mtime
+        last["stopped_s"] = overlap(last.get("stopped", []), last["start"], end)
+        last["wall_s"] = max(0.0, end - last["start"] - last["stopped_s"])
     summary_file.unlink(missing_ok=True)
     if resumable:
         args = ["resume", str(out), "--no-plot"]
@@ -81,15 +125,24 @@ def run_scene(scene: str, level: int, settings: dict | None = None, out: Path | 
         args += [a for k, v in settings.items() for a in ("--set", f"{k}={cli_value(v)}")]
         if checkpoint_every:
             args += ["--checkpoint-every", str(checkpoint_every)]
-    pieces.append({"start": time.time(), "command": "fbmflow " + " ".join(args)})
-    pieces_file.write_text(json.dumps(pieces, indent=1))
-    done = subprocess.run([sys.executable, "-m", "fbmflow.cli", *args], cwd=ROOT)
-    if done.returncode != 0 or not summary_file.is_file():
-        raise RunFailed(f"fbmflow {' '.join(args)} exited with status {done.returncode}")
+    piece = {"start": time.time(), "command": "fbmflow " + " ".join(args), "stopped": []}
+    pieces.append(piece)
+
+    def save(intervals):
+        piece["stopped"] = intervals
+        pieces_file.write_text(json.dumps(pieces, indent=1))
+
+    save([])
+    status, intervals = monitored([sys.executable, "-m", "fbmflow.cli", *args], save)
+    if status != 0 or not summary_file.is_file():
+        raise RunFailed(f"fbmflow {' '.join(args)} exited with status {status}")
     summary = json.loads(summary_file.read_text())
-    pieces[-1]["wall_s"] = summary["wall_time_s"]
-    pieces_file.write_text(json.dumps(pieces, indent=1))
+    end = summary_file.stat().st_mtime
+    piece["stopped_s"] = overlap(intervals, end - summary["wall_time_s"], end)
+    piece["wall_s"] = summary["wall_time_s"] - piece["stopped_s"]
+    save(intervals)
     summary["wall_s"] = sum(p["wall_s"] for p in pieces)
+    summary["stopped_s"] = sum(p.get("stopped_s", 0.0) for p in pieces)
     summary["pieces"] = len(pieces)
     return summary
 
@@ -111,10 +164,20 @@ def commit() -> str:
     if os.environ.get("FBMFLOW_BENCH_COMMIT"):
         return os.environ["FBMFLOW_BENCH_COMMIT"]
     try:
-        head = subprocess.run(["git", "log", "-1", "--format=%h", "--", "src"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "src"], cwd=ROOT,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "log", "-1", "--format=%h", "--", "src"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "src"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return ""
     return head + ("+" if dirty else "")
@@ -160,6 +223,7 @@ def tradeoff_plot(path: Path, curves: dict, ylabel: str, title: str) -> None:
     """Error against wall time, one line per ``curves[label] = [(wall_s, |error|, point label)]``
     (points in order of refinement), both axes logarithmic."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -11,6 +11,7 @@ Crank–Nicolson with the trapezoidal particle integrator), ``glowinski-be.*`` w
 ``glowinski-nodes.*`` for the nodal boundary (backward Euler) and ``glowinski-uniform.*`` for
 that on a uniform mesh; ``glowinski-tradeoff.png`` draws the error against the wall time.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,24 +45,56 @@ def curve_deviation(t, v) -> float:
     return float(np.max(np.abs(np.interp(ref[:, 0], t, -np.asarray(v)) - ref[:, 1])) / koblitz2017.V_MAX)
 
 
-def run(level: int, dt: float, t_end: float = 0.65, mesh: str = "graded", boundary: str = "sharp",
-        scheme: str = "crank-nicolson") -> dict:
+def run(
+    level: int,
+    dt: float,
+    t_end: float = 0.65,
+    mesh: str = "graded",
+    boundary: str = "sharp",
+    scheme: str = "crank-nicolson",
+) -> dict:
     """One run of the scene; the result row."""
     warm_up(SCENE, **{"time.t_end": 0.004})
-    settings = {"time.dt": dt, "time.t_end": t_end, "time.scheme": scheme,
-                "coupling.integrator": INTEGRATOR[scheme], "domain.mesh": mesh, "fbm.boundary": boundary}
+    settings = {
+        "time.dt": dt,
+        "time.t_end": t_end,
+        "time.scheme": scheme,
+        "coupling.integrator": INTEGRATOR[scheme],
+        "domain.mesh": mesh,
+        "fbm.boundary": boundary,
+    }
     s = run_scene(SCENE, level, settings)
     q = s["quantities"]
-    row = dict(level=level, cells_per_diameter=2**level, n_dofs=s["n_dofs"], dt=dt, t_end=t_end, mesh=mesh,
-               boundary=boundary, scheme=scheme, pressure_lag=pressure_lag(scheme), wall_s=s["wall_s"],
-               linear_solver=s["linear_solver"], newton=s["newton_iterations"], steps=s["steps"],
-               max_settling_velocity=q["max_settling_velocity"], max_reynolds_number=q["max_reynolds_number"],
-               final_y=q["final_position"][1], t=q["t"], v=q["v"],
-               vs_koblitz=q["max_settling_velocity"] / koblitz2017.V_MAX - 1,
-               curve_deviation=curve_deviation(q["t"], q["v"]), **provenance())
-    print(f"glowinski level {level} dt {dt}: {row['n_dofs']} unknowns, {row['wall_s']:.1f} s, "
-          f"v_max {row['max_settling_velocity']:.4f} cm/s ({100 * row['vs_koblitz']:+.2f} % vs Koblitz), "
-          f"curve {100 * row['curve_deviation']:.2f} %", flush=True)
+    row = dict(
+        level=level,
+        cells_per_diameter=2**level,
+        n_dofs=s["n_dofs"],
+        dt=dt,
+        t_end=t_end,
+        mesh=mesh,
+        boundary=boundary,
+        scheme=scheme,
+        pressure_lag=pressure_lag(scheme),
+        wall_s=s["wall_s"],
+        stopped_s=s["stopped_s"],
+        linear_solver=s["linear_solver"],
+        newton=s["newton_iterations"],
+        steps=s["steps"],
+        max_settling_velocity=q["max_settling_velocity"],
+        max_reynolds_number=q["max_reynolds_number"],
+        final_y=q["final_position"][1],
+        t=q["t"],
+        v=q["v"],
+        vs_koblitz=q["max_settling_velocity"] / koblitz2017.V_MAX - 1,
+        curve_deviation=curve_deviation(q["t"], q["v"]),
+        **provenance(),
+    )
+    print(
+        f"glowinski level {level} dt {dt}: {row['n_dofs']} unknowns, {row['wall_s']:.1f} s, "
+        f"v_max {row['max_settling_velocity']:.4f} cm/s ({100 * row['vs_koblitz']:+.2f} % vs Koblitz), "
+        f"curve {100 * row['curve_deviation']:.2f} %",
+        flush=True,
+    )
     return row
 
 
@@ -95,25 +128,37 @@ def groups(rows: list[dict]) -> tuple[dict, dict]:
     for r in rows:
         mesh.setdefault((r["dt"], r["t_end"], _code(r)), []).append(r)
         times.setdefault((r["level"], r["t_end"], _code(r)), []).append(r)
-    mesh = {k: sorted(v, key=lambda r: r["level"]) for k, v in sorted(mesh.items(), key=lambda kv: (kv[0][2], -kv[0][0]))}
+    mesh = {
+        k: sorted(v, key=lambda r: r["level"])
+        for k, v in sorted(mesh.items(), key=lambda kv: (kv[0][2], -kv[0][0]))
+    }
     times = {k: sorted(v, key=lambda r: -r["dt"]) for k, v in sorted(times.items()) if len(v) > 1}
     return mesh, times
 
 
 def table(rows: list[dict], versus: str | None) -> list[str]:
     """Markdown rows; ``versus`` names what the change column compares (None: no comparison)."""
-    lines = [f"| level | cells/D | unknowns | dt s | linear solver | wall s | v_max cm/s | Re_max | y(t_end) cm "
-             f"| change of v_max vs finer {versus} | v_max vs Koblitz | curve vs Koblitz | measured |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"| level | cells/D | unknowns | dt s | linear solver | wall s | v_max cm/s | Re_max | y(t_end) cm "
+        f"| {'change of v_max vs finer ' + versus if versus else 'change of v_max'} "
+        "| v_max vs Koblitz | curve vs Koblitz | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for a, b in zip(rows, rows[1:] + [None]):
-        change = "" if b is None or versus is None else f"{100 * abs(a['max_settling_velocity'] / b['max_settling_velocity'] - 1):.2f} %"
+        change = (
+            ""
+            if b is None or versus is None
+            else f"{100 * abs(a['max_settling_velocity'] / b['max_settling_velocity'] - 1):.2f} %"
+        )
         end = f"{a['final_y']:.4f}" + (" (failed)" if a.get("failure") else "")
         # rows measured before the solver was recorded ran on SuperLU (then the only 2D direct backend)
-        lines.append(f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | "
-                     f"{a.get('linear_solver', 'direct (SuperLU)')} | {a['wall_s']:.1f} | "
-                     f"{a['max_settling_velocity']:.4f} | {a['max_reynolds_number']:.3f} | {end} | {change} | "
-                     f"{100 * a['vs_koblitz']:+.2f} % | {100 * a['curve_deviation']:.2f} % | "
-                     f"{a.get('date', 'earlier session')} {a.get('commit', '')} |")
+        lines.append(
+            f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | "
+            f"{a.get('linear_solver', 'direct (SuperLU)')} | {a['wall_s']:.1f} | "
+            f"{a['max_settling_velocity']:.4f} | {a['max_reynolds_number']:.3f} | {end} | {change} | "
+            f"{100 * a['vs_koblitz']:+.2f} % | {100 * a['curve_deviation']:.2f} % | "
+            f"{a.get('date', 'earlier session')} {a.get('commit', '')} |"
+        )
     return lines
 
 
@@ -124,18 +169,23 @@ def write(name: str, rows: list[dict]) -> None:
     r0 = rows[0]
     scheme = r0["scheme"]
     mesh_groups, time_groups = groups(rows)
-    lines = [f"# Glowinski free fall of a disk, {r0['boundary']} fictitious boundary ({name})", "",
-             f"Disk d = 0.25 cm, rho_s/rho_f = 1.25, 2 x 6 cm closed channel, {r0['mesh']} mesh, {r0['boundary']} "
-             f"fictitious boundary, implicit coupling, {scheme} with the {INTEGRATOR[scheme]} particle integrator. "
-             "Wall time of the run without the JIT compilation, on a 2-core machine with other jobs beside most "
-             "runs (upper bounds). Reproduce a row: `python benchmarks/bench_glowinski.py --levels L --dt DT "
-             "--t-end T` (plus `--boundary`, `--scheme`, `--mesh` for the other studies), or the pytest "
-             "benchmark `python -m pytest benchmarks -k glowinski`.",
-             f"References: Koblitz et al. (2017), overset grid: v_max {koblitz2017.V_MAX:.3f} cm/s "
-             f"(Re_max {koblitz2017.RE_MAX:.2f}); Glowinski et al. (2001) and Wan & Turek (2006): Re_max about 17.3. "
-             "'curve vs Koblitz': largest |v - v_Koblitz| / v_max,Koblitz for t >= 0.05 s. 'pressure unlagged': "
-             "Crank–Nicolson runs from before the particle's pressure force was taken half a step back "
-             "(docs/method.md); the other rows ran today's scheme."]
+    lines = [
+        f"# Glowinski free fall of a disk, {r0['boundary']} fictitious boundary ({name})",
+        "",
+        f"Disk d = 0.25 cm, rho_s/rho_f = 1.25, 2 x 6 cm closed channel, {r0['mesh']} mesh, {r0['boundary']} "
+        f"fictitious boundary, implicit coupling, {scheme} with the {INTEGRATOR[scheme]} particle "
+        "integrator. "
+        "Wall time of the run without the JIT compilation, on a 2-core machine with other jobs beside most "
+        "runs (upper bounds). Reproduce a row: `python benchmarks/bench_glowinski.py --levels L --dt DT "
+        "--t-end T` (plus `--boundary`, `--scheme`, `--mesh` for the other studies), or the pytest "
+        "benchmark `python -m pytest benchmarks -k glowinski`.",
+        f"References: Koblitz et al. (2017), overset grid: v_max {koblitz2017.V_MAX:.3f} cm/s "
+        f"(Re_max {koblitz2017.RE_MAX:.2f}); Glowinski et al. (2001) and Wan & Turek (2006): "
+        "Re_max about 17.3. "
+        "'curve vs Koblitz': largest |v - v_Koblitz| / v_max,Koblitz for t >= 0.05 s. 'pressure unlagged': "
+        "Crank–Nicolson runs from before the particle's pressure force was taken half a step back "
+        "(docs/method.md); the other rows ran today's scheme.",
+    ]
     shown = []
     for (dt, t_end, code), group in mesh_groups.items():
         if len(group) > 1:
@@ -157,6 +207,7 @@ def plot_curves(name: str, mesh_groups: dict, time_groups: dict) -> None:
     """The settling velocity over Koblitz et al.'s: the mesh study and the time-step study with the
     most runs (today's scheme first)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -170,12 +221,19 @@ def plot_curves(name: str, mesh_groups: dict, time_groups: dict) -> None:
             continue
         (a, t_end, code), rows = chosen
         for r in rows:
-            label = (f"level {r['level']} ({r['cells_per_diameter']} cells/D)" if what == "mesh"
-                     else f"dt = {r['dt']} s")
+            label = (
+                f"level {r['level']} ({r['cells_per_diameter']} cells/D)"
+                if what == "mesh"
+                else f"dt = {r['dt']} s"
+            )
             ax.plot(r["t"], [-v for v in r["v"]], label=label)
         ax.plot(*koblitz2017.VELOCITY.T, "k.", ms=3, label="Koblitz et al. 2017")
         where = f"dt {a} s" if what == "mesh" else f"level {a}"
-        ax.set(xlabel="t [s]", ylabel="settling velocity [cm/s]", title=f"{what} ({where}{', ' + code if code else ''})")
+        ax.set(
+            xlabel="t [s]",
+            ylabel="settling velocity [cm/s]",
+            title=f"{what} ({where}{', ' + code if code else ''})",
+        )
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(RESULTS / f"{name}.png", dpi=120)
@@ -191,6 +249,12 @@ def plot_tradeoff() -> None:
         for (dt, t_end, code), rows in mesh_groups.items():
             if len(rows) > 1:
                 label = f"{name}, dt {dt} s{', ' + code if code else ''}"
-                curves[label] = [(r["wall_s"], abs(r["vs_koblitz"]), f"{r['cells_per_diameter']}/D") for r in rows]
-    tradeoff_plot(RESULTS / "glowinski-tradeoff.png", curves, "|v_max / v_max,Koblitz - 1|",
-                  "Glowinski free fall: peak settling velocity against cost (labels: cells per diameter)")
+                curves[label] = [
+                    (r["wall_s"], abs(r["vs_koblitz"]), f"{r['cells_per_diameter']}/D") for r in rows
+                ]
+    tradeoff_plot(
+        RESULTS / "glowinski-tradeoff.png",
+        curves,
+        "|v_max / v_max,Koblitz - 1|",
+        "Glowinski free fall: peak settling velocity against cost (labels: cells per diameter)",
+    )
