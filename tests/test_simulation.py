@@ -4,8 +4,16 @@ import pytest
 
 from fbmflow.flow import NoSlip, Slip
 from fbmflow.mesh import StructuredMesh
-from fbmflow.params import (ContactParams, CouplingParams, FictitiousBoundaryParams, FluidParams, ParamError,
-                            SolverParams, TimeParams, from_dict)
+from fbmflow.params import (
+    ContactParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    ParamError,
+    SolverParams,
+    TimeParams,
+    from_dict,
+)
 from fbmflow.particles import Ball, Particles
 from fbmflow.scenes import get_scene
 from fbmflow.simulation import Simulation
@@ -19,7 +27,8 @@ def _sim(mesh, particles, viscosity=0.1, gravity=980.0, coupling="explicit", fbm
     return Simulation(mesh, particles, FluidParams(density=1.0, viscosity=viscosity, gravity=gravity),
                       boundary=boundary, time=TimeParams(scheme=scheme),
                       solver=SolverParams(linear="direct", newton_reuse_jacobian=False),
-                      coupling=sections.pop("coupling_params", CouplingParams(scheme=coupling, first_rtol=1e-10)),
+                      coupling=sections.pop("coupling_params",
+                                            CouplingParams(scheme=coupling, first_rtol=1e-10)),
                       fbm=FictitiousBoundaryParams(boundary=fbm, force=force), **sections)
 
 
@@ -136,8 +145,8 @@ def test_half_domain_with_a_symmetry_plane_equals_the_full_domain(coupling):
         bc = {t: NoSlip() for t in mesh.tags}
         if symmetry:
             bc["xmin"] = Slip()
-        sim = _sim(mesh, Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.0, 2.0]]), coupling=coupling, boundary=bc,
-                   symmetry=symmetry)
+        sim = _sim(mesh, Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.0, 2.0]]), coupling=coupling,
+                   boundary=bc, symmetry=symmetry)
         return [sim.step(0.002).velocity[0].copy() for _ in range(4)]
 
     full = np.array(fall(0.0, (16, 24), ()))
@@ -200,8 +209,9 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, forc
         bc = {t: NoSlip() for t in mesh.tags}
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
-        sim = _sim(mesh, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]), viscosity=0.5, gravity=9.81,
-                   coupling="implicit", fbm=fbm, force=force, boundary=bc, symmetry=(0, 1) if quarter else ())
+        sim = _sim(mesh, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]), viscosity=0.5,
+                   gravity=9.81, coupling="implicit", fbm=fbm, force=force, boundary=bc,
+                   symmetry=(0, 1) if quarter else ())
         reps = [sim.step(0.01) for _ in range(2)]
         return np.array([r.velocity[0] for r in reps]), reps[-1].flow_solves
 
@@ -213,8 +223,8 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, forc
 
 
 def test_ten_cate_scene_validation_and_gap_deviation():
-    from fbmflow.scenes.tencate import gap_deviation
     from fbmflow.scenes.data import tencate2002
+    from fbmflow.scenes.tencate import gap_deviation
     scene = get_scene("ten-cate")
     with pytest.raises(ParamError, match="outside"):
         from_dict(scene.Params, {"particle": {"height": 0.2}}).validate()
@@ -234,7 +244,8 @@ def test_gap_from_the_velocity_curve_integrates_it(monkeypatch):
     from fbmflow.scenes.tencate import gap_deviation
     ts = np.linspace(0.01, 1.0, 400)
     monkeypatch.setitem(tencate2002.VELOCITY, "E4", np.column_stack([ts, 0.1 * ts])[::-1])
-    monkeypatch.setitem(tencate2002.GAP, "E4", np.column_stack([[-0.02, 0.0, 0.5, 1.0], [8.0, 8.0, 7.0, 5.0]]))
+    monkeypatch.setitem(tencate2002.GAP, "E4",
+                        np.column_stack([[-0.02, 0.0, 0.5, 1.0], [8.0, 8.0, 7.0, 5.0]]))
     g = tencate2002.gap_from_velocity("E4")
     np.testing.assert_allclose(g[:, 0], [0.0, 0.5, 1.0])
     np.testing.assert_allclose(g[:, 1], 8.0 - 0.1 * g[:, 0] ** 2 / 0.03, atol=1e-5)
@@ -394,8 +405,8 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
     mesh = StructuredMesh.box((32, 32), upper=(2.0, 2.0))
     disk, k, c, dt, U = Ball(0.3, 2), 3.0, 0.6, 0.1, -1.0
     for force in ("surface", "volume"):
-        sim = _sim(mesh, Particles.at_rest([disk], 1.5, [[1.0, 1.0]]), gravity=9.8, scheme=scheme, fbm="sharp",
-                   force=force)
+        sim = _sim(mesh, Particles.at_rest([disk], 1.5, [[1.0, 1.0]]), gravity=9.8, scheme=scheme,
+                   fbm="sharp", force=force)
         sim.particles.velocity[:] = [[0.0, U]]
         space = sim.flow.space
         p = np.zeros((mesh.n_cells, 3))  # P1disc: the value and the gradient of q at each cell's centre
@@ -409,10 +420,12 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
             expected = (2 * 0.1 - k * (behind[0, 1] - c)) * disk.volume  # viscous mu lap u_y = 2 mu
             assert abs(F[0, 1] - expected) < 0.1 * k * 0.5 * dt * abs(U) * disk.volume, (F, expected)
             here = SurfaceForces(space, [[1.0, 1.0]], [disk])
-            parts = here(u, np.zeros(p.size), 0.1)[0] + SurfaceForces(space, behind, [disk])(0 * u, p.ravel(), 0.1)[0]
+            parts = (here(u, np.zeros(p.size), 0.1)[0]
+                     + SurfaceForces(space, behind, [disk])(0 * u, p.ravel(), 0.1)[0])
         else:
-            parts = (hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)[0]
-                     + hydrodynamic_forces(space, node_owner(space.V, behind, [disk]), behind, 0 * u, p.ravel(), 0.1)[0])
+            owner_behind = node_owner(space.V, behind, [disk])
+            here = hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)
+            parts = here[0] + hydrodynamic_forces(space, owner_behind, behind, 0 * u, p.ravel(), 0.1)[0]
         np.testing.assert_allclose(F[0], parts[0], rtol=1e-12, atol=1e-12)
 
 
@@ -458,7 +471,8 @@ def test_placement_is_checked_before_the_first_step(centres, radius, needle):
 
 def test_placement_allows_touching_walls_and_each_other_and_symmetry_planes():
     mesh = StructuredMesh.box((16, 32), upper=(1.0, 2.0))
-    touching = Particles.at_rest([Ball(0.1, 2)] * 2, 1.5, [[0.1, 0.1], [0.3, 0.1]])  # on the floor, in contact
+    # on the floor, in contact
+    touching = Particles.at_rest([Ball(0.1, 2)] * 2, 1.5, [[0.1, 0.1], [0.3, 0.1]])
     assert _sim(mesh, touching).particles.n == 2
     half = Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.0, 1.0]])  # centred on the mirror plane x = 0
     bc = {t: NoSlip() for t in mesh.tags}
@@ -499,6 +513,7 @@ def test_a_loose_first_flow_solve_changes_the_work_not_the_coupled_step():
                 "coupling": {"scheme": "implicit", "first_rtol": first}}
         runs[first] = scene.run(from_dict(scene.Params, data), 1)
     loose, exact = runs[1e-2], runs[1e-9]
-    assert loose.newton_iterations < exact.newton_iterations, (loose.newton_iterations, exact.newton_iterations)
+    assert loose.newton_iterations < exact.newton_iterations, \
+        (loose.newton_iterations, exact.newton_iterations)
     v, w = np.array(loose.quantities["v"]), np.array(exact.quantities["v"])
     assert np.abs(v - w).max() <= 1e-7 * np.abs(w).max()

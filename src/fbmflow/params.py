@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import sys
 import tomllib
 import typing
 from typing import Any
@@ -96,13 +97,45 @@ class Section:
             value, ftype = getattr(self, f.name), hints[f.name]
             if dataclasses.is_dataclass(ftype):
                 if not isinstance(value, ftype):
-                    raise ParamError(f"{type(self).__name__}.{f.name}: expected a {ftype.__name__}, got {value!r}")
+                    raise ParamError(f"{type(self).__name__}.{f.name}: expected a {ftype.__name__}, "
+                                     f"got {value!r}")
                 continue
             object.__setattr__(self, f.name, _check_value(f"{type(self).__name__}.{f.name}", value, ftype,
                                                           f.metadata))
         validate = getattr(self, "validate", None)
         if validate is not None:
             validate()
+
+
+def derive(base: type, name: str, doc: str, **changes) -> type:
+    """A frozen subclass ``name`` of the section ``base`` with other defaults.
+
+    Each change names a field of ``base``: a plain value replaces its default (its doc, unit and
+    bounds stay), a :func:`param` replaces the whole field. The class belongs to the calling
+    module. ValueError when ``base`` has no such field. For example
+    ``derive(TimeParams, "SlowTime", "Time stepping.", dt=0.1)``."""
+    fields, hints = {f.name: f for f in dataclasses.fields(base)}, _hints(base)
+    unknown = sorted(set(changes) - set(fields))
+    if unknown:
+        raise ValueError(f"derive: {base.__name__} has no field {unknown[0]!r}; its fields: "
+                         f"{', '.join(fields)}")
+    new = [(key, hints[key], change if isinstance(change, dataclasses.Field)
+            else dataclasses.field(default=change, metadata=fields[key].metadata))
+           for key, change in changes.items()]
+    module = sys._getframe(1).f_globals["__name__"]
+    return dataclasses.make_dataclass(name, new, bases=(base,), frozen=True,
+                                      namespace={"__doc__": doc, "__module__": module})
+
+
+def tree(name: str, doc: str, validate=None, module: str | None = None, **sections) -> type:
+    """A frozen :class:`Section` ``name`` whose fields are the given sections (``key=Class``), in
+    that order, each defaulting to its class's defaults; ``validate(self)``, when given, checks
+    what spans several sections. The class belongs to ``module`` (default: the calling one)."""
+    namespace = {"__doc__": doc, "__module__": module or sys._getframe(1).f_globals["__name__"]}
+    if validate is not None:
+        namespace["validate"] = validate
+    return dataclasses.make_dataclass(name, [(key, cls, section(cls)) for key, cls in sections.items()],
+                                      bases=(Section,), frozen=True, namespace=namespace)
 
 
 def from_dict(cls, data: dict | None, prefix: str = ""):
@@ -178,8 +211,8 @@ class FluidParams(Section):
 
     density: float = param(1000.0, "fluid density rho_f", "kg/m^3", positive=True)
     viscosity: float = param(1e-3, "dynamic viscosity mu", "Pa s", positive=True)
-    gravity: float = param(9.81, "gravitational acceleration, pointing along the last axis downwards", "m/s^2",
-                           nonnegative=True)
+    gravity: float = param(9.81, "gravitational acceleration, pointing along the last axis downwards",
+                           "m/s^2", nonnegative=True)
 
     def gravity_vector(self, dim: int):
         """Gravity as a vector, ``(dim,)`` float: ``(0, ..., 0, -gravity)``."""
@@ -209,8 +242,8 @@ class SolverParams(Section):
     mg_smoothing_steps: int = param(2, "multigrid pre- and post-smoothing sweeps", minimum=1)
     mg_krylov: str = param("fgmres", "Krylov acceleration of multigrid", choices=("fgmres", "none"))
     mg_linearisation: str = param("auto", "operator the multigrid hierarchy is built from: newton, picard "
-                                  "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or auto "
-                                  "(picard in time steps, newton in steady solves)",
+                                  "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or "
+                                  "auto (picard in time steps, newton in steady solves)",
                                   choices=("auto", "newton", "picard"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
@@ -245,6 +278,7 @@ class SteadySolverParams(SolverParams):
                                positive=True, maximum=0.1)
 
 
+_INTEGRATORS = ("semi-implicit-euler", "trapezoidal")  # the integrators that couple with a flow
 _INTEGRATOR_DOC = ("particle integrator: semi-implicit-euler (first order) or trapezoidal (second order with "
                    "time.scheme = crank-nicolson; not with hard contact)")
 
@@ -263,14 +297,14 @@ class CouplingParams(Section):
                               "flow solve, which only seeds the iteration (the step ends on a solve to "
                               "solver.newton_rtol; a value at or below that solves the first one alike)",
                               positive=True, maximum=0.5)
-    integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=("semi-implicit-euler", "trapezoidal"))
+    integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
 
 
 @dataclasses.dataclass(frozen=True)
 class SecondOrderCouplingParams(CouplingParams):
     """Fluid–particle coupling, second order in time with ``time.scheme = "crank-nicolson"``."""
 
-    integrator: str = param("trapezoidal", _INTEGRATOR_DOC, choices=("semi-implicit-euler", "trapezoidal"))
+    integrator: str = param("trapezoidal", _INTEGRATOR_DOC, choices=_INTEGRATORS)
 
 
 _BOUNDARY_DOC = ("nodes: every velocity node inside a particle moves rigidly (first order in the mesh size); "
@@ -315,8 +349,8 @@ class RepulsionParams(Section):
             return None
         from .contact import Repulsion
 
-        return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower), tuple(mesh.upper),
-                         self.strength, None if walls is None else tuple(walls))
+        return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower),
+                         tuple(mesh.upper), self.strength, None if walls is None else tuple(walls))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,14 +18,30 @@ from pathlib import Path
 import numpy as np
 
 from .contact import ContactReport
-from .coupling import (SurfaceForces, make_coupling, make_force_estimator, mirror_images, node_owner,
-                       rigid_body_constraints, rigid_liftings, sharp_boundary, supports_sharp_boundary)
+from .coupling import (
+    make_coupling,
+    make_force_estimator,
+    mirror_images,
+    node_owner,
+    rigid_body_constraints,
+    rigid_liftings,
+    sharp_boundary,
+    supports_sharp_boundary,
+)
 from .fem import FlowSpace
 from .fem.functions import sample_pressure, sample_velocity
 from .flow import NavierStokesProblem, NoSlip
 from .flow.time_schemes import advance, pressure_lag
-from .params import (ContactParams, CouplingParams, FictitiousBoundaryParams, FluidParams, ParamError,
-                     RepulsionParams, SolverParams, TimeParams)
+from .params import (
+    ContactParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    ParamError,
+    RepulsionParams,
+    SolverParams,
+    TimeParams,
+)
 from .particles import Particles, accelerations, integrate, velocity_gain
 from .solvers import ConvergenceError
 from .solvers.linear import LinearWork, auto_backend, pardiso_available
@@ -112,18 +128,20 @@ class Simulation:
 
     def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict | None = None,
                  time: TimeParams = TimeParams(), solver: SolverParams = SolverParams(),
-                 coupling: CouplingParams = CouplingParams(), fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
+                 coupling: CouplingParams = CouplingParams(),
+                 fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
                  contact: ContactParams | None = None, repulsion: RepulsionParams | None = None,
                  symmetry: tuple = ()):
         for name, value, cls in (("particles", particles, Particles), ("fluid", fluid, FluidParams),
                                  ("time", time, TimeParams), ("solver", solver, SolverParams),
-                                 ("coupling", coupling, CouplingParams), ("fbm", fbm, FictitiousBoundaryParams),
+                                 ("coupling", coupling, CouplingParams),
+                                 ("fbm", fbm, FictitiousBoundaryParams),
                                  ("contact", contact, (ContactParams, type(None))),
                                  ("repulsion", repulsion, (RepulsionParams, type(None)))):
             if not isinstance(value, cls):
                 expected = cls.__name__ if isinstance(cls, type) else f"{cls[0].__name__} or None"
-                raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; make it "
-                                f"with {expected.split()[0]}(...) or fbmflow.params.from_dict")
+                raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
+                                f"make it with {expected.split()[0]}(...) or fbmflow.params.from_dict")
         contact = contact if contact is not None and contact.enabled else None
         if contact is not None and coupling.integrator != "semi-implicit-euler":
             raise ValueError("hard contact advances the particles by semi-implicit Euler; integrator "
@@ -412,7 +430,8 @@ class Simulation:
         else:
             self._last_force = self._last_torque = None
         if self.contact is not None:
-            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items() if k.startswith("contact_")})
+            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
+                                    if k.startswith("contact_")})
         self._owner_of = None
         self.flow.forget_linearisation()
 
@@ -456,9 +475,9 @@ class Simulation:
         k = int(np.argmax(cells))
         if cells[k] > 1.0:
             self._warned_fast = True
-            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above about "
-                        "one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less", self.step_count + 1,
-                        k, cells[k], dt, dt / cells[k])
+            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above "
+                        "about one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less",
+                        self.step_count + 1, k, cells[k], dt, dt / cells[k])
 
 
 def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple):
@@ -471,7 +490,8 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
             np.isclose(particles.position[:, a], mesh.upper[a], atol=tol)
         if not on.all():
             raise ValueError(f"symmetry plane with normal axis {a}: particles {np.flatnonzero(~on).tolist()} "
-                             "are not centred on it; put their centres on the domain face or drop the symmetry")
+                             "are not centred on it; put their centres on the domain face or drop the "
+                             "symmetry")
         if gravity[a] != 0.0:
             raise ValueError(f"symmetry plane with normal axis {a}: gravity has a component {gravity[a]} "
                              "across it; the motion would not be symmetric")
@@ -496,8 +516,8 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
         out = np.flatnonzero((X[:, a] - r < lo - tol) | (X[:, a] + r > hi + tol))
         if out.size:
             k = out[0]
-            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside the "
-                             f"domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
+            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside "
+                             f"the domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
     if radius is not None and n > 1:
         from scipy.spatial import cKDTree
         pairs = cKDTree(X).query_pairs(2.0 * float(radius.max()), output_type="ndarray")
@@ -506,8 +526,9 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
             bad = np.flatnonzero(gap < -1e-9 * radius[pairs].sum(axis=1))
             if bad.size:
                 i, j = pairs[bad[0]]
-                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres {X[i].tolist()} "
-                                 f"and {X[j].tolist()}){_more(bad)}; place them at least a diameter apart")
+                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres "
+                                 f"{X[i].tolist()} and {X[j].tolist()}){_more(bad)}; place them at least a "
+                                 "diameter apart")
     axes = mesh.axis_coordinates
     if axes is not None:  # the local cell size where each particle sits
         h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
@@ -515,11 +536,11 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
         small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
         if small.size:
             k = small[0]
-            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller than "
-                             f"the velocity-node spacing, half the cell it sits in (cell size {h[k]:.4g})"
-                             f"{_more(small)}: it can cover no velocity node and feel no drag; refine the mesh "
-                             "(cells of at most two diameters; 4 or more cells per diameter for accurate "
-                             "forces) or enlarge the particles")
+            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller "
+                             "than the velocity-node spacing, half the cell it sits in (cell size "
+                             f"{h[k]:.4g}){_more(small)}: it can cover no velocity node and feel no drag; "
+                             "refine the mesh (cells of at most two diameters; 4 or more cells per diameter "
+                             "for accurate forces) or enlarge the particles")
 
 
 def _more(indices: np.ndarray) -> str:
@@ -597,11 +618,11 @@ def estimate_memory(n_unknowns: int, dim: int, linear_solver) -> tuple[float, st
     return MEMORY_BASE + n_unknowns * c * (n_unknowns / n_ref) ** growth, words
 
 
-def available_memory() -> float | None:
-    """Memory available to a new process [bytes]: ``MemAvailable`` of ``/proc/meminfo`` (Linux);
-    None where it cannot be read (no check is made then)."""
+def available_memory(meminfo="/proc/meminfo") -> float | None:
+    """Memory available to a new process [bytes]: ``MemAvailable`` of ``meminfo`` (Linux); None
+    where it cannot be read (no check is made then)."""
     try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
+        for line in Path(meminfo).read_text().splitlines():
             if line.startswith("MemAvailable:"):
                 return float(line.split()[1]) * 1024.0
     except (OSError, ValueError, IndexError):

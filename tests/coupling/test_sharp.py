@@ -38,7 +38,8 @@ def test_projection_is_the_closest_surface_point(shape):
 
 def _setup(dim, level=2):
     n = 4 * 2**level
-    mesh = StructuredMesh.rectilinear([np.linspace(0.0, 1.0, n + 1) ** 1.1] + [np.linspace(0.0, 1.0, n + 1)] * (dim - 1))
+    mesh = StructuredMesh.rectilinear([np.linspace(0.0, 1.0, n + 1) ** 1.1]
+                                      + [np.linspace(0.0, 1.0, n + 1)] * (dim - 1))
     space = FlowSpace(mesh)
     centres = np.array([[0.47] + [0.52] * (dim - 1)])
     shapes = [Ball(0.23, dim)]
@@ -124,8 +125,8 @@ def test_pressure_extension_continues_a_linear_pressure_exactly(dim):
     c, s = space.Q.centre, space.Q.scale
     p = np.zeros(space.n_p)  # P1disc coefficients of p(x) = a + b . x on every cell
     p[0::npl] = a + c @ b
-    for l in range(dim):
-        p[l + 1::npl] = b[l] * s[:, l]
+    for k in range(dim):
+        p[k + 1::npl] = b[k] * s[:, k]
     assert ext.dofs.size > 0
     np.testing.assert_allclose((ext.matrix @ p)[ext.dofs], p[ext.dofs], atol=1e-13)
     assert np.abs(ext.residual(p)).max() < 1e-13
@@ -147,10 +148,11 @@ def test_replace_rows_kernel_matches_numpy():
     B = A.copy()
     assert fk.replace_rows(B.indptr, B.indices, B.data, rows, R.indptr, R.indices, R.data)
     np.testing.assert_array_equal(B.toarray(), ref)
-    outside = sp.csr_matrix((np.array([9.0]), (np.array([0]), np.array([np.setdiff1d(np.arange(12), A[2].indices)[0]]))),
-                            shape=(1, 12))
+    column = np.setdiff1d(np.arange(12), A[2].indices)[0]
+    outside = sp.csr_matrix((np.array([9.0]), (np.array([0]), np.array([column]))), shape=(1, 12))
     C = A.copy()
-    assert not fk.replace_rows(C.indptr, C.indices, C.data, rows[:1], outside.indptr, outside.indices, outside.data)
+    assert not fk.replace_rows(C.indptr, C.indices, C.data, rows[:1], outside.indptr, outside.indices,
+                               outside.data)
     np.testing.assert_array_equal(C.toarray(), A.toarray())  # all or nothing
     written = RowConstraints(rows[:1], outside, np.zeros(1)).write_rows(A.copy(), np.array([2.0]))
     expected = A.toarray()
@@ -214,7 +216,8 @@ def test_channel_over_a_flat_face_is_far_more_accurate_than_the_nodal_boundary()
         for n in (8, 16, 32):
             mesh = StructuredMesh.box((n, n), periodic=(True, False))
             problem = NavierStokesProblem(mesh, 1.0, {"ymin": NoSlip(), "ymax": NoSlip()}, convection=False,
-                                          body_force=lambda x, t: np.column_stack([np.ones(len(x)), 0 * x[:, 0]]),
+                                          body_force=lambda x, t: np.column_stack([np.ones(len(x)),
+                                                                                   0 * x[:, 0]]),
                                           linear_solver="direct",
                                           extra_constraints=FixedObstacles([box], centres, boundary))
             x, _ = problem.solve_steady()
@@ -241,7 +244,8 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
     sim = Simulation(mesh, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
                      FluidParams(density=1.0, viscosity=0.5), time=TimeParams(scheme="backward-euler"),
                      solver=SolverParams(linear="direct", newton_reuse_jacobian=False),
-                     coupling=CouplingParams(first_rtol=1e-10), fbm=FictitiousBoundaryParams(boundary="sharp"))
+                     coupling=CouplingParams(first_rtol=1e-10),
+                     fbm=FictitiousBoundaryParams(boundary="sharp"))
     sim.step(0.01)
     p = sim.particles
 

@@ -79,9 +79,9 @@ class SurfaceForce:
 
     def check(self, shapes: list, sharp: bool) -> None:
         if not (sharp and supports_surface_force(shapes)):
-            raise ValueError("force 'surface' integrates the traction over the true surface of balls with the "
-                             "sharp boundary (the nodal boundary's cut cells carry no flow up to the surface); "
-                             "use fbm.boundary = 'sharp' with balls, or fbm.force = 'volume'")
+            raise ValueError("force 'surface' integrates the traction over the true surface of balls with "
+                             "the sharp boundary (the nodal boundary's cut cells carry no flow up to the "
+                             "surface); use fbm.boundary = 'sharp' with balls, or fbm.force = 'volume'")
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None):
@@ -100,4 +100,5 @@ def make_force_estimator(name: str):
     try:
         return FORCE_ESTIMATORS[name]()
     except KeyError:
-        raise ValueError(f"unknown hydrodynamic force {name!r}; choose one of {sorted(FORCE_ESTIMATORS)}") from None
+        raise ValueError(f"unknown hydrodynamic force {name!r}; choose one of "
+                         f"{sorted(FORCE_ESTIMATORS)}") from None

@@ -14,10 +14,24 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 from dataclasses import dataclass
 
 from ..flow import NavierStokesProblem
-from ..params import FluidParams, SolverParams, TimeParams, param
+from ..params import (
+    ContactParams,
+    ContactRepulsionParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    NodalBoundaryParams,
+    RepulsionParams,
+    Section,
+    SolverParams,
+    TimeParams,
+    param,
+    tree,
+)
 from ..simulation import Simulation, check_memory
 from .base import SceneResult, Setup, SimulationScene
 
@@ -35,6 +49,34 @@ class CgsFluid(FluidParams):
     density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
     viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
     gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
+
+
+@dataclass(frozen=True)
+class DomainParams(Section):
+    """Mesh of a single particle's fall."""
+
+    mesh: str = param("graded", "graded: uniform cells along the particle's path, growing towards the "
+                      "side walls and the lid; uniform: the same cells everywhere",
+                      choices=("graded", "uniform"))
+
+
+#: the sections every particle scene has, after its own, with their default classes (``contact``:
+#: only where the scene passes one)
+STANDARD_SECTIONS = {"time": TimeParams, "coupling": CouplingParams, "fbm": FictitiousBoundaryParams,
+                     "contact": None, "repulsion": RepulsionParams, "solver": SolverParams}
+#: the sections of the scenes with many particles in hard contact: the nodal boundary, contact on,
+#: repulsion off
+CONTACT_SECTIONS = {"fbm": NodalBoundaryParams, "contact": ContactParams, "repulsion": ContactRepulsionParams}
+
+
+def particle_params(name: str, doc: str, validate=None, **sections) -> type:
+    """The parameter tree of a particle scene (:func:`~fbmflow.params.tree`): its own sections
+    in the order given, then those of :data:`STANDARD_SECTIONS`, each the class given here or the
+    default one. The class belongs to the calling module."""
+    own = {key: cls for key, cls in sections.items() if key not in STANDARD_SECTIONS}
+    standard = {key: sections.get(key, cls) for key, cls in STANDARD_SECTIONS.items()}
+    return tree(name, doc, validate, sys._getframe(1).f_globals["__name__"], **own,
+                **{key: cls for key, cls in standard.items() if cls is not None})
 
 
 @dataclass
@@ -66,9 +108,9 @@ class ParticleScene(SimulationScene):
 
     def build(self, params, level: int) -> Setup:
         place = self.layout(params, level)
-        sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary, time=self.time(params),
-                         solver=params.solver, coupling=params.coupling, fbm=params.fbm,
-                         contact=getattr(params, "contact", None), repulsion=params.repulsion,
+        sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary,
+                         time=self.time(params), solver=params.solver, coupling=params.coupling,
+                         fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
                          symmetry=place.symmetry)
         self._check_contact_skin(sim, level)
         return Setup(sim, sim.dt, sim.n_steps)
@@ -89,8 +131,8 @@ class ParticleScene(SimulationScene):
         cell = float(max(sim.flow.mesh.finest_spacing))
         log.warning("%s at level %d: the contact skin (%.3g, %.3g cells of %.3g) is %.2g particle radii, so "
                     "contact stops the particles that far apart and contact times and distances lose their "
-                    "meaning; %s (a skin of at most %.2g radii) or lower contact.skin_cells", self.name, level,
-                    sim.contact.skin, sim.contact.skin / cell, cell, ratio, remedy, SKIN_FRACTION)
+                    "meaning; %s (a skin of at most %.2g radii) or lower contact.skin_cells", self.name,
+                    level, sim.contact.skin, sim.contact.skin / cell, cell, ratio, remedy, SKIN_FRACTION)
 
 
 def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,

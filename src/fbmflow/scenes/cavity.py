@@ -13,8 +13,8 @@ import numpy as np
 from ..fem.functions import sample_velocity
 from ..flow import Dirichlet, NoSlip
 from ..mesh import StructuredMesh
-from ..params import Section, SteadySolverParams, param, section
-from .base import Scene, SceneResult
+from ..params import Section, SteadySolverParams, param, tree
+from .base import Scene, SceneResult, pyplot, save_figure
 from .builder import flow_problem, steady_result
 from .data import ghia1982
 
@@ -39,12 +39,8 @@ class CavityFluid(Section):
     re: float = param(100.0, "Reynolds number U L / nu", positive=True, maximum=5000.0)
 
 
-@dataclass(frozen=True)
-class CavityParams(Section):
-    """Parameters of ``cavity-2d``."""
-
-    fluid: CavityFluid = section(CavityFluid)
-    solver: SteadySolverParams = section(SteadySolverParams)
+CavityParams = tree("CavityParams", "Parameters of ``cavity-2d``.", fluid=CavityFluid,
+                    solver=SteadySolverParams)
 
 
 class Cavity2D(Scene):
@@ -81,14 +77,14 @@ class Cavity2D(Scene):
              "y_samples": s.tolist()}
         re_int = int(round(params.fluid.re))
         if re_int in ghia1982.U and abs(params.fluid.re - re_int) < 1e-12:
-            q["ghia_max_deviation_u"] = float(np.max(np.abs(np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int])))
-            q["ghia_max_deviation_v"] = float(np.max(np.abs(np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int])))
+            u_error = np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int]
+            v_error = np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int]
+            q["ghia_max_deviation_u"] = float(np.max(np.abs(u_error)))
+            q["ghia_max_deviation_v"] = float(np.max(np.abs(v_error)))
         return steady_result(problem, q, newton_its)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         s = np.array(q["y_samples"])
@@ -108,7 +104,4 @@ class Cavity2D(Scene):
             a.grid(alpha=0.3)
             a.legend()
         fig.suptitle(f"cavity-2d, Re = {re:g}, level {summary['level']} ({summary['n_cells']} cells)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

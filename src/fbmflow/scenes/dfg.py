@@ -25,7 +25,7 @@ from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import NodalBoundaryParams, Section, SolverParams, param, section
+from ..params import NodalBoundaryParams, Section, SolverParams, derive, param, tree
 from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
 from .builder import flow_problem, steady_result
@@ -46,27 +46,13 @@ class DFGFluid(Section):
     max_inflow: float = param(0.3, "centre-line inflow velocity U (mean 2U/3)", "m/s", positive=True)
 
 
-@dataclass(frozen=True)
-class DFGParams(Section):
-    """Parameters of ``dfg-2d-1``."""
-
-    fluid: DFGFluid = section(DFGFluid)
-    solver: SolverParams = section(SolverParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-
-
-@dataclass(frozen=True)
-class DFG3DFluid(DFGFluid):
-    """Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow)."""
-
-    max_inflow: float = param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True)
-
-
-@dataclass(frozen=True)
-class DFG3DParams(DFGParams):
-    """Parameters of ``dfg-3d-1z``."""
-
-    fluid: DFG3DFluid = section(DFG3DFluid)
+DFGParams = tree("DFGParams", "Parameters of ``dfg-2d-1``.", fluid=DFGFluid, solver=SolverParams,
+                 fbm=NodalBoundaryParams)
+DFG3DFluid = derive(DFGFluid, "DFG3DFluid",
+                    "Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow).",
+                    max_inflow=param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True))
+DFG3DParams = tree("DFG3DParams", "Parameters of ``dfg-3d-1z``.", fluid=DFG3DFluid, solver=SolverParams,
+                   fbm=NodalBoundaryParams)
 
 
 class _DFGScene(Scene):
@@ -109,8 +95,9 @@ class _DFGScene(Scene):
             linear = "direct" if sharp or FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
+        coarse_cells = mesh.n_cells // 2**(dim * max(level - 2, 0))
         problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density, linear=linear,
-                               extra_constraints=obstacle, coarse_cells=mesh.n_cells // 2**(dim * max(level - 2, 0)))
+                               extra_constraints=obstacle, coarse_cells=coarse_cells)
         x, report = problem.solve_steady()
         space = problem.space
         u, p = x[:space.n_u], x[space.n_u:]
@@ -129,7 +116,8 @@ class _DFGScene(Scene):
         shift = np.zeros(dim)
         shift[0] = D / 2
         front_back = self.centre + np.array([-shift, shift])
-        dp = sample_pressure(space, p, front_back, cells_at=front_back + 3 * h * np.array([-shift, shift]) / D)
+        behind = front_back + 3 * h * np.array([-shift, shift]) / D
+        dp = sample_pressure(space, p, front_back, cells_at=behind)
         q = {"drag_coefficient": float(scale * force[0, 0]), "lift_coefficient": float(scale * force[0, 1]),
              "pressure_difference": float(dp[0] - dp[1]),
              "cells_per_diameter": self.cells_per_diameter(mesh)}
@@ -180,7 +168,8 @@ class DFG3D1Z(_DFGScene):
 
     def mesh(self, level: int) -> StructuredMesh:
         h = D / 2**level
-        return StructuredMesh.rectilinear([graded_axis(0.0, 2.5, (0.4, 0.6), h), graded_axis(0.0, H, (0.1, 0.3), h),
+        return StructuredMesh.rectilinear([graded_axis(0.0, 2.5, (0.4, 0.6), h),
+                                           graded_axis(0.0, H, (0.1, 0.3), h),
                                            np.linspace(0.0, H, 2**level + 1)])
 
     def cylinder(self):

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh import StructuredMesh
-from ..params import (SCHEMES, ContactParams, ContactRepulsionParams, CouplingParams, FluidParams,
-                      NodalBoundaryParams, Section, SolverParams, TimeParams, param, section)
+from ..params import FluidParams, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
-from .builder import Layout, ParticleScene
+from .base import pyplot, save_figure
+from .builder import CONTACT_SECTIONS, Layout, ParticleScene, particle_params
 
 # setup: (box (width, height) [cm], diameter [cm], rho_s, rho_f, nu [cm^2/s], leading centre,
 # trailing centre, (leading, trailing) x offsets in units of `offset`, cells per cm at level 0)
@@ -39,7 +39,8 @@ SETUPS = {
     "uhlmann": dict(box=(2.0, 6.0), d=0.25, rho_s=1.5, rho_f=1.0, nu=0.01, leading=(1.0, 4.5),
                     trailing=(1.0, 5.0), shift=(-1.0, 1.0), cells_per_cm=4),
 }
-DEFAULTS = {"glowinski": dict(dt=0.01, t_end=4.0, offset=1e-4), "uhlmann": dict(dt=0.002, t_end=0.4, offset=0.25 / 250)}
+DEFAULTS = {"glowinski": dict(dt=0.01, t_end=4.0, offset=1e-4),
+            "uhlmann": dict(dt=0.002, t_end=0.4, offset=0.25 / 250)}
 REFERENCE = {"uhlmann": {"t_kiss": 0.175, "t_tumble": 0.26}}  # Koblitz et al. 2017, Fig. 10c
 
 
@@ -55,26 +56,13 @@ class DktCase(Section):
     kiss_distance: float = param(1.05, "kissing: centre distance below this many diameters", minimum=1.0)
 
 
-@dataclass(frozen=True)
-class DktTime(TimeParams):
-    """Time stepping (``t_end = 0``: 4 s for glowinski, 0.4 s for uhlmann)."""
-
-    dt: float = param(0.0, "time step (0: 0.01 s for glowinski, 0.002 s for uhlmann)", "s", nonnegative=True)
-    t_end: float = param(0.0, "final time", "s", nonnegative=True)
-    scheme: str = param("backward-euler", "implicit time scheme", choices=SCHEMES)
-
-
-@dataclass(frozen=True)
-class DktParams(Section):
-    """Parameters of ``dkt-2d``."""
-
-    case: DktCase = section(DktCase)
-    time: DktTime = section(DktTime)
-    coupling: CouplingParams = section(CouplingParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-    contact: ContactParams = section(ContactParams)
-    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
-    solver: SolverParams = section(SolverParams)
+DktTime = derive(TimeParams, "DktTime",
+                 "Time stepping (``t_end = 0``: 4 s for glowinski, 0.4 s for uhlmann).",
+                 dt=param(0.0, "time step (0: 0.01 s for glowinski, 0.002 s for uhlmann)", "s",
+                          nonnegative=True),
+                 t_end=param(0.0, "final time", "s", nonnegative=True), scheme="backward-euler")
+DktParams = particle_params("DktParams", "Parameters of ``dkt-2d``.", case=DktCase, time=DktTime,
+                            **CONTACT_SECTIONS)
 
 
 def _first_crossing(t: np.ndarray, f: np.ndarray) -> float | None:
@@ -140,9 +128,7 @@ class DKT2D(ParticleScene):
         return q
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         setup = summary["params"]["case"]["setup"]
@@ -159,10 +145,8 @@ class DKT2D(ParticleScene):
                 if q.get(key) is not None:
                     a.axvline(q[key], c=colour, lw=0.8, label=f"{key} = {q[key]:.3f} s")
                 if f"{key}_reference" in q:
-                    a.axvline(q[f"{key}_reference"], c=colour, ls=":", lw=0.8, label=f"{key}, Koblitz et al. 2017")
+                    a.axvline(q[f"{key}_reference"], c=colour, ls=":", lw=0.8,
+                              label=f"{key}, Koblitz et al. 2017")
         ax[0].legend(fontsize=8)
         fig.suptitle(f"dkt-2d ({setup}), level {summary['level']} ({q['cells_per_diameter']:.0f} cells/d)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

@@ -30,19 +30,12 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import (SCHEMES, ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams,
-                      ParamError, Section, SolverParams, TimeParams, param, section)
+from ..params import ParamError, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
-from .builder import CgsFluid, Layout, ParticleScene
+from .base import pyplot, save_figure
+from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle_params
 
-
-@dataclass(frozen=True)
-class ManyTime(TimeParams):
-    """Time stepping."""
-
-    dt: float = param(0.005, "time step", "s", positive=True)
-    t_end: float = param(1.0, "final time", "s", positive=True)
-    scheme: str = param("backward-euler", "implicit time scheme", choices=SCHEMES)
+ManyTime = derive(TimeParams, "ManyTime", "Time stepping.", dt=0.005, scheme="backward-euler")
 
 
 @dataclass(frozen=True)
@@ -56,55 +49,23 @@ class ManyParticles(Section):
 
 
 @dataclass(frozen=True)
-class SphereParticles(ManyParticles):
-    """The particles."""
-
-    count: int = param(20, "number of particles", minimum=1)
-    diameter: float = param(0.2, "particle diameter", "cm", positive=True)
-
-
-@dataclass(frozen=True)
-class BedParticles(ManyParticles):
-    """The particles."""
-
-    count: int = param(60, "number of particles", minimum=1)
-    density: float = param(1.5, "particle density", "g/cm^3", positive=True)
-
-
-@dataclass(frozen=True)
 class BedInflow(Section):
     """Inflow through the bottom."""
 
     velocity: float = param(1.0, "uniform inflow velocity", "cm/s", positive=True)
 
 
-@dataclass(frozen=True)
-class Sedimentation2DParams(Section):
-    """Parameters of ``sedimentation-2d``."""
-
-    fluid: CgsFluid = section(CgsFluid)
-    particles: ManyParticles = section(ManyParticles)
-    time: ManyTime = section(ManyTime)
-    coupling: CouplingParams = section(CouplingParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-    contact: ContactParams = section(ContactParams)
-    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
-    solver: SolverParams = section(SolverParams)
-
-
-@dataclass(frozen=True)
-class Sedimentation3DParams(Sedimentation2DParams):
-    """Parameters of ``sedimentation-3d``."""
-
-    particles: SphereParticles = section(SphereParticles)
-
-
-@dataclass(frozen=True)
-class FluidizedBedParams(Sedimentation2DParams):
-    """Parameters of ``fluidized-bed-2d``."""
-
-    particles: BedParticles = section(BedParticles)
-    inflow: BedInflow = section(BedInflow)
+SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", count=20, diameter=0.2)
+BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5)
+Sedimentation2DParams = particle_params("Sedimentation2DParams", "Parameters of ``sedimentation-2d``.",
+                                        fluid=CgsFluid, particles=ManyParticles, time=ManyTime,
+                                        **CONTACT_SECTIONS)
+Sedimentation3DParams = particle_params("Sedimentation3DParams", "Parameters of ``sedimentation-3d``.",
+                                        fluid=CgsFluid, particles=SphereParticles, time=ManyTime,
+                                        **CONTACT_SECTIONS)
+FluidizedBedParams = particle_params("FluidizedBedParams", "Parameters of ``fluidized-bed-2d``.",
+                                     fluid=CgsFluid, particles=BedParticles, inflow=BedInflow, time=ManyTime,
+                                     **CONTACT_SECTIONS)
 
 
 def lattice(count: int, d: float, lower: np.ndarray, upper: np.ndarray, seed: int) -> np.ndarray:
@@ -138,7 +99,8 @@ def max_overlap(p: Particles, lower, upper) -> float:
         i, j = pairs[:, 0], pairs[:, 1]
         dist = np.linalg.norm(p.position[i] - p.position[j], axis=1)
         worst = max(worst, float(np.max((R[i] + R[j] - dist) / np.minimum(R[i], R[j]))))
-    wall = np.maximum(R[:, None] - (p.position - np.asarray(lower)), R[:, None] - (np.asarray(upper) - p.position))
+    wall = np.maximum(R[:, None] - (p.position - np.asarray(lower)),
+                      R[:, None] - (np.asarray(upper) - p.position))
     return max(worst, float(np.max(wall / R[:, None])), 0.0)
 
 
@@ -200,9 +162,7 @@ class _ManyParticles(ParticleScene):
         return float(z[-max(1, len(z) // 10):].mean() + d / 2)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         panels = 2 if "bed_height" in q else 1
@@ -225,10 +185,7 @@ class _ManyParticles(ParticleScene):
             last.add_patch(plt.Circle((x[0], x[-1]), d / 2, fc="C0", ec="k", lw=0.3))
         last.set_title(f"t = {q['t'][-1]:.3g} s" + (" (projected on x-z)" if X.shape[1] == 3 else ""))
         fig.suptitle(f"{summary['scene']}, level {summary['level']}, max overlap {q['max_overlap']:.2g} r")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)
 
 
 class Sedimentation2D(_ManyParticles):

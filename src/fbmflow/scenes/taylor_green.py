@@ -12,9 +12,9 @@ import numpy as np
 from ..fem.functions import error_norms
 from ..flow.time_schemes import advance
 from ..mesh import StructuredMesh
-from ..params import Section, SolverParams, TimeParams, param, section
+from ..params import Section, SolverParams, TimeParams, derive, param, tree
 from ..solvers import ConvergenceError
-from .base import Scene, SceneResult
+from .base import Scene, SceneResult, pyplot, save_figure
 from .builder import flow_problem, steady_result
 
 TWO_PI = 2.0 * np.pi
@@ -46,21 +46,9 @@ class TaylorGreenFluid(Section):
     viscosity: float = param(0.01, "kinematic viscosity nu", "m^2/s", positive=True)
 
 
-@dataclass(frozen=True)
-class TaylorGreenTime(TimeParams):
-    """Time stepping of the vortex."""
-
-    dt: float = param(0.025, "time step", "s", positive=True)
-    t_end: float = param(0.5, "final time", "s", positive=True)
-
-
-@dataclass(frozen=True)
-class TaylorGreenParams(Section):
-    """Parameters of ``taylor-green-2d``."""
-
-    fluid: TaylorGreenFluid = section(TaylorGreenFluid)
-    time: TaylorGreenTime = section(TaylorGreenTime)
-    solver: SolverParams = section(SolverParams)
+TaylorGreenTime = derive(TimeParams, "TaylorGreenTime", "Time stepping of the vortex.", dt=0.025, t_end=0.5)
+TaylorGreenParams = tree("TaylorGreenParams", "Parameters of ``taylor-green-2d``.", fluid=TaylorGreenFluid,
+                         time=TaylorGreenTime, solver=SolverParams)
 
 
 class TaylorGreen2D(Scene):
@@ -117,9 +105,7 @@ class TaylorGreen2D(Scene):
         return steady_result(problem, q, newton_its, steps=n_steps)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         fig, ax = plt.subplots(figsize=(6, 4.5))
@@ -130,7 +116,4 @@ class TaylorGreen2D(Scene):
         ax.grid(alpha=0.3)
         ax.legend()
         ax.set_title(f"taylor-green-2d, level {summary['level']}, {summary['params']['time']['scheme']}")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)
