@@ -27,27 +27,38 @@ from .forces import SurfaceForces, TestFunctionForces, hydrodynamic_forces, supp
 from .indicator import node_owner
 
 
-class VolumeForce:
-    """``F_i = -int sigma . grad alpha_i`` over the cells the particle cuts
-    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary."""
+class ForceEstimator:
+    """Base of the estimators: any shape, either boundary, the pressure's part lagged; the rule's
+    node owner computed where not given."""
 
-    name = "volume"
+    name = ""
     lags_pressure = True
 
     def check(self, shapes: list, sharp: bool) -> None:
         return None
 
+    @staticmethod
+    def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
+               owner: np.ndarray | None) -> np.ndarray:
+        return node_owner(space.V, centres, shapes, rotations) if owner is None else owner
+
+
+class VolumeForce(ForceEstimator):
+    """``F_i = -int sigma . grad alpha_i`` over the cells the particle cuts
+    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary."""
+
+    name = "volume"
+
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None):
-        if owner is None:
-            owner = node_owner(space.V, centres, shapes, rotations)
+        owner = self._owner(space, centres, shapes, rotations, owner)
         return partial(hydrodynamic_forces, space, owner, centres)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu)
 
 
-class TestFunctionForce:
+class TestFunctionForce(ForceEstimator):
     """The momentum balance tested with a function that is one on the particle
     (:class:`~fbmflow.coupling.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
     ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is."""
@@ -56,26 +67,21 @@ class TestFunctionForce:
     name = "test-function"
     lags_pressure = False
 
-    def check(self, shapes: list, sharp: bool) -> None:
-        return None
-
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None):
-        if owner is None:
-            owner = node_owner(space.V, centres, shapes, rotations)
+        owner = self._owner(space, centres, shapes, rotations, owner)
         return TestFunctionForces(space, owner, centres, shapes, rotations, walls)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu, rho, u_old=u_old, dt=dt, about=about)
 
 
-class SurfaceForce:
+class SurfaceForce(ForceEstimator):
     """The traction integrated over the true surface (:class:`~fbmflow.coupling.SurfaceForces`);
     balls with the sharp boundary only (the nodal boundary's cut cells carry no flow up to the
     surface)."""
 
     name = "surface"
-    lags_pressure = True
 
     def check(self, shapes: list, sharp: bool) -> None:
         if not (sharp and supports_surface_force(shapes)):
