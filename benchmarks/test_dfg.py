@@ -37,6 +37,7 @@ def test_dfg(scene, level, drag, dp, bench):
     dfg.record(scene, row)
     bench(
         wall_s=round(row["wall_s"], 1),
+        cpu_s=round(row["cpu_s"], 1),
         n_dofs=row["n_dofs"],
         C_D_error=row["drag_coefficient_error"],
         C_D_bound=bound(drag),

@@ -23,6 +23,7 @@ def test_dkt(level, kiss, tumble, bench):
     dkt.record(row)
     bench(
         wall_s=round(row["wall_s"]),
+        cpu_s=round(row["cpu_s"], 1),
         n_dofs=row["n_dofs"],
         t_kiss=row["t_kiss"],
         t_tumble=row["t_tumble"],

@@ -33,6 +33,7 @@ def test_glowinski(level, dt, boundary, vmax, curve, bench):
     glowinski.record(row)
     bench(
         wall_s=round(row["wall_s"], 1),
+        cpu_s=round(row["cpu_s"], 1),
         n_dofs=row["n_dofs"],
         v_max=row["max_settling_velocity"],
         v_max_error=row["vs_koblitz"],

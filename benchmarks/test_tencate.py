@@ -42,6 +42,7 @@ def test_tencate(case, level, dt, settings, u_max, gap, bench):
     tencate.record(row)
     bench(
         wall_s=round(row["wall_s"]),
+        cpu_s=round(row["cpu_s"], 1),
         steps=row["steps"],
         n_dofs=row["n_dofs"],
         u_max=row["u_max"],
@@ -61,6 +62,7 @@ def test_tencate_quick(bench):
     deviation = tencate.curve_deviation(row)
     bench(
         wall_s=round(row["wall_s"]),
+        cpu_s=round(row["cpu_s"], 1),
         steps=row["steps"],
         u_at_end=row["settling_velocity"][-1],
         curve_deviation=deviation,

@@ -19,6 +19,7 @@ import functools
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -55,32 +56,41 @@ def slug(scene: str, level: int, settings: dict) -> str:
     return "-".join(p.replace("/", "_") for p in parts)
 
 
-def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]]]:
-    """Run ``cmd`` and return its exit status and the intervals ``[t0, t1]`` (epoch seconds) in
+def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]], float]:
+    """Run ``cmd`` and return its exit status, the intervals ``[t0, t1]`` (epoch seconds) in
     which it was stopped (state T: another job's timing run can SIGSTOP the others on this
-    shared machine). ``record(intervals)`` is called every 30 s and at the end."""
+    shared machine) and its CPU time (user + system, start-up included: on a machine shared
+    with other jobs a better measure of the work than the wall time). ``record(intervals)`` is
+    called every 30 s and at the end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.Popen(cmd, cwd=ROOT)
     stat = Path(f"/proc/{proc.pid}/stat")
     intervals: list[list[float]] = []
     last_save = time.time()
+    prev = None  # (time, stopped) of the last look
     while proc.poll() is None:
         now = time.time()
         try:
-            state = stat.read_text().rsplit(")", 1)[1].split()[0]
+            stopped = stat.read_text().rsplit(")", 1)[1].split()[0] in "Tt"
         except (OSError, IndexError):
-            state = "?"
-        if state in "Tt":
-            if intervals and now - intervals[-1][1] < 1.0:
+            stopped = False
+        # This process is stopped together with the child: a gap in its own looks, with the child
+        # stopped at either end, counts as stopped too.
+        if prev is not None and (stopped and prev[1] or (now - prev[0] > 2.0 and (stopped or prev[1]))):
+            if intervals and prev[0] - intervals[-1][1] < 1.0:
                 intervals[-1][1] = now
             else:
-                intervals.append([now, now])
+                intervals.append([prev[0], now])
+        prev = (now, stopped)
         if record is not None and now - last_save > 30:
             record(intervals)
             last_save = now
         time.sleep(0.25)
     if record is not None:
         record(intervals)
-    return proc.returncode, intervals
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return proc.returncode, intervals, cpu
 
 
 def overlap(intervals: list[list[float]], start: float, end: float) -> float:
@@ -93,7 +103,8 @@ def run_scene(
 ) -> dict:
     """Run ``scene`` at ``level`` with the ``settings`` (``{"time.dt": 0.004, ...}``) and return
     its ``summary.json`` with ``wall_s`` added: the run's wall time less the time its process was
-    stopped by other jobs (``stopped_s``, see :func:`monitored`).
+    stopped by other jobs (``stopped_s``, see :func:`monitored`); ``cpu_s`` is the process's CPU
+    time (pieces of an interrupted run that were not waited for count none).
 
     With ``checkpoint_every > 0`` the run checkpoints into ``out`` and a later call with the same
     arguments continues it (``fbmflow resume``) when it was interrupted: a long run can span
@@ -133,7 +144,8 @@ def run_scene(
         pieces_file.write_text(json.dumps(pieces, indent=1))
 
     save([])
-    status, intervals = monitored([sys.executable, "-m", "fbmflow.cli", *args], save)
+    status, intervals, cpu = monitored([sys.executable, "-m", "fbmflow.cli", *args], save)
+    piece["cpu_s"] = cpu
     if status != 0 or not summary_file.is_file():
         raise RunFailed(f"fbmflow {' '.join(args)} exited with status {status}")
     summary = json.loads(summary_file.read_text())
@@ -143,6 +155,7 @@ def run_scene(
     save(intervals)
     summary["wall_s"] = sum(p["wall_s"] for p in pieces)
     summary["stopped_s"] = sum(p.get("stopped_s", 0.0) for p in pieces)
+    summary["cpu_s"] = sum(p.get("cpu_s", 0.0) for p in pieces)
     summary["pieces"] = len(pieces)
     return summary
 
@@ -213,6 +226,11 @@ def merge_row(name: str, row: dict, same) -> list[dict]:
 def write_text(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
+
+
+def cpu(row: dict) -> str:
+    """A row's CPU time for the tables ("" for rows measured before it was recorded)."""
+    return f"{row['cpu_s']:.0f}" if "cpu_s" in row else ""
 
 
 def percent(value, spec: str = "+.2f") -> str:

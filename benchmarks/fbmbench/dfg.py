@@ -10,7 +10,17 @@ from __future__ import annotations
 
 from fbmflow.scenes.registry import load_scene
 
-from .common import RESULTS, merge_row, percent, provenance, run_scene, tradeoff_plot, warm_up, write_text
+from .common import (
+    RESULTS,
+    cpu,
+    merge_row,
+    percent,
+    provenance,
+    run_scene,
+    tradeoff_plot,
+    warm_up,
+    write_text,
+)
 
 SCENES = ("dfg-2d-1", "dfg-3d-1z")
 QUANTITIES = ("drag_coefficient", "lift_coefficient", "pressure_difference")
@@ -28,6 +38,7 @@ def run(scene: str, level: int, solver: str = "direct") -> dict:
         n_dofs=s["n_dofs"],
         wall_s=s["wall_s"],
         stopped_s=s["stopped_s"],
+        cpu_s=s["cpu_s"],
         newton=s["newton_iterations"],
         linear_solver=s["linear_solver"],
         **{k: q[k] for k in QUANTITIES},
@@ -64,13 +75,13 @@ def write(scene: str, rows: list[dict]) -> None:
         "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python benchmarks/bench_dfg.py "
         f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`.",
         "",
-        "| level | cells/D | unknowns | linear solver | wall s | Newton | C_D | err C_D | C_L | dp | err dp "
-        "| measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L | dp "
+        "| err dp | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
         f"| {r['level']} | {r['cells_per_diameter']:.1f} | {r['n_dofs']} | {r['linear_solver']} | "
-        f"{r['wall_s']:.1f} | "
+        f"{r['wall_s']:.1f} | {cpu(r)} | "
         f"{r['newton']} | {r['drag_coefficient']:.4f} | {percent(r['drag_coefficient_error'], '.2f')} | "
         f"{r['lift_coefficient']:.4f} | {r['pressure_difference']:.4f} | "
         f"{percent(r.get('pressure_difference_error'), '.2f')} | {r.get('date', 'earlier session')} "

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import RESULTS, ROOT, merge_row, provenance, run_scene, tradeoff_plot, warm_up, write_text
+from .common import RESULTS, ROOT, cpu, merge_row, provenance, run_scene, tradeoff_plot, warm_up, write_text
 
 SCENE = "dkt-2d"
 REFERENCE = ROOT.parent / "shared" / "reference-data" / "koblitz2017-dkt-basilisk"
@@ -32,6 +32,7 @@ def run(level: int, setup: str = "uhlmann") -> dict:
         "n_dofs": s["n_dofs"],
         "wall_s": s["wall_s"],
         "stopped_s": s["stopped_s"],
+        "cpu_s": s["cpu_s"],
         "steps": s["steps"],
         "linear_solver": s["linear_solver"],
         **{k: v for k, v in q.items() if not isinstance(v, list)},
@@ -68,9 +69,9 @@ def write(rows: list[dict], reference: Path = REFERENCE) -> None:
         "(upper bounds). Reproduce a row: `python benchmarks/bench_dkt.py --levels L`, or "
         "`python -m pytest benchmarks -k dkt`.",
         "",
-        "| level | cells/d | unknowns | wall s | t_kiss s | error | t_tumble s | error | "
+        "| level | cells/d | unknowns | wall s | CPU s | t_kiss s | error | t_tumble s | error | "
         "closest centres / d | t_tumble change vs finer | measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for k, r in enumerate(rows):
         change = None
@@ -78,6 +79,7 @@ def write(rows: list[dict], reference: Path = REFERENCE) -> None:
             change = abs(r["t_tumble"] - rows[k + 1]["t_tumble"]) / rows[k + 1]["t_tumble"]
         lines.append(
             f"| {r['level']} | {r['cells_per_diameter']:.0f} | {r['n_dofs']} | {r['wall_s']:.0f} | "
+            f"{cpu(r)} | "
             f"{fmt(r['t_kiss'])} | {fmt(r.get('t_kiss_error'), '+.1%')} | {fmt(r['t_tumble'])} | "
             f"{fmt(r.get('t_tumble_error'), '+.1%')} | {r['min_distance_over_d']:.3f} | "
             f"{fmt(change, '.1%')} | {r.get('date', 'earlier session')} {r.get('commit', '')} |"

@@ -19,7 +19,17 @@ import numpy as np
 from fbmflow.flow.time_schemes import pressure_lag
 from fbmflow.scenes.data import koblitz2017
 
-from .common import RESULTS, load_rows, merge_row, provenance, run_scene, tradeoff_plot, warm_up, write_text
+from .common import (
+    RESULTS,
+    cpu,
+    load_rows,
+    merge_row,
+    provenance,
+    run_scene,
+    tradeoff_plot,
+    warm_up,
+    write_text,
+)
 
 SCENE = "glowinski-free-fall"
 INTEGRATOR = {"crank-nicolson": "trapezoidal", "backward-euler": "semi-implicit-euler"}
@@ -77,6 +87,7 @@ def run(
         pressure_lag=pressure_lag(scheme),
         wall_s=s["wall_s"],
         stopped_s=s["stopped_s"],
+        cpu_s=s["cpu_s"],
         linear_solver=s["linear_solver"],
         newton=s["newton_iterations"],
         steps=s["steps"],
@@ -139,10 +150,11 @@ def groups(rows: list[dict]) -> tuple[dict, dict]:
 def table(rows: list[dict], versus: str | None) -> list[str]:
     """Markdown rows; ``versus`` names what the change column compares (None: no comparison)."""
     lines = [
-        f"| level | cells/D | unknowns | dt s | linear solver | wall s | v_max cm/s | Re_max | y(t_end) cm "
+        f"| level | cells/D | unknowns | dt s | linear solver | wall s | CPU s | v_max cm/s | Re_max "
+        "| y(t_end) cm "
         f"| {'change of v_max vs finer ' + versus if versus else 'change of v_max'} "
         "| v_max vs Koblitz | curve vs Koblitz | measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for a, b in zip(rows, rows[1:] + [None]):
         change = (
@@ -154,7 +166,7 @@ def table(rows: list[dict], versus: str | None) -> list[str]:
         # rows measured before the solver was recorded ran on SuperLU (then the only 2D direct backend)
         lines.append(
             f"| {a['level']} | {a['cells_per_diameter']} | {a['n_dofs']} | {a['dt']} | "
-            f"{a.get('linear_solver', 'direct (SuperLU)')} | {a['wall_s']:.1f} | "
+            f"{a.get('linear_solver', 'direct (SuperLU)')} | {a['wall_s']:.1f} | {cpu(a)} | "
             f"{a['max_settling_velocity']:.4f} | {a['max_reynolds_number']:.3f} | {end} | {change} | "
             f"{100 * a['vs_koblitz']:+.2f} % | {100 * a['curve_deviation']:.2f} % | "
             f"{a.get('date', 'earlier session')} {a.get('commit', '')} |"

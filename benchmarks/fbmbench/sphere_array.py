@@ -52,6 +52,7 @@ from .common import (
     BENCHMARKS,
     RESULTS,
     RunFailed,
+    cpu,
     merge_row,
     monitored,
     overlap,
@@ -149,13 +150,14 @@ def run(cells: int) -> dict:
             f"import sys; sys.path.insert(0, {str(BENCHMARKS)!r}); "
             f"from fbmbench.sphere_array import child; child({cells}, {str(path)!r})"
         )
-        status, intervals = monitored([sys.executable, "-c", code])
+        status, intervals, cpu = monitored([sys.executable, "-c", code])
         if status != 0 or not path.is_file():
             raise RunFailed(f"sphere array at {cells} cells/d exited with status {status}")
         row = json.loads(path.read_text())
     end = row.pop("end")
     row["stopped_s"] = overlap(intervals, end - row["wall_s"], end)
     row["wall_s"] -= row["stopped_s"]
+    row["cpu_s"] = cpu
     row.update(provenance())
     print(
         f"sphere array {cells} cells/d, {row['n_dofs']} unknowns: "
@@ -189,13 +191,14 @@ def write(rows: list[dict]) -> None:
         "",
         "| cells/d | unknowns | volume force error | test-function force error | surface force error "
         "| K | K error "
-        "| wall s | measured |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| wall s | CPU s | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
         f"| {r['cells_per_diameter']} | {r['n_dofs']} | {100 * r['volume_error']:+.2f} % | "
         f"{100 * r['test_function_error']:+.2f} % | {100 * r['surface_error']:+.2f} % | {r['K']:.4f} | "
-        f"{100 * r['K_error']:+.2f} % | {r['wall_s']:.1f} | {r.get('date', 'earlier session')} "
+        f"{100 * r['K_error']:+.2f} % | {r['wall_s']:.1f} | {cpu(r)} | "
+        f"{r.get('date', 'earlier session')} "
         f"{r.get('commit', '')} |"
         for r in rows
     ]

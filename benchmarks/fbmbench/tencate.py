@@ -17,7 +17,17 @@ from fbmflow.scenes.data import tencate2002
 from fbmflow.scenes.registry import load_scene
 from fbmflow.scenes.tencate import gap_deviation
 
-from .common import RESULTS, load_rows, merge_row, provenance, run_scene, tradeoff_plot, warm_up, write_text
+from .common import (
+    RESULTS,
+    cpu,
+    load_rows,
+    merge_row,
+    provenance,
+    run_scene,
+    tradeoff_plot,
+    warm_up,
+    write_text,
+)
 
 SCENE = "ten-cate"
 CASES = ("E1", "E2", "E3", "E4")
@@ -44,6 +54,7 @@ def run(case: str, level: int, dt: float, settings: dict | None = None, checkpoi
         steps=s["steps"],
         wall_s=s["wall_s"],
         stopped_s=s["stopped_s"],
+        cpu_s=s["cpu_s"],
         pieces=s["pieces"],
         newton=s["newton_iterations"],
         linear_solver=s["linear_solver"],
@@ -214,14 +225,16 @@ def write(rows: list[dict]) -> None:
         "Reproduce a row: `python benchmarks/bench_tencate.py --cases C "
         "--levels L --dt DT [--set KEY=VALUE]`, or `python -m pytest benchmarks -k tencate`.",
         "",
-        "| case | level | settings | linear solver | cells/d | unknowns | dt s | steps | wall s | u_max m/s "
+        "| case | level | settings | linear solver | cells/d | unknowns | dt s | steps | wall s | CPU s "
+        "| u_max m/s "
         "| u_max error | gap deviation | vs exp. velocity | curve to 0.3 s | end | measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in sorted(rows, key=lambda r: (r["case"], r["level"], -r["dt"], r["t"][-1])):
         lines.append(
             f"| {r['case']} | {r['level']} | {describe(r)} | {solver(r)} | {r['cells_per_diameter']:.0f} | "
-            f"{r['n_dofs']} | {r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {r['u_max']:.5f} | "
+            f"{r['n_dofs']} | {r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {cpu(r)} | "
+            f"{r['u_max']:.5f} | "
             f"{100 * r['u_max_error']:+.2f} % | {100 * r['gap_deviation']:.1f} % | "
             f"{100 * _velocity_gap(r):.1f} % | {100 * curve_deviation(r):.1f} % | {_end(r)} | "
             f"{r.get('date', 'earlier session')} {r.get('commit', '')} |"
