@@ -11,12 +11,12 @@ import os
 
 import matplotlib.pyplot as plt
 
-from fbmflow.params import from_dict
-from fbmflow.scenes import get_scene
+import fbmflow as fb
 
 small = os.environ.get("FBMFLOW_EXAMPLE_SIZE") == "small"
-scene = get_scene("dkt-2d")
-params = from_dict(scene.Params, {"case": {"setup": "uhlmann"}, "time": {"t_end": 0.02 if small else 0.4}})
+scene = fb.get_scene("dkt-2d")
+params = fb.from_dict(scene.Params, {"case": {"setup": "uhlmann"},
+                                     "time": {"t_end": 0.02 if small else 0.4}})
 q = scene.run(params, 0 if small else 2).quantities
 print("kiss at", q["t_kiss"], "s; tumble at", q["t_tumble"], "s (Koblitz et al. 2017: 0.175, 0.26)")
 

@@ -10,17 +10,16 @@ import os
 
 import matplotlib.pyplot as plt
 
-from fbmflow.params import from_dict
-from fbmflow.scenes import get_scene
+import fbmflow as fb
 
 small = os.environ.get("FBMFLOW_EXAMPLE_SIZE") == "small"
-scene = get_scene("fluidized-bed-2d")
+scene = fb.get_scene("fluidized-bed-2d")
 runs = {}
 for inflow in ([5.0] if small else [1.0, 3.0]):
     data = {"inflow": {"velocity": inflow}, "time": {"t_end": 0.02 if small else 1.0}}
     if small:
         data["particles"] = {"count": 20}
-    runs[inflow] = scene.run(from_dict(scene.Params, data), 1).quantities
+    runs[inflow] = scene.run(fb.from_dict(scene.Params, data), 1).quantities
     print(f"inflow {inflow} cm/s: bed height {runs[inflow]['bed_height'][0]:.2f} -> "
           f"{runs[inflow]['bed_height'][-1]:.2f} cm, max overlap {runs[inflow]['max_overlap']:.1e}")
 

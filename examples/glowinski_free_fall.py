@@ -15,8 +15,7 @@ import time
 
 import matplotlib.pyplot as plt
 
-from fbmflow.params import from_dict
-from fbmflow.scenes import get_scene
+import fbmflow as fb
 from fbmflow.scenes.data import koblitz2017
 
 small = os.environ.get("FBMFLOW_EXAMPLE_SIZE") == "small"
@@ -24,10 +23,10 @@ levels = [0] if small else [1, 2]
 t_end = 0.02 if small else 0.65
 
 # %%
-scene = get_scene("glowinski-free-fall")
+scene = fb.get_scene("glowinski-free-fall")
 results = {}
 for level in levels:
-    params = from_dict(scene.Params, {"time": {"t_end": t_end}})
+    params = fb.from_dict(scene.Params, {"time": {"t_end": t_end}})
     start = time.perf_counter()
     q = scene.run(params, level).quantities
     results[level] = q

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 HERE = Path(__file__).parent
-SCRIPTS = ["glowinski_free_fall.py", "ten_cate.py", "dkt.py", "fluidized_bed.py"]
+SCRIPTS = ["settling_ball.py", "glowinski_free_fall.py", "ten_cate.py", "dkt.py", "fluidized_bed.py"]
 
 
 def cells(source: str) -> list[dict]:
@@ -18,7 +18,8 @@ def cells(source: str) -> list[dict]:
     for chunk in source.split("# %%")[1:]:
         head, _, body = chunk.partition("\n")
         if head.strip() == "[markdown]":
-            text = [line[2:] if line.startswith("# ") else line.lstrip("#") for line in body.strip("\n").split("\n")]
+            text = [line[2:] if line.startswith("# ") else line.lstrip("#")
+                    for line in body.strip("\n").split("\n")]
             out.append({"cell_type": "markdown", "metadata": {}, "source": "\n".join(text)})
         else:
             out.append({"cell_type": "code", "metadata": {}, "execution_count": None, "outputs": [],

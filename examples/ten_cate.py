@@ -10,14 +10,14 @@ import os
 
 import matplotlib.pyplot as plt
 
-from fbmflow.params import from_dict
-from fbmflow.scenes import get_scene
+import fbmflow as fb
 from fbmflow.scenes.data import tencate2002
 
 small = os.environ.get("FBMFLOW_EXAMPLE_SIZE") == "small"
 case = "E4"
-scene = get_scene("ten-cate")
-params = from_dict(scene.Params, {"fluid": {"case": case}, "time": {"t_end": 0.02 if small else 0.0}})
+scene = fb.get_scene("ten-cate")
+params = fb.from_dict(scene.Params, {"fluid": {"case": case},
+                                     "time": {"t_end": 0.02 if small else 0.0}})
 q = scene.run(params, 0 if small else 1).quantities
 print(f"u_max = {q['max_settling_velocity']:.4f} m/s (experiment {tencate2002.U_MAX[case]} m/s)")
 

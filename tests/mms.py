@@ -12,12 +12,14 @@ class Manufactured2D:
 
     @staticmethod
     def u(x):
-        sx, cx, sy, cy = np.sin(PI * x[:, 0]), np.cos(PI * x[:, 0]), np.sin(PI * x[:, 1]), np.cos(PI * x[:, 1])
+        sx, cx = np.sin(PI * x[:, 0]), np.cos(PI * x[:, 0])
+        sy, cy = np.sin(PI * x[:, 1]), np.cos(PI * x[:, 1])
         return np.stack([sx * cy, -cx * sy], axis=1)
 
     @staticmethod
     def grad(x):
-        sx, cx, sy, cy = np.sin(PI * x[:, 0]), np.cos(PI * x[:, 0]), np.sin(PI * x[:, 1]), np.cos(PI * x[:, 1])
+        sx, cx = np.sin(PI * x[:, 0]), np.cos(PI * x[:, 0])
+        sy, cy = np.sin(PI * x[:, 1]), np.cos(PI * x[:, 1])
         g = np.empty((x.shape[0], 2, 2))
         g[:, 0, 0] = PI * cx * cy
         g[:, 0, 1] = -PI * sx * sy

@@ -124,7 +124,8 @@ def test_output_paths_that_cannot_hold_a_run_exit_2(tmp_path, capsys):
         cases.append((str(locked / "x"), "cannot write"))
     cases.append(("/proc/fbmflow-test", "cannot write"))
     for out, needle in cases:
-        assert main(["run", "taylor-green-2d", "--level", "0", "--out", out, "--quiet", "--no-plot"]) == 2, out
+        code = main(["run", "taylor-green-2d", "--level", "0", "--out", out, "--quiet", "--no-plot"])
+        assert code == 2, out
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and needle in err[0], (out, err)
 

@@ -1,25 +1,58 @@
-"""The generated parameter reference is up to date with the parameter dataclasses."""
+"""The generated references are current, and the tutorial's Python examples run."""
 import importlib.util
+import re
 from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fbmflow
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
+def _generator(name: str):
+    spec = importlib.util.spec_from_file_location(name, DOCS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_parameters_md_is_current():
-    spec = importlib.util.spec_from_file_location("gen", DOCS / "generate_parameters.py")
-    gen = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gen)
-    assert (DOCS / "parameters.md").read_text() == gen.render(), "docs/parameters.md is stale: run python docs/generate_parameters.py"
+    assert (DOCS / "parameters.md").read_text() == _generator("generate_parameters").render(), \
+        "docs/parameters.md is stale: run python docs/generate_parameters.py"
 
 
-def test_tutorial_python_example_runs():
-    """The tutorial's Python example, cut to three steps."""
-    import re
-    from pathlib import Path
+def test_api_md_documents_every_public_name_and_is_current():
+    text = (DOCS / "api.md").read_text()
+    headings = re.findall(r"^### `([^`]+)`$", text, re.M)
+    assert sorted(headings) == sorted(n for n in fbmflow.__all__ if n != "__version__")
+    assert text == _generator("generate_api").render(), \
+        "docs/api.md is stale: run python docs/generate_api.py"
 
-    text = (Path(__file__).parents[1] / "docs" / "tutorial.md").read_text()
-    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
-    assert "range(100)" in code
+
+def _tutorial_examples() -> list[str]:
+    return re.findall(r"```python\n(.*?)```", (DOCS / "tutorial.md").read_text(), re.S)
+
+
+def test_tutorial_ball_example_runs_as_written_and_settles(capsys):
+    """The first example, exactly as printed (it is the README's too): the disk reaches its
+    terminal velocity, where the drag balances the net weight."""
     namespace: dict = {}
-    exec(code.replace("range(100)", "range(3)"), namespace)
-    assert namespace["report"].step == 3
+    exec(_tutorial_examples()[0], namespace)
+    last, weight = namespace["last"], namespace["net_weight"]
+    assert last.t == pytest.approx(0.5) and len(namespace["reports"]) == 50
+    assert 5.0 < -last.velocity[0, 1] < 6.5  # cm/s: Re 12.5 to 16 (Koblitz et al.: 14.0)
+    assert abs(last.force[0, 1] / weight - 1.0) < 0.02
+    assert "settling at" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("index, shorten", [(1, ("range(100)", "range(3)")),
+                                            (2, ('"t_end": 0.1', '"t_end": 0.01'))])
+def test_tutorial_other_examples_run_shortened(index, shorten):
+    code = _tutorial_examples()[index]
+    assert shorten[0] in code
+    namespace: dict = {}
+    exec(code.replace(*shorten), namespace)
+    if index == 1:
+        assert namespace["report"].step == 3 and np.all(np.isfinite(namespace["report"].position))

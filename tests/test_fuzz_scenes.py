@@ -82,6 +82,7 @@ def test_bad_physical_setups_exit_2_before_the_first_step(overrides, needle, cap
 
 
 def test_particles_that_do_not_fit_are_refused(capsys, tmp_path):
-    assert main(["run", "sedimentation-2d", "--set", "particles.count=5000", "--out", str(tmp_path), "--quiet"]) == 2
+    assert main(["run", "sedimentation-2d", "--set", "particles.count=5000", "--out", str(tmp_path),
+                 "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "do not fit" in err and err.count("\n") == 1

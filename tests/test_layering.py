@@ -1,23 +1,28 @@
-"""Imports point down only (docs/design.md, "Layers")."""
+"""Imports point down only (docs/design.md, "Layers"), for every package and top-level module."""
 import ast
 from pathlib import Path
+
+import pytest
 
 import fbmflow
 
 ROOT = Path(fbmflow.__file__).parent
-FORBIDDEN = {
-    "mesh": {"fem", "solvers", "flow", "particles", "contact", "coupling", "scenes", "io", "cli", "simulation"},
-    "fem": {"solvers", "flow", "particles", "contact", "coupling", "scenes", "io", "cli", "simulation"},
-    "solvers": {"flow", "particles", "contact", "coupling", "scenes", "io", "cli", "simulation"},
-    "flow": {"particles", "contact", "coupling", "scenes", "io", "cli", "simulation"},
-    "particles": {"mesh", "fem", "solvers", "flow", "contact", "coupling", "scenes", "io", "cli", "simulation"},
-    "contact": {"mesh", "fem", "solvers", "flow", "coupling", "scenes", "io", "cli", "simulation"},
-}
+#: the layers from the top down: each may import only those below it
+LAYERS = ["cli", "scenes", "simulation", "params", "io", "coupling", "contact", "particles", "flow",
+          "solvers", "fem", "mesh", "_jit"]
+#: packages that must not see some lower ones: particles and contact know nothing of meshes
+#: (they work on positions, velocities and shapes), and contact imports particles only
+UNSEEN = {"particles": {"flow", "solvers", "fem", "mesh"},
+          "contact": {"io", "coupling", "flow", "solvers", "fem", "mesh"}}
+#: names any module may take from the package root (it does no work at import time)
+ROOT_NAMES = {"__version__"}
 
 
-def _imported_subpackages(path: Path) -> set[str]:
+def _imported_subpackages(path: Path, root: Path = ROOT) -> set[str]:
+    """The fbmflow packages, top-level modules and root names that the module at ``path`` (in the
+    package tree ``root``) imports."""
     tree = ast.parse(path.read_text())
-    rel = path.relative_to(ROOT).parts
+    rel = path.relative_to(root).parts
     found = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
@@ -37,21 +42,43 @@ def _imported_subpackages(path: Path) -> set[str]:
     return found
 
 
-def test_imports_point_down():
+def _layer_of(path: Path) -> str:
+    return path.relative_to(ROOT).parts[0].removesuffix(".py")
+
+
+def test_every_package_has_a_layer():
+    units = {_layer_of(p) for p in ROOT.rglob("*.py")} - {"__init__"}
+    assert units == set(LAYERS), \
+        f"place {sorted(units - set(LAYERS))} in LAYERS; drop {sorted(set(LAYERS) - units)}"
+
+
+@pytest.mark.parametrize("layer", LAYERS)
+def test_imports_point_down(layer):
+    below = set(LAYERS[LAYERS.index(layer) + 1:]) - UNSEEN.get(layer, set())
     bad = []
-    for package, forbidden in FORBIDDEN.items():
-        for path in (ROOT / package).rglob("*.py") if (ROOT / package).is_dir() else []:
-            hits = _imported_subpackages(path) & forbidden
-            if hits:
-                bad.append(f"{path.relative_to(ROOT)} imports {sorted(hits)}")
+    for path in sorted(p for p in ROOT.rglob("*.py") if _layer_of(p) == layer):
+        hits = _imported_subpackages(path) - below - {layer} - ROOT_NAMES
+        if hits:
+            bad.append(f"{path.relative_to(ROOT)} imports {sorted(hits)}")
     assert not bad, bad
+
+
+def test_the_checker_sees_relative_and_absolute_imports(tmp_path):
+    """Relative (``from ..scenes``, ``from . import``) and absolute imports are all seen."""
+    fake = tmp_path / "fbmflow"
+    (fake / "mesh").mkdir(parents=True)
+    bad = fake / "mesh" / "bad.py"
+    bad.write_text("from ..scenes import SCENES\nfrom fbmflow.flow import NoSlip\nfrom . import structured\n"
+                   "import fbmflow.io.fields\nfrom .. import __version__\n")
+    assert _imported_subpackages(bad, fake) == {"scenes", "flow", "mesh", "io", "__version__"}
 
 
 def _imports_numba(path: Path) -> bool:
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "numba" for a in node.names):
             return True
-        if isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] == "numba":
+        absolute = isinstance(node, ast.ImportFrom) and not node.level
+        if absolute and (node.module or "").split(".")[0] == "numba":
             return True
     return False
 

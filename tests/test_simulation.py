@@ -1,11 +1,35 @@
-"""The particulate-flow time loop on the Glowinski free-fall scene (small and short)."""
+"""The particulate-flow time loop on the Glowinski free-fall scene and small boxes (small and short)."""
 import numpy as np
 import pytest
 
 from fbmflow.flow import NoSlip, Slip
 from fbmflow.mesh import StructuredMesh
-from fbmflow.params import ParamError, from_dict
+from fbmflow.params import (
+    ContactParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    ParamError,
+    SolverParams,
+    TimeParams,
+    from_dict,
+)
+from fbmflow.particles import Ball, Particles
 from fbmflow.scenes import get_scene
+from fbmflow.simulation import Simulation
+
+
+def _sim(mesh, particles, viscosity=0.1, gravity=980.0, coupling="explicit", fbm="nodes", force="volume",
+         scheme="backward-euler", boundary=None, **sections):
+    """A simulation with the settings these tests were written for: backward Euler, the nodal
+    boundary, the volume force, each step's first flow solve as tight as the others, a fresh
+    Jacobian in every Newton step."""
+    return Simulation(mesh, particles, FluidParams(density=1.0, viscosity=viscosity, gravity=gravity),
+                      boundary=boundary, time=TimeParams(scheme=scheme),
+                      solver=SolverParams(linear="direct", newton_reuse_jacobian=False),
+                      coupling=sections.pop("coupling_params",
+                                            CouplingParams(scheme=coupling, first_rtol=1e-10)),
+                      fbm=FictitiousBoundaryParams(boundary=fbm, force=force), **sections)
 
 
 def _run(t_end=0.03, coupling="explicit", **overrides):
@@ -116,18 +140,13 @@ def test_disk_touching_the_wall_does_not_crash_the_step():
 def test_half_domain_with_a_symmetry_plane_equals_the_full_domain(coupling):
     """A disk falling on the centre line: the right half (slip on x = 1, forces of the whole disk by
     mirroring) gives the full domain's trajectory to solver accuracy."""
-    from fbmflow.flow import NoSlip, Slip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     def fall(lower_x, shape, symmetry):
         mesh = StructuredMesh.box(shape, lower=(lower_x, 0.0), upper=(2.0, 3.0))
         bc = {t: NoSlip() for t in mesh.tags}
         if symmetry:
             bc["xmin"] = Slip()
-        sim = Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.0, 2.0]]), [0.0, -980.0],
-                         coupling=coupling, symmetry=symmetry)
+        sim = _sim(mesh, Particles.at_rest([Ball(0.125, 2)], 1.5, [[1.0, 2.0]]), coupling=coupling,
+                   boundary=bc, symmetry=symmetry)
         return [sim.step(0.002).velocity[0].copy() for _ in range(4)]
 
     full = np.array(fall(0.0, (16, 24), ()))
@@ -147,15 +166,8 @@ def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_toleran
     solve gives: the flow solved afresh with the returned particle velocity equals the returned
     flow, and its forces (pressure included) give back that velocity (the fixed point), both to
     the tolerance."""
-    from fbmflow.flow import NoSlip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
-    sim = Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
-                     Particles.at_rest([Ball(0.25, 2)], ratio, [[0.9, 2.0]]), [0.0, -980.0],
-                     coupling="implicit", coupling_tol=1e-6)
+    sim = _sim(mesh, Particles.at_rest([Ball(0.25, 2)], ratio, [[0.9, 2.0]]), coupling="implicit")
     dt = 0.005
     counts = [sim.step(dt).flow_solves for _ in range(3)]
     before = sim.state()
@@ -165,9 +177,8 @@ def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_toleran
     sim.set_state(before)
     state = sim.particles.copy()
     state.velocity[:], state.angular_velocity[:] = v, w
-    sim._constraint_state = state
-    x_again, _, force, torque = sim._flow_and_forces(dt)
-    again = sim._integrate(force, torque, dt)
+    x_again, _, force, torque = sim.flow_and_forces(dt, velocities=state)
+    again = sim.integrate(force, torque, dt)
     n_u = sim.flow.space.n_u  # the fluid velocity, to the tolerance in the particle's velocity scale
     assert np.abs(x[:n_u] - x_again[:n_u]).max() <= 1e-6 * np.abs(v).max()
     assert np.abs(v - again.velocity).max() <= 1e-6 * np.abs(v).max()
@@ -175,16 +186,13 @@ def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_toleran
 
 
 def test_symmetry_plane_must_pass_through_the_particle():
-    from fbmflow.flow import NoSlip, Slip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
     mesh = StructuredMesh.box((4, 8), lower=(1.0, 0.0), upper=(2.0, 3.0))
     bc = {**{t: NoSlip() for t in mesh.tags}, "xmin": Slip()}
     with pytest.raises(ValueError, match="not centred on it"):
-        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.2, 2.0]]), [0.0, -9.8], symmetry=(0,))
-    with pytest.raises(ValueError, match="gravity"):
-        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.0, 2.0]]), [1.0, -9.8], symmetry=(0,))
+        _sim(mesh, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.2, 2.0]]), boundary=bc, symmetry=(0,))
+    bc = {**{t: NoSlip() for t in mesh.tags}, "ymin": Slip()}
+    with pytest.raises(ValueError, match="gravity"):  # gravity along -y crosses the plane y = 0
+        _sim(mesh, Particles.at_rest([Ball(0.1, 2)], 1.5, [[1.5, 0.0]]), boundary=bc, symmetry=(1,))
 
 
 @pytest.mark.parametrize("fbm, force", [("nodes", "volume"), ("sharp", "volume"), ("sharp", "test-function"),
@@ -195,20 +203,15 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, forc
     either boundary (the sharp one has ghost nodes on the planes, their normal velocity held by
     the slip condition) and either force (the test function crosses the planes); the coupling's
     Newton step, with the force's linearisation, converges at once."""
-    from fbmflow.flow import NoSlip, Slip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     def fall(quarter):
         lower = (0.5, 0.5, 0.0) if quarter else (0.0, 0.0, 0.0)
         mesh = StructuredMesh.box((3, 3, 5) if quarter else (6, 6, 5), lower=lower, upper=(1.0, 1.0, 1.0))
         bc = {t: NoSlip() for t in mesh.tags}
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
-        sim = Simulation(mesh, 0.5, bc, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]),
-                         [0.0, 0.0, -9.81], coupling="implicit", symmetry=(0, 1) if quarter else (), fbm=fbm,
-                         force=force)
+        sim = _sim(mesh, Particles.at_rest([Ball(0.2, 3)], 1.5, [[0.5, 0.5, 0.6]]), viscosity=0.5,
+                   gravity=9.81, coupling="implicit", fbm=fbm, force=force, boundary=bc,
+                   symmetry=(0, 1) if quarter else ())
         reps = [sim.step(0.01) for _ in range(2)]
         return np.array([r.velocity[0] for r in reps]), reps[-1].flow_solves
 
@@ -220,8 +223,8 @@ def test_quarter_box_with_two_mirror_planes_equals_the_whole_box_in_3d(fbm, forc
 
 
 def test_ten_cate_scene_validation_and_gap_deviation():
-    from fbmflow.scenes.tencate import gap_deviation
     from fbmflow.scenes.data import tencate2002
+    from fbmflow.scenes.tencate import gap_deviation
     scene = get_scene("ten-cate")
     with pytest.raises(ParamError, match="outside"):
         from_dict(scene.Params, {"particle": {"height": 0.2}}).validate()
@@ -241,7 +244,8 @@ def test_gap_from_the_velocity_curve_integrates_it(monkeypatch):
     from fbmflow.scenes.tencate import gap_deviation
     ts = np.linspace(0.01, 1.0, 400)
     monkeypatch.setitem(tencate2002.VELOCITY, "E4", np.column_stack([ts, 0.1 * ts])[::-1])
-    monkeypatch.setitem(tencate2002.GAP, "E4", np.column_stack([[-0.02, 0.0, 0.5, 1.0], [8.0, 8.0, 7.0, 5.0]]))
+    monkeypatch.setitem(tencate2002.GAP, "E4",
+                        np.column_stack([[-0.02, 0.0, 0.5, 1.0], [8.0, 8.0, 7.0, 5.0]]))
     g = tencate2002.gap_from_velocity("E4")
     np.testing.assert_allclose(g[:, 0], [0.0, 0.5, 1.0])
     np.testing.assert_allclose(g[:, 1], 8.0 - 0.1 * g[:, 0] ** 2 / 0.03, atol=1e-5)
@@ -254,12 +258,13 @@ def test_gap_from_the_velocity_curve_integrates_it(monkeypatch):
 def test_ten_cate_auto_solver(monkeypatch, pardiso, level, expected):
     """SuperLU cannot factorise these 3D systems: ``auto`` takes PARDISO for the small ones where
     it is installed, multigrid (which takes the sharp boundary) otherwise."""
-    import fbmflow.scenes.tencate as tencate
-    monkeypatch.setattr(tencate, "pardiso_available", lambda: pardiso)
+    import fbmflow.simulation
+    monkeypatch.setattr(fbmflow.simulation, "pardiso_available", lambda: pardiso)
+    monkeypatch.setattr(fbmflow.simulation, "available_memory", lambda: None)  # the choice, not the machine
     scene = get_scene("ten-cate")
     sim = scene.build(from_dict(scene.Params, {}), level).sim
     assert sim.flow.linear_solver.name == expected
-    assert sim.fbm == "sharp"
+    assert sim.fbm.boundary == "sharp"
 
 
 @pytest.mark.parametrize("symmetry", ["quarter", "none"])
@@ -285,18 +290,10 @@ def test_disk_landing_with_hard_contact_rests_on_the_wall_without_overlap():
     """Released 0.4 cm above the bottom; hard contact (restitution 0, 10 sub-steps per fluid step,
     a skin of half a cell) stops it on the wall: never closer than the skin, at rest there. Without
     the skin the flow solve fails once the disk is within a node spacing of the wall."""
-    from fbmflow.contact import ContactSet, Planes
-    from fbmflow.flow import NoSlip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
     r, skin = 0.25, 0.125
-    sim = Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
-                     Particles.at_rest([Ball(r, 2)], 1.5, [[1.0, r + 0.4]]), [0.0, -980.0],
-                     coupling="implicit", contact=ContactSet(Planes.box(mesh.lower, mesh.upper), skin=skin),
-                     contact_substeps=10)
+    sim = _sim(mesh, Particles.at_rest([Ball(r, 2)], 1.5, [[1.0, r + 0.4]]), coupling="implicit",
+               contact=ContactParams(skin_cells=0.5, substeps=10))
     gaps, speeds = [], []
     for _ in range(40):
         rep = sim.step(0.01)
@@ -309,35 +306,20 @@ def test_disk_landing_with_hard_contact_rests_on_the_wall_without_overlap():
 
 
 def test_hard_contact_needs_the_semi_implicit_integrator():
-    from fbmflow.contact import ContactSet
-    from fbmflow.flow import NoSlip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     mesh = StructuredMesh.box((4, 4))
     with pytest.raises(ValueError, match="semi-implicit"):
-        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]),
-                   [0.0, -1.0], integrator="explicit-euler", contact=ContactSet())
+        _sim(mesh, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), contact=ContactParams(),
+             coupling_params=CouplingParams(integrator="trapezoidal"))
 
 
 def test_state_round_trip_with_contact_repeats_the_run():
     """Restoring a saved state (flow, particles, contact warm start) into a fresh simulation
     repeats the original's steps exactly (the original drops its factorisation at the save, as
     the scenes do at every checkpoint)."""
-    from fbmflow.contact import ContactSet, Planes
-    from fbmflow.flow import NoSlip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-
     def make():
         mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
-        return Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags},
-                          Particles.at_rest([Ball(0.25, 2), Ball(0.25, 2)], 1.5, [[0.7, 0.5], [1.35, 1.2]]),
-                          [0.0, -980.0], coupling="implicit",
-                          contact=ContactSet(Planes.box(mesh.lower, mesh.upper), skin=0.25, friction=0.3),
-                          contact_substeps=5)
+        return _sim(mesh, Particles.at_rest([Ball(0.25, 2), Ball(0.25, 2)], 1.5, [[0.7, 0.5], [1.35, 1.2]]),
+                    coupling="implicit", contact=ContactParams(skin_cells=1.0, friction=0.3, substeps=5))
 
     a = make()
     for _ in range(12):
@@ -403,14 +385,8 @@ def test_trapezoidal_integrator_with_crank_nicolson_is_stable_and_resumes_exactl
 
 
 def test_unknown_force_is_refused():
-    from fbmflow.flow import NoSlip
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
-    mesh = StructuredMesh.box((4, 4))
-    with pytest.raises(ValueError, match="unknown hydrodynamic force 'pressure-only'"):
-        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.2, 2)], 1.5, [[0.5, 0.5]]),
-                   [0.0, -9.81], force="pressure-only")
+    with pytest.raises(ParamError, match="FictitiousBoundaryParams.force: 'pressure-only' is not allowed"):
+        FictitiousBoundaryParams(force="pressure-only")
 
 
 @pytest.mark.parametrize("scheme, lag", [("crank-nicolson", 0.5), ("backward-euler", 0.0),
@@ -423,18 +399,14 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
     taken by the simulation is that of ``Y - lag dt U_y`` to a tenth of the lag's effect; the
     volume force is the volume rule's own at that height, and the viscous part stays at ``Y``."""
     from fbmflow.coupling import SurfaceForces, hydrodynamic_forces, node_owner
-    from fbmflow.flow import NoSlip
     from fbmflow.flow.time_schemes import pressure_lag
-    from fbmflow.mesh import StructuredMesh
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
 
     assert pressure_lag(scheme) == lag
     mesh = StructuredMesh.box((32, 32), upper=(2.0, 2.0))
     disk, k, c, dt, U = Ball(0.3, 2), 3.0, 0.6, 0.1, -1.0
     for force in ("surface", "volume"):
-        sim = Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([disk], 1.5, [[1.0, 1.0]]),
-                         [0.0, -9.8], scheme=scheme, fbm="sharp", force=force)
+        sim = _sim(mesh, Particles.at_rest([disk], 1.5, [[1.0, 1.0]]), gravity=9.8, scheme=scheme,
+                   fbm="sharp", force=force)
         sim.particles.velocity[:] = [[0.0, U]]
         space = sim.flow.space
         p = np.zeros((mesh.n_cells, 3))  # P1disc: the value and the gradient of q at each cell's centre
@@ -448,10 +420,12 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
             expected = (2 * 0.1 - k * (behind[0, 1] - c)) * disk.volume  # viscous mu lap u_y = 2 mu
             assert abs(F[0, 1] - expected) < 0.1 * k * 0.5 * dt * abs(U) * disk.volume, (F, expected)
             here = SurfaceForces(space, [[1.0, 1.0]], [disk])
-            parts = here(u, np.zeros(p.size), 0.1)[0] + SurfaceForces(space, behind, [disk])(0 * u, p.ravel(), 0.1)[0]
+            parts = (here(u, np.zeros(p.size), 0.1)[0]
+                     + SurfaceForces(space, behind, [disk])(0 * u, p.ravel(), 0.1)[0])
         else:
-            parts = (hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)[0]
-                     + hydrodynamic_forces(space, node_owner(space.V, behind, [disk]), behind, 0 * u, p.ravel(), 0.1)[0])
+            owner_behind = node_owner(space.V, behind, [disk])
+            here = hydrodynamic_forces(space, sim.owner(), np.array([[1.0, 1.0]]), u, np.zeros(p.size), 0.1)
+            parts = here[0] + hydrodynamic_forces(space, owner_behind, behind, 0 * u, p.ravel(), 0.1)[0]
         np.testing.assert_allclose(F[0], parts[0], rtol=1e-12, atol=1e-12)
 
 
@@ -489,24 +463,21 @@ def test_a_failing_multigrid_solve_stops_the_step_with_a_remedy(tmp_path, monkey
 ])
 def test_placement_is_checked_before_the_first_step(centres, radius, needle):
     """Before: accepted, then moved without a word (through walls) or left without drag."""
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
     mesh = StructuredMesh.box((16, 32), upper=(1.0, 2.0))
     shapes = [Ball(radius, 2) for _ in centres]
     with pytest.raises(ValueError, match=needle):
-        Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, Particles.at_rest(shapes, 1.5, centres), [0.0, -9.8])
+        _sim(mesh, Particles.at_rest(shapes, 1.5, centres))
 
 
 def test_placement_allows_touching_walls_and_each_other_and_symmetry_planes():
-    from fbmflow.particles import Ball, Particles
-    from fbmflow.simulation import Simulation
     mesh = StructuredMesh.box((16, 32), upper=(1.0, 2.0))
-    touching = Particles.at_rest([Ball(0.1, 2)] * 2, 1.5, [[0.1, 0.1], [0.3, 0.1]])  # on the floor, in contact
-    Simulation(mesh, 0.1, {t: NoSlip() for t in mesh.tags}, touching, [0.0, -9.8])
+    # on the floor, in contact
+    touching = Particles.at_rest([Ball(0.1, 2)] * 2, 1.5, [[0.1, 0.1], [0.3, 0.1]])
+    assert _sim(mesh, touching).particles.n == 2
     half = Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.0, 1.0]])  # centred on the mirror plane x = 0
     bc = {t: NoSlip() for t in mesh.tags}
     bc["xmin"] = Slip()
-    Simulation(mesh, 0.1, bc, half, [0.0, -9.8], symmetry=(0,))
+    assert _sim(mesh, half, boundary=bc, symmetry=(0,)).symmetry == (0,)
 
 
 def test_a_scene_placed_through_a_wall_exits_2_with_one_line(capsys, tmp_path):
@@ -542,6 +513,7 @@ def test_a_loose_first_flow_solve_changes_the_work_not_the_coupled_step():
                 "coupling": {"scheme": "implicit", "first_rtol": first}}
         runs[first] = scene.run(from_dict(scene.Params, data), 1)
     loose, exact = runs[1e-2], runs[1e-9]
-    assert loose.newton_iterations < exact.newton_iterations, (loose.newton_iterations, exact.newton_iterations)
+    assert loose.newton_iterations < exact.newton_iterations, \
+        (loose.newton_iterations, exact.newton_iterations)
     v, w = np.array(loose.quantities["v"]), np.array(exact.quantities["v"])
     assert np.abs(v - w).max() <= 1e-7 * np.abs(w).max()

@@ -1,13 +1,27 @@
 """fbmflow: particulate flows with the finite element fictitious boundary method.
 
-The public API is listed in ``__all__``; names are imported lazily so that ``import fbmflow``
-does no work (no Numba import, no compilation).
+The public API is listed in ``__all__`` (documented in docs/api.md); names are imported lazily so
+that ``import fbmflow`` does no work (no Numba import, no compilation).
 """
 import importlib
 
 __version__ = "0.1.0"
 
 _API = {
+    "Simulation": "fbmflow.simulation",
+    "StepReport": "fbmflow.simulation",
+    "InsufficientMemory": "fbmflow.simulation",
+    "FluidParams": "fbmflow.params",
+    "TimeParams": "fbmflow.params",
+    "SolverParams": "fbmflow.params",
+    "CouplingParams": "fbmflow.params",
+    "FictitiousBoundaryParams": "fbmflow.params",
+    "ContactParams": "fbmflow.params",
+    "RepulsionParams": "fbmflow.params",
+    "ParamError": "fbmflow.params",
+    "from_dict": "fbmflow.params",
+    "COUPLINGS": "fbmflow.coupling",
+    "FORCE_ESTIMATORS": "fbmflow.coupling",
     "StructuredMesh": "fbmflow.mesh",
     "FlowSpace": "fbmflow.fem",
     "NavierStokesProblem": "fbmflow.flow",
@@ -23,14 +37,14 @@ _API = {
     "Ball": "fbmflow.particles",
     "Ellipsoid": "fbmflow.particles",
     "Box": "fbmflow.particles",
+    "Cylinder": "fbmflow.particles",
     "ImplicitShape": "fbmflow.particles",
     "TriangulatedSurface": "fbmflow.particles",
     "Particles": "fbmflow.particles",
-    "Simulation": "fbmflow.simulation",
     "SCENES": "fbmflow.scenes",
+    "get_scene": "fbmflow.scenes",
     "load_scene": "fbmflow.scenes",
     "run_scene": "fbmflow.scenes",
-    "ParamError": "fbmflow.params",
 }
 
 __all__ = ["__version__", *_API]

@@ -75,7 +75,8 @@ def _progress(quiet: bool):
         eta = elapsed / step * (n - step)
         done = int(width * step / n)
         where = f"t = {t:.4g}" if t is not None else "steady stage"
-        extra = "".join(f"  {k} {v:.3g}" if isinstance(v, float) else f"  {k} {v}" for k, v in (info or {}).items())
+        extra = "".join(f"  {k} {v:.3g}" if isinstance(v, float) else f"  {k} {v}"
+                        for k, v in (info or {}).items())
         sys.stderr.write(f"\r  [{'#' * done}{'.' * (width - done)}] {step}/{n}  {where}{extra}  "
                          f"elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
         if step == n:

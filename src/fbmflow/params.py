@@ -1,19 +1,29 @@
 """Parameters: frozen, documented dataclasses with strict loading from TOML-like dictionaries.
 
-Every scene's parameters are a tree of frozen dataclasses whose fields are declared with
-:func:`param` (default, unit, documentation and constraints). :func:`from_dict` builds them from
-nested dictionaries and rejects unknown keys, wrong types and values outside the constraints with
-a :class:`ParamError` that names the dotted key and what is allowed. ``--set a.b=value`` overrides
-use :func:`set_dotted` and :func:`parse_value`.
+Every scene's parameters are a tree of frozen dataclasses (:class:`Section` subclasses) whose
+fields are declared with :func:`param` (default, unit, documentation and constraints). A section
+checks its values when it is made, so ``FluidParams(viscosity=-1.0)`` fails at once;
+:func:`from_dict` builds a tree from nested dictionaries and rejects unknown keys, wrong types and
+values outside the constraints with a :class:`ParamError` that names the dotted key and what is
+allowed. ``--set a.b=value`` overrides use :func:`set_dotted` and :func:`parse_value`.
+
+The sections shared by scenes and by :class:`~fbmflow.simulation.Simulation` are defined here:
+:class:`FluidParams`, :class:`TimeParams`, :class:`SolverParams`, :class:`CouplingParams`,
+:class:`FictitiousBoundaryParams`, :class:`ContactParams` and :class:`RepulsionParams`.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import sys
 import tomllib
 import typing
 from typing import Any
 
+from .contact import BROADPHASES
+from .coupling import COUPLINGS, FORCE_ESTIMATORS
+from .flow.time_schemes import TIME_SCHEMES
 from .solvers.multigrid import MultigridSettings, MultigridSolver
 from .solvers.newton import NewtonSettings
 
@@ -67,12 +77,74 @@ def _check_value(key: str, value: Any, ftype, meta) -> Any:
     return value
 
 
+@functools.cache
+def _hints(cls) -> dict:
+    return typing.get_type_hints(cls)
+
+
+class Section:
+    """Base of the parameter dataclasses: a section checks its values when it is made.
+
+    Every field declared with :func:`param` is checked against its type (an integer is accepted
+    for a float and stored as one) and its constraints, nested sections against their class,
+    and then ``validate()``, when the section has one, checks what spans several keys; a
+    violation raises :class:`ParamError` naming ``Class.field`` and what is allowed.
+    """
+
+    def __post_init__(self):
+        hints = _hints(type(self))
+        for f in dataclasses.fields(self):
+            value, ftype = getattr(self, f.name), hints[f.name]
+            if dataclasses.is_dataclass(ftype):
+                if not isinstance(value, ftype):
+                    raise ParamError(f"{type(self).__name__}.{f.name}: expected a {ftype.__name__}, "
+                                     f"got {value!r}")
+                continue
+            object.__setattr__(self, f.name, _check_value(f"{type(self).__name__}.{f.name}", value, ftype,
+                                                          f.metadata))
+        validate = getattr(self, "validate", None)
+        if validate is not None:
+            validate()
+
+
+def derive(base: type, name: str, doc: str, **changes) -> type:
+    """A frozen subclass ``name`` of the section ``base`` with other defaults.
+
+    Each change names a field of ``base``: a plain value replaces its default (its doc, unit and
+    bounds stay), a :func:`param` replaces the whole field. The class belongs to the calling
+    module. ValueError when ``base`` has no such field. For example
+    ``derive(TimeParams, "SlowTime", "Time stepping.", dt=0.1)``."""
+    fields, hints = {f.name: f for f in dataclasses.fields(base)}, _hints(base)
+    unknown = sorted(set(changes) - set(fields))
+    if unknown:
+        raise ValueError(f"derive: {base.__name__} has no field {unknown[0]!r}; its fields: "
+                         f"{', '.join(fields)}")
+    new = [(key, hints[key], change if isinstance(change, dataclasses.Field)
+            else dataclasses.field(default=change, metadata=fields[key].metadata))
+           for key, change in changes.items()]
+    module = sys._getframe(1).f_globals["__name__"]
+    return dataclasses.make_dataclass(name, new, bases=(base,), frozen=True,
+                                      namespace={"__doc__": doc, "__module__": module})
+
+
+def tree(name: str, doc: str, validate=None, module: str | None = None, **sections) -> type:
+    """A frozen :class:`Section` ``name`` whose fields are the given sections (``key=Class``), in
+    that order, each defaulting to its class's defaults; ``validate(self)``, when given, checks
+    what spans several sections. The class belongs to ``module`` (default: the calling one)."""
+    namespace = {"__doc__": doc, "__module__": module or sys._getframe(1).f_globals["__name__"]}
+    if validate is not None:
+        namespace["validate"] = validate
+    return dataclasses.make_dataclass(name, [(key, cls, section(cls)) for key, cls in sections.items()],
+                                      bases=(Section,), frozen=True, namespace=namespace)
+
+
 def from_dict(cls, data: dict | None, prefix: str = ""):
-    """Build the dataclass ``cls`` from a nested dict, validating every key and value."""
+    """Build the dataclass ``cls`` from a nested dict, validating every key and value (errors name
+    the dotted key, ``prefix`` + field name)."""
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise ParamError(f"{prefix.rstrip('.') or 'scene'}: expected a table of parameters, got {data!r}")
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = [k for k in data if k not in fields]
     if unknown:
@@ -87,11 +159,7 @@ def from_dict(cls, data: dict | None, prefix: str = ""):
             kwargs[name] = from_dict(ftype, data[name], f"{prefix}{name}.")
         else:
             kwargs[name] = _check_value(prefix + name, data[name], ftype, f.metadata)
-    obj = cls(**kwargs)
-    validate = getattr(obj, "validate", None)
-    if validate is not None:
-        validate()
-    return obj
+    return cls(**kwargs)  # Section.__post_init__ runs validate()
 
 
 def to_dict(obj) -> dict:
@@ -123,7 +191,7 @@ def set_dotted(data: dict, key: str, value: Any) -> None:
 def describe(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
     """Rows ``(dotted key, default, unit, doc)`` for every parameter of ``cls`` (for the docs)."""
     rows = []
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     default = cls()
     for f in dataclasses.fields(cls):
         if dataclasses.is_dataclass(hints[f.name]):
@@ -136,13 +204,30 @@ def describe(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
     return rows
 
 
-# -- sections shared by scenes -------------------------------------------------------------------
+# -- sections shared by scenes and the Simulation ------------------------------------------------
 @dataclasses.dataclass(frozen=True)
-class SolverParams:
+class FluidParams(Section):
+    """A Newtonian fluid and gravity, in any consistent units (SI shown; the CGS scenes use g, cm, s)."""
+
+    density: float = param(1000.0, "fluid density rho_f", "kg/m^3", positive=True)
+    viscosity: float = param(1e-3, "dynamic viscosity mu", "Pa s", positive=True)
+    gravity: float = param(9.81, "gravitational acceleration, pointing along the last axis downwards",
+                           "m/s^2", nonnegative=True)
+
+    def gravity_vector(self, dim: int):
+        """Gravity as a vector, ``(dim,)`` float: ``(0, ..., 0, -gravity)``."""
+        g = [0.0] * dim
+        g[-1] = -self.gravity
+        return g
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverParams(Section):
     """Nonlinear and linear solver settings."""
 
-    linear: str = param("auto", "linear solver for the Newton systems ('auto': multigrid above "
-                        "20 000 unknowns in 2D / 15 000 in 3D (300 000 with PARDISO), else direct)",
+    linear: str = param("auto", "linear solver for the Newton systems ('auto': with particles direct, in 3D "
+                        "multigrid above 150 000 unknowns (50 000 without PARDISO); without particles "
+                        "multigrid above 20 000 unknowns in 2D / 15 000 in 3D (300 000 with PARDISO))",
                         choices=("auto", "direct", "multigrid"))
     linear_rtol: float = param(1e-8, "relative residual per linear solve (multigrid: its stopping "
                                "rule; direct with PARDISO: its refinement target in Newton steps)",
@@ -157,8 +242,8 @@ class SolverParams:
     mg_smoothing_steps: int = param(2, "multigrid pre- and post-smoothing sweeps", minimum=1)
     mg_krylov: str = param("fgmres", "Krylov acceleration of multigrid", choices=("fgmres", "none"))
     mg_linearisation: str = param("auto", "operator the multigrid hierarchy is built from: newton, picard "
-                                  "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or auto "
-                                  "(picard in time steps, newton in steady solves)",
+                                  "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or "
+                                  "auto (picard in time steps, newton in steady solves)",
                                   choices=("auto", "newton", "picard"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
@@ -167,7 +252,8 @@ class SolverParams:
                                         "residual 10x per iteration (same solution, less work)")
 
     def linear_solver(self):
-        """The configured linear solver: a name for ``direct``/``auto``, else a solver object."""
+        """The configured linear solver: the name ``"direct"`` or ``"auto"`` (resolved by its user:
+        the flow problem or the simulation), or a :class:`~fbmflow.solvers.MultigridSolver`."""
         if self.linear != "multigrid":
             return self.linear
         return MultigridSolver(MultigridSettings(
@@ -176,6 +262,7 @@ class SolverParams:
             coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation))
 
     def newton_settings(self) -> NewtonSettings:
+        """The Newton stopping rule and Jacobian reuse of these settings."""
         return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,
                               max_iterations=self.newton_max_iterations,
                               reuse_jacobian=self.newton_reuse_jacobian, linear_rtol=self.linear_rtol)
@@ -191,54 +278,50 @@ class SteadySolverParams(SolverParams):
                                positive=True, maximum=0.1)
 
 
+_INTEGRATORS = ("semi-implicit-euler", "trapezoidal")  # the integrators that couple with a flow
+_INTEGRATOR_DOC = ("particle integrator: semi-implicit-euler (first order) or trapezoidal (second order with "
+                   "time.scheme = crank-nicolson; not with hard contact)")
+
+
 @dataclasses.dataclass(frozen=True)
-class CouplingParams:
-    """Fluid–particle coupling."""
+class CouplingParams(Section):
+    """Fluid–particle coupling: the scheme (:data:`fbmflow.coupling.COUPLINGS`) and the particle
+    integrator."""
 
     scheme: str = param("implicit", "coupling: explicit (staggered) or implicit (sub-iterated)",
-                        choices=("explicit", "implicit"))
+                        choices=tuple(COUPLINGS))
     tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
     max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
     first_rtol: float = param(1e-2, "implicit coupling: Newton's residual reduction in each step's first "
                               "flow solve, which only seeds the iteration (the step ends on a solve to "
-                              "solver.newton_rtol)", positive=True, maximum=0.5)
-    integrator: str = param("semi-implicit-euler", "particle integrator: semi-implicit-euler (first order) "
-                            "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
-                            "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))
-
-    def settings(self) -> dict:
-        """Keyword arguments of :class:`~fbmflow.simulation.Simulation` for these settings."""
-        return dict(coupling=self.scheme, coupling_tol=self.tol, max_subiterations=self.max_subiterations,
-                    integrator=self.integrator, first_solve_rtol=self.first_rtol)
+                              "solver.newton_rtol; a value at or below that solves the first one alike)",
+                              positive=True, maximum=0.5)
+    integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
 
 
 @dataclasses.dataclass(frozen=True)
 class SecondOrderCouplingParams(CouplingParams):
     """Fluid–particle coupling, second order in time with ``time.scheme = "crank-nicolson"``."""
 
-    integrator: str = param("trapezoidal", "particle integrator: semi-implicit-euler (first order) "
-                            "or trapezoidal (second order with time.scheme = crank-nicolson; not with "
-                            "hard contact)", choices=("semi-implicit-euler", "trapezoidal"))
+    integrator: str = param("trapezoidal", _INTEGRATOR_DOC, choices=_INTEGRATORS)
+
+
+_BOUNDARY_DOC = ("nodes: every velocity node inside a particle moves rigidly (first order in the mesh size); "
+                 "sharp: the no-slip condition on the true surface (balls, boxes and cylinders)")
 
 
 @dataclasses.dataclass(frozen=True)
-class FictitiousBoundaryParams:
+class FictitiousBoundaryParams(Section):
     """How particles and obstacles meet the mesh (docs/method.md, "Particles as fictitious
-    boundaries")."""
+    boundaries"), and the force estimator (:data:`fbmflow.coupling.FORCE_ESTIMATORS`)."""
 
-    boundary: str = param("sharp", "nodes: every velocity node inside a particle moves rigidly (first order "
-                          "in the mesh size); sharp: the no-slip condition on the true surface (balls, "
-                          "boxes and cylinders; direct solver)", choices=("nodes", "sharp"))
+    boundary: str = param("sharp", _BOUNDARY_DOC, choices=("nodes", "sharp"))
     force: str = param("volume", "hydrodynamic force: volume (-int sigma . grad alpha over the cut cells; "
                        "first order with the sharp boundary) or test-function (the momentum balance "
                        "tested with a function that is one on the particle, its gradient in the fluid "
                        "cells beyond the cut ones) or surface (the traction integrated over the true "
-                       "surface; balls with the sharp boundary)", choices=("volume", "test-function", "surface"))
-
-    def settings(self) -> dict:
-        """Keyword arguments of :class:`~fbmflow.simulation.Simulation` for these settings."""
-        return dict(fbm=self.boundary, force=self.force)
+                       "surface; balls with the sharp boundary)", choices=tuple(FORCE_ESTIMATORS))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -247,13 +330,11 @@ class NodalBoundaryParams(FictitiousBoundaryParams):
     where the sharp one is not yet the better choice (many particles in contact; fixed obstacles,
     whose drag from the cut cells converges only to first order with it, docs/method.md)."""
 
-    boundary: str = param("nodes", "nodes: every velocity node inside a particle moves rigidly (first order "
-                          "in the mesh size); sharp: the no-slip condition on the true surface (balls, "
-                          "boxes and cylinders; direct solver)", choices=("nodes", "sharp"))
+    boundary: str = param("nodes", _BOUNDARY_DOC, choices=("nodes", "sharp"))
 
 
 @dataclasses.dataclass(frozen=True)
-class RepulsionParams:
+class RepulsionParams(Section):
     """Short-range repulsion from walls and other particles (Glowinski et al.)."""
 
     enabled: bool = param(True, "repulsive forces on (the flow cannot resolve the last gap)")
@@ -268,8 +349,8 @@ class RepulsionParams:
             return None
         from .contact import Repulsion
 
-        return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower), tuple(mesh.upper),
-                         self.strength, None if walls is None else tuple(walls))
+        return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower),
+                         tuple(mesh.upper), self.strength, None if walls is None else tuple(walls))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -281,7 +362,7 @@ class ContactRepulsionParams(RepulsionParams):
 
 
 @dataclasses.dataclass(frozen=True)
-class ContactParams:
+class ContactParams(Section):
     """Hard contact between particles and with the walls (projected Gauss–Seidel, sub-stepped)."""
 
     enabled: bool = param(True, "hard contact on (no overlap of particles or with the walls)")
@@ -290,7 +371,7 @@ class ContactParams:
     friction: float = param(0.0, "Coulomb friction coefficient", nonnegative=True)
     substeps: int = param(10, "contact sub-steps per fluid step", minimum=1)
     iterations: int = param(50, "projected Gauss-Seidel sweeps per sub-step at most", minimum=1)
-    broadphase: str = param("grid", "broadphase", choices=("brute-force", "grid", "hierarchical-grid"))
+    broadphase: str = param("grid", "broadphase", choices=tuple(BROADPHASES))
     skin_cells: float = param(1.0, "contact distance in mesh cells: the fictitious boundary needs free "
                               "fluid nodes between surfaces", nonnegative=True)
     lubrication: bool = param(False, "lubrication correction for gaps below lubrication_range_cells")
@@ -298,10 +379,10 @@ class ContactParams:
                                            "(the flow resolves larger gaps); it saturates at 1 % of it",
                                            positive=True)
 
-    def make(self, mesh, walls=None, viscosity: float | None = None):
+    def make(self, mesh, viscosity: float, walls=None):
         """The :class:`~fbmflow.contact.ContactSet` with the walls of ``mesh`` (all faces, or the
         ``(axis, side)`` pairs in ``walls``); None when off. ``viscosity``: the fluid's, for the
-        lubrication correction."""
+        lubrication correction. Distances are counted in the mesh's finest cells."""
         if not self.enabled:
             return None
         from .contact import ContactSet, Lubrication, Planes
@@ -309,22 +390,24 @@ class ContactParams:
         h = float(max(mesh.finest_spacing))  # the fine zone's cells on a graded mesh
         lubrication = None
         if self.lubrication:
-            if viscosity is None:
-                raise ParamError("contact.lubrication needs the fluid viscosity; this scene does not support it")
-            lubrication = Lubrication(viscosity, self.lubrication_range_cells * h, 0.01 * self.lubrication_range_cells * h)
+            lubrication = Lubrication(viscosity, self.lubrication_range_cells * h,
+                                      0.01 * self.lubrication_range_cells * h)
         return ContactSet(Planes.box(mesh.lower, mesh.upper, walls), restitution=self.restitution,
                           friction=self.friction, iterations=self.iterations, broadphase=self.broadphase,
                           skin=self.skin_cells * h, lubrication=lubrication)
 
 
+#: the time schemes a ``scheme`` parameter may name (:data:`fbmflow.flow.time_schemes.TIME_SCHEMES`)
+SCHEMES = tuple(TIME_SCHEMES)
+
+
 @dataclasses.dataclass(frozen=True)
-class TimeParams:
+class TimeParams(Section):
     """Time stepping."""
 
     dt: float = param(0.01, "time step", "s", positive=True)
     t_end: float = param(1.0, "final time", "s", positive=True)
-    scheme: str = param("fractional-step-theta", "implicit time scheme",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+    scheme: str = param("fractional-step-theta", "implicit time scheme", choices=SCHEMES)
 
     @property
     def n_steps(self) -> int:

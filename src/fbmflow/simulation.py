@@ -1,45 +1,62 @@
-"""The particulate-flow time loop (docs/design.md, "One time step"): particles -> mesh, flow, forces,
-particles.
+"""The particulate-flow time loop (docs/design.md, "One time step"): particles -> mesh, flow,
+forces, particles, contact.
 
-Couplings (a registry):
-
-* ``explicit`` (staggered): each step solves the flow with the particles' current rigid velocities
-  as fictitious-boundary constraints, evaluates the hydrodynamic forces of the new flow and
-  advances the particles with them. Cheap; stable only while the added mass stays below the
-  particle mass (see :mod:`fbmflow.particles.dynamics`); at rho_s / rho_f = 1.25 a disk already
-  shows a damped step-to-step wobble.
-* ``implicit``: the same step iterated to a fixed point, the flow constrained by the particles'
-  *new* velocities, by Newton's method on the particle velocities with the discrete added-mass
-  and drag matrix from the flow's linear response to unit rigid motions; removes the added-mass
-  instability at the price of one linear response per rigid degree of freedom (3 per disk, 6 per
-  sphere, back-substitutions with the last factorisation) and two to three flow solves per step.
+A :class:`Simulation` is made from a mesh, the particles and typed parameter sections
+(:mod:`fbmflow.params`): the fluid, the time stepping, the solvers, the coupling scheme
+(:data:`fbmflow.coupling.COUPLINGS`), the fictitious boundary with its force estimator
+(:data:`fbmflow.coupling.FORCE_ESTIMATORS`), hard contact and repulsion. Before anything is
+assembled it checks the set-up (placement of the particles, mirror planes) and estimates the
+memory of the linear solver (:func:`estimate_memory`), refusing a run that cannot fit.
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 
 from .contact import ContactReport
-from .coupling import (SurfaceForces, TestFunctionForces, hydrodynamic_forces, mirror_images, node_owner,
-                       rigid_body_constraints, rigid_liftings, sharp_boundary, supports_sharp_boundary,
-                       supports_surface_force)
-from .flow import NavierStokesProblem
+from .coupling import (
+    make_coupling,
+    make_force_estimator,
+    mirror_images,
+    node_owner,
+    rigid_body_constraints,
+    rigid_liftings,
+    sharp_boundary,
+    supports_sharp_boundary,
+)
+from .fem import FlowSpace
+from .fem.functions import sample_pressure, sample_velocity
+from .flow import NavierStokesProblem, NoSlip
 from .flow.time_schemes import advance, pressure_lag
-from .particles import (Particles, accelerations, integrate, pack_velocities, symmetric_motion,
-                        unpack_velocities, velocity_gain)
+from .params import (
+    ContactParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    ParamError,
+    RepulsionParams,
+    SolverParams,
+    TimeParams,
+)
+from .particles import Particles, accelerations, integrate, velocity_gain
 from .solvers import ConvergenceError
-from .solvers.linear import LinearWork
+from .solvers.linear import LinearWork, auto_backend, pardiso_available
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class StepReport:
-    """What one time step did."""
+    """What one time step did.
+
+    force : (n, dim) float64 and torque : (n, 3) float64, the hydrodynamic force and torque on
+    every particle at the step's end; position, velocity : (n, dim) float64, the particles' new
+    centres and velocities; newton_iterations : over all flow solves of the step.
+    """
 
     step: int
     t: float
@@ -59,97 +76,111 @@ class Simulation:
 
     Parameters
     ----------
-    mesh, viscosity, boundary, density : as for :class:`~fbmflow.flow.NavierStokesProblem`
+    mesh : StructuredMesh
     particles : Particles
-    gravity : (dim,) float64 [m/s^2]
-    scheme : time scheme name; integrator : particle integrator name
-        (:data:`~fbmflow.particles.dynamics.INTEGRATORS`; ``trapezoidal`` with ``crank-nicolson``
-        is second order in time)
-    linear_solver, newton : passed to the flow problem
-    coupling : ``explicit`` or ``implicit`` (see the module docstring)
-    first_solve_rtol : float or None
-        Implicit coupling: Newton's residual reduction in each step's first flow solve, which
-        only seeds the coupling iteration (its forces give the first velocity update, its
-        linearisation the responses); the later solves, whose flow is kept, use the Newton
-        settings' ``rtol``, and the step always ends on one of them. None: the same for all.
-        (Measured effect: docs/validation.md, "Multigrid with fictitious boundaries".)
-    symmetry : normal axes of mirror planes that cut the domain through every particle centre
-        (the domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
-        of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
-        stays on the planes. Gravity must lie in the planes.
-    repulsion : :class:`~fbmflow.contact.Repulsion` or None, short-range repulsive forces that
-        keep particles off the walls and each other (the flow cannot resolve the last gap).
-    contact : :class:`~fbmflow.contact.ContactSet` or None, hard contact: the particles then
-        advance over a fluid step in ``contact_substeps`` contact sub-steps with the hydrodynamic
-        force of the step held constant (semi-implicit Euler with contact impulses, see
+        The particles' shapes and initial state; the simulation advances its own copy.
+    fluid : FluidParams
+        Density, viscosity and gravity (along the last axis, downwards); particles feel gravity
+        and buoyancy ``(M_i - rho_f V_i) g``.
+    boundary : dict tag -> condition, optional
+        One of :mod:`fbmflow.flow.boundary`'s conditions for every non-periodic face of the mesh;
+        default: no-slip walls all round.
+    time : TimeParams
+        The time scheme; ``dt`` and ``t_end`` are what :meth:`run` and :meth:`step` without a
+        time step use.
+    solver : SolverParams
+        Newton and linear solver settings. ``linear = "auto"`` takes the direct solver, in 3D
+        multigrid above :data:`DIRECT_UP_TO_3D` unknowns.
+    coupling : CouplingParams
+        The coupling scheme (:data:`~fbmflow.coupling.COUPLINGS`: ``explicit`` or ``implicit``)
+        and the particle integrator (``trapezoidal`` with ``crank-nicolson`` is second order in
+        time).
+    fbm : FictitiousBoundaryParams
+        ``boundary``: ``nodes`` (every node inside a particle moves rigidly; first order in the
+        mesh size) or ``sharp`` (the no-slip condition on the true surface,
+        :mod:`fbmflow.coupling.sharp`; shapes with ``project``); ``force``: the estimator
+        (:data:`~fbmflow.coupling.FORCE_ESTIMATORS`: ``volume``, ``test-function`` or
+        ``surface``).
+    contact : ContactParams or None
+        Hard contact (off when None or not ``enabled``): the particles then advance over a fluid
+        step in ``contact.substeps`` contact sub-steps with the hydrodynamic force of the step
+        held constant (semi-implicit Euler with contact impulses, see
         :mod:`fbmflow.contact.contact_set`), so that contact resolution does not depend on the
         fluid time step. With the implicit coupling, contact acts once the coupling iteration has
         converged (a collision's velocity change reaches the flow in the next step).
-    fbm : ``nodes`` (every node inside a particle moves rigidly; first order in the mesh size) or
-        ``sharp`` (the no-slip condition on the true surface, :mod:`fbmflow.coupling.sharp`;
-        shapes with ``project``, the direct linear solver)
-    force : ``volume`` (``-int sigma . grad alpha`` over the cut cells,
-        :func:`~fbmflow.coupling.hydrodynamic_forces`) or ``test-function`` (the momentum balance
-        tested with a function that is one on the particle, :class:`~fbmflow.coupling.TestFunctionForces`;
-        ``du/dt`` is the step's mean acceleration ``(u - u_old) / dt``) or ``surface`` (the
-        traction integrated over the true surface, :class:`~fbmflow.coupling.SurfaceForces`;
-        balls with the sharp boundary)
+    repulsion : RepulsionParams or None
+        Short-range repulsive forces that keep particles off the walls and each other (the flow
+        cannot resolve the last gap); off when None or not ``enabled``.
+    symmetry : tuple of int
+        Normal axes of mirror planes that cut the domain through every particle centre (the
+        domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
+        of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
+        stays on the planes, and the planes are no walls for contact and repulsion. Gravity must
+        lie in the planes.
+
+    Raises
+    ------
+    ValueError
+        A set-up that cannot run (placement, symmetry, a boundary or force the shapes do not
+        support, contact with the trapezoidal integrator), or :class:`InsufficientMemory`; the
+        message says what to change.
     """
 
-    def __init__(self, mesh, viscosity: float, boundary: dict, particles: Particles, gravity,
-                 density: float = 1.0, scheme: str = "backward-euler",
-                 integrator: str = "semi-implicit-euler", linear_solver="direct", newton=None,
-                 coupling: str = "explicit", coupling_tol: float = 1e-6, max_subiterations: int = 20,
-                 symmetry: tuple = (), repulsion=None, contact=None, contact_substeps: int = 1,
-                 fbm: str = "nodes", force: str = "volume", first_solve_rtol: float | None = None):
-        if coupling not in COUPLINGS:
-            raise ValueError(f"unknown coupling {coupling!r}; choose one of {COUPLINGS}")
-        if contact is not None and integrator != "semi-implicit-euler":
-            raise ValueError("hard contact advances the particles by semi-implicit Euler; "
-                             f"integrator {integrator!r} cannot be combined with it")
-        if contact_substeps < 1:
-            raise ValueError(f"contact_substeps must be >= 1, got {contact_substeps}")
-        if fbm not in FBM_BOUNDARIES:
-            raise ValueError(f"unknown fictitious boundary {fbm!r}; choose one of {FBM_BOUNDARIES}")
-        if force not in FORCES:
-            raise ValueError(f"unknown hydrodynamic force {force!r}; choose one of {FORCES}")
-        if fbm == "sharp" and not supports_sharp_boundary(particles.shapes):
+    def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict | None = None,
+                 time: TimeParams = TimeParams(), solver: SolverParams = SolverParams(),
+                 coupling: CouplingParams = CouplingParams(),
+                 fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
+                 contact: ContactParams | None = None, repulsion: RepulsionParams | None = None,
+                 symmetry: tuple = ()):
+        for name, value, cls in (("particles", particles, Particles), ("fluid", fluid, FluidParams),
+                                 ("time", time, TimeParams), ("solver", solver, SolverParams),
+                                 ("coupling", coupling, CouplingParams),
+                                 ("fbm", fbm, FictitiousBoundaryParams),
+                                 ("contact", contact, (ContactParams, type(None))),
+                                 ("repulsion", repulsion, (RepulsionParams, type(None)))):
+            if not isinstance(value, cls):
+                expected = cls.__name__ if isinstance(cls, type) else f"{cls[0].__name__} or None"
+                raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
+                                f"make it with {expected.split()[0]}(...) or fbmflow.params.from_dict")
+        contact = contact if contact is not None and contact.enabled else None
+        if contact is not None and coupling.integrator != "semi-implicit-euler":
+            raise ValueError("hard contact advances the particles by semi-implicit Euler; integrator "
+                             f"{coupling.integrator!r} cannot be combined with it: set coupling.integrator = "
+                             "'semi-implicit-euler' or turn contact off")
+        sharp = fbm.boundary == "sharp"
+        if sharp and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
-                             "(Ball, Box, Cylinder); use fbm='nodes' for the others")
-        if force == "surface" and not (fbm == "sharp" and supports_surface_force(particles.shapes)):
-            raise ValueError("force='surface' integrates the traction over the true surface of balls with the "
-                             "sharp boundary (the nodal boundary's cut cells carry no flow up to the surface); "
-                             "use fbm='sharp' with balls, or force='volume'")
-        self.fbm = fbm
-        self.force = force
-        self._estimator_of = None  # the force's test functions or surface rule for the current state
-        self.contact = contact
-        self.contact_substeps = int(contact_substeps)
-        self._contact_report = None
+                             "(Ball, Box, Cylinder); use fbm.boundary = 'nodes' for the others")
+        self.estimator = make_force_estimator(fbm.force)
+        self.estimator.check(particles.shapes, sharp)
+        self.fluid, self.time, self.fbm = fluid, time, fbm
         self.symmetry = tuple(symmetry)
-        self.repulsion = repulsion
-        _check_symmetry(mesh, particles, np.asarray(gravity, dtype=float), self.symmetry)
+        self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)
+        _check_symmetry(mesh, particles, self.gravity, self.symmetry)
         _check_placement(mesh, particles, self.symmetry)
-        self.coupling = coupling
-        self.coupling_tol = coupling_tol
-        if first_solve_rtol is not None and not 0.0 < first_solve_rtol < 1.0:
-            raise ValueError(f"first_solve_rtol must lie in (0, 1), got {first_solve_rtol}")
-        self.first_solve_rtol = first_solve_rtol
-        self.max_subiterations = max_subiterations
+        walls = _walls(mesh, particles, self.symmetry)
+        self.contact = None if contact is None else contact.make(mesh, fluid.viscosity, walls)
+        self.contact_substeps = 1 if contact is None else contact.substeps
+        self.repulsion = None if repulsion is None else repulsion.make(mesh, walls)
+        self.coupling = make_coupling(coupling, solver.newton_rtol)
+        self.integrator = coupling.integrator
+        self.scheme = time.scheme
+        self._pressure_lag = pressure_lag(time.scheme)
+        linear = choose_linear_solver(solver, mesh)
+        check_memory(FlowSpace.estimate_dofs(mesh), mesh.dim, linear)
+        self._contact_report = None
+        self._estimator_of = None  # the force rule for the current particle state
         self._constraint_state: Particles | None = None
         self._owner_of: np.ndarray | None = None  # positions and orientations of _owner_cache
         self._owner_cache: dict = {}  # id of the DOF map (fine or multigrid level) -> owner
         self._sharp_of = None  # the sharp boundary of the current state
-        self._behind = None  # (centres, owner or SurfaceForces) where the pressure's force is taken
-        self.particles = particles
-        self.gravity = np.asarray(gravity, dtype=float)
-        self.scheme = scheme
-        self._pressure_lag = pressure_lag(scheme)
-        self.integrator = integrator
-        kwargs = {} if newton is None else {"newton": newton}
-        self.flow = NavierStokesProblem(mesh, viscosity, boundary, density=density,
-                                        linear_solver=linear_solver,
-                                        extra_constraints=self._constraints, **kwargs)
+        self._behind = None  # (centres, force rule) where the pressure's force is taken
+        self._walls_of = None  # velocity nodes held by the walls (the test-function force's)
+        self.particles = particles.copy()
+        boundary = {t: NoSlip() for t in mesh.tags} if boundary is None else boundary
+        self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
+                                        linear_solver=linear, newton=solver.newton_settings(),
+                                        extra_constraints=self._constraints)
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0
@@ -158,6 +189,64 @@ class Simulation:
         self._last_force: np.ndarray | None = None
         self._last_torque: np.ndarray | None = None
         self._warned_fast = False  # the warning about particles crossing cells in a step is given once
+
+    # -- the run ------------------------------------------------------------------------------
+    @property
+    def n_steps(self) -> int:
+        """Steps of a whole run, from ``t = 0`` to ``time.t_end`` (:attr:`TimeParams.n_steps`)."""
+        return self.time.n_steps
+
+    @property
+    def dt(self) -> float:
+        """The time step of :meth:`run` [s]: ``time.t_end / n_steps`` (``time.dt`` shortened
+        evenly so that the last step lands on ``t_end``)."""
+        return self.time.t_end / self.n_steps
+
+    def run(self, callback=None) -> list[StepReport]:
+        """Step from the current step to ``time.t_end`` in steps of :attr:`dt`; ``callback(report)``
+        after every step. Returns the steps' reports; ConvergenceError names a failing step."""
+        reports = []
+        for _ in range(self.step_count, self.n_steps):
+            reports.append(self.step(self.dt))
+            if callback is not None:
+                callback(reports[-1])
+        return reports
+
+    # -- reading the state ----------------------------------------------------------------------
+    @property
+    def force(self) -> np.ndarray:
+        """Hydrodynamic force on every particle at the end of the last step, (n, dim) float64
+        (zeros before the first step)."""
+        return np.zeros_like(self.particles.position) if self._last_force is None else self._last_force.copy()
+
+    @property
+    def torque(self) -> np.ndarray:
+        """Hydrodynamic torque on every particle at the end of the last step, (n, 3) float64
+        (zeros before the first step)."""
+        return np.zeros((self.particles.n, 3)) if self._last_torque is None else self._last_torque.copy()
+
+    def velocity_at(self, points) -> np.ndarray:
+        """Fluid velocity at ``points (m, dim)``, (m, dim) float64 (inside a particle: its rigid
+        motion, as the constraints hold it)."""
+        return sample_velocity(self.flow.space, self.x[:self.flow.space.n_u], np.atleast_2d(points))
+
+    def pressure_at(self, points) -> np.ndarray:
+        """Pressure at ``points (m, dim)``, (m,) float64 (P1disc: the value of the cell each point
+        lies in)."""
+        return sample_pressure(self.flow.space, self.x[self.flow.space.n_u:], np.atleast_2d(points))
+
+    def write_fields(self, out, step: int | None = None, fmt: str = "vtu") -> Path:
+        """Write the flow (velocity, pressure, vorticity, owner) and the particles for ParaView
+        into the directory ``out`` (:class:`~fbmflow.io.FieldWriter`), as output number ``step``
+        (default: the step count); returns the directory."""
+        from .io import FieldWriter
+
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        step = self.step_count if step is None else step
+        writer = FieldWriter(out, self.flow.space, start_step=step, fmt=fmt)
+        writer.write(step, self.t, self.x, self.owner(), self.particles, self.force)
+        return out
 
     def owner(self) -> np.ndarray:
         """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
@@ -177,7 +266,7 @@ class Simulation:
     def _sharp(self, V):
         """The sharp boundary on the fine DOF map ``V`` for the current particle state (None for
         the nodal boundary and on coarser multigrid levels); computed once per state."""
-        if self.fbm != "sharp" or V is not self.flow.space.V:
+        if self.fbm.boundary != "sharp" or V is not self.flow.space.V:
             return None
         owner = self._owner(V)  # resets the caches when the particles moved
         if self._sharp_of is None:
@@ -197,75 +286,77 @@ class Simulation:
 
     def _forces(self, owner: np.ndarray, x: np.ndarray, dt: float, about: np.ndarray | None = None):
         """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for the flow ``x``
-        at the end of a step of length ``dt`` from ``self.x``; with ``about`` (a flow), ``x`` is a
-        change of that flow and the result the force's change (linear in ``x``).
+        at the end of a step of length ``dt`` from ``self.x``, by the force estimator; with
+        ``about`` (a flow), ``x`` is a change of that flow and the result the force's change
+        (linear in ``x``). ``owner``: the node owner of the current state (:meth:`owner`).
 
-        The volume and surface forces take the pressure's part where the pressure belongs: on
-        the particles moved back by ``lag dt U`` (``lag``:
+        Estimators that allow it (``lags_pressure``) take the pressure's part where the pressure
+        belongs: on the particles moved back by ``lag dt U`` (``lag``:
         :func:`~fbmflow.flow.time_schemes.pressure_lag`, one half with Crank–Nicolson; ``U`` the
-        velocities at the step's start: ``dt U`` is the last step's displacement to first order).
-        Measured (glowinski-free-fall, 4 cells/D, dt 4 / 2 / 1 ms): the settling velocity's
-        plateau moves -0.80 / -0.34 % (volume force) and -0.50 / -0.16 % (surface force) between
-        the time steps with it, +0.78 / +0.53 % (surface, order 0.5) without. Rotation is left
-        out of the lag (none for balls).
+        velocities at the step's start: ``dt U`` is the last step's displacement to first order;
+        docs/method.md, "The pressure's time level"). Rotation is left out of the lag (none for
+        balls).
         """
-        space = self.flow.space
-        n_u = space.n_u
+        n_u = self.flow.space.n_u
         u, p = x[:n_u], x[n_u:]
-        if self.force == "test-function":
-            u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
-            force, torque = self._estimator(owner)(u, p, self.flow.mu, self.flow.rho,
-                                                   u_old=u_old, dt=dt, about=linear)
+        u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
+        est, mu, rho = self.estimator, self.flow.mu, self.flow.rho
+        here = self._rule_here(owner)
+        if not est.lags_pressure or self._pressure_lag == 0.0 or not np.any(self.particles.velocity):
+            force, torque = est.evaluate(here, u, p, mu, rho, u_old=u_old, dt=dt, about=linear)
         else:
-            here = owner if self.force == "volume" else self._estimator(owner)
-            if self._pressure_lag == 0.0 or not np.any(self.particles.velocity):
-                force, torque = self._stress(here, self.particles.position, u, p)
-            else:
-                force, torque = self._stress(here, self.particles.position, u, np.zeros_like(p))
-                behind = self.particles.position - self._pressure_lag * dt * self.particles.velocity
-                force_p, torque_p = self._stress(self._rule_behind(behind), behind, np.zeros_like(u), p)
-                force, torque = force + force_p, torque + torque_p
+            force, torque = est.evaluate(here, u, np.zeros_like(p), mu, rho, u_old=u_old, dt=dt, about=linear)
+            behind = self.particles.position - self._pressure_lag * dt * self.particles.velocity
+            force_p, torque_p = est.evaluate(self._rule_behind(behind), np.zeros_like(u), p, mu, rho,
+                                             u_old=u_old, dt=dt, about=linear)
+            force, torque = force + force_p, torque + torque_p
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
-    def _stress(self, rule, centres: np.ndarray, u: np.ndarray, p: np.ndarray):
-        """Force and torque of the stress of ``(u, p)`` on the particles at ``centres``: by the
-        volume rule with ``rule`` their node owner, or by ``rule`` a SurfaceForces."""
-        if self.force == "volume":
-            return hydrodynamic_forces(self.flow.space, rule, centres, u, p, self.flow.mu)
-        return rule(u, p, self.flow.mu)
+    def _rule_here(self, owner: np.ndarray):
+        """The estimator's rule for the current particle state (computed once per state)."""
+        if self._estimator_of is None:
+            p = self.particles
+            self._estimator_of = self.estimator.prepare(self.flow.space, p.position, p.shapes, p.rotations(),
+                                                        owner=owner, walls=self._wall_nodes())
+        return self._estimator_of
 
     def _rule_behind(self, centres: np.ndarray):
-        """Node owner (volume force) or SurfaceForces of the particles moved to ``centres``,
-        built once per centres."""
+        """The estimator's rule for the particles moved to ``centres``, built once per centres."""
         if self._behind is None or not np.array_equal(self._behind[0], centres):
-            pts = self.particles
-            rule = (node_owner(self.flow.space.V, centres, pts.shapes, pts.rotations()) if self.force == "volume"
-                    else SurfaceForces(self.flow.space, centres, pts.shapes))
+            p = self.particles
+            rule = self.estimator.prepare(self.flow.space, centres, p.shapes, p.rotations(),
+                                          walls=self._wall_nodes())
             self._behind = (centres.copy(), rule)
         return self._behind[1]
 
-    def _estimator(self, owner: np.ndarray):
-        """The force's test functions (TestFunctionForces) or surface rule (SurfaceForces) for the
-        current particle state (computed once per state)."""
-        if self._estimator_of is None:
-            p, space = self.particles, self.flow.space
-            if self.force == "surface":
-                self._estimator_of = SurfaceForces(space, p.position, p.shapes)
-            else:
-                fixed = self.flow.fine.boundary_constraints.dofs
-                walls = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
-                self._estimator_of = TestFunctionForces(space, owner, p.position, p.shapes, p.rotations(), walls)
-        return self._estimator_of
+    def _wall_nodes(self) -> np.ndarray:
+        """Velocity nodes whose every component the boundary conditions hold, (k,) int64."""
+        if self._walls_of is None:
+            space = self.flow.space
+            fixed = self.flow.fine.boundary_constraints.dofs
+            self._walls_of = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
+        return self._walls_of
 
-    def _flow_and_forces(self, dt: float, guess: np.ndarray | None = None, rtol: float | None = None):
-        x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol)
+    # -- what the coupling schemes use (fbmflow.coupling.schemes) ----------------------------------
+    def flow_and_forces(self, dt: float, velocities: Particles | None = None, guess: np.ndarray | None = None,
+                        rtol: float | None = None):
+        """Solve the flow over the step ``dt`` from the current state, the particles at their
+        current positions moving with the velocities of ``velocities`` (default: their own), from
+        the initial guess ``guess`` (n_dofs,) with Newton's residual reduction ``rtol`` (default:
+        the solver settings'). Returns ``(x (n_dofs,), Newton reports, force (n, dim), torque
+        (n, 3))``; the state itself is not changed."""
+        self._constraint_state = velocities
+        try:
+            x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol)
+        finally:
+            self._constraint_state = None
         force, torque = self._forces(self._owner(self.flow.space.V), x, dt)
         return x, reports, force, torque
 
-    def _integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
-        """New particle state under the hydrodynamic and the repulsive forces (the latter at the
-        positions of the start of the step) and, with hard contact (unless ``contact`` is False),
-        the contact impulses."""
+    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
+        """New particle state under the hydrodynamic ``force (n, dim)`` and ``torque (n, 3)``, the
+        repulsive forces (at the positions of the start of the step) and, with hard contact
+        (unless ``contact`` is False), the contact impulses; the state itself is not changed."""
         previous = None  # the trapezoidal rule's forces at the start of the step (None: no history)
         if self._last_force is not None:
             previous = self._last_force, self._last_torque
@@ -280,6 +371,27 @@ class Simulation:
         lin, ang = accelerations(self.particles, force, torque, self.gravity, self.flow.rho)
         new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
         return new
+
+    def velocity_gain(self, dt: float) -> np.ndarray:
+        """``d v_new / d f`` of :meth:`integrate` over ``dt`` (:func:`~fbmflow.particles.velocity_gain`),
+        (n, r, r) float64."""
+        return velocity_gain(self.particles, dt, self.integrator, history=self._last_force is not None)
+
+    def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float):
+        """The flow's linear response to a unit rigid motion of every free component and its
+        force: ``free (n, r)`` bool selects the ``k`` generalised velocity components; returns
+        ``dX (k, n_dofs)``, ``dF (k, n, dim)`` and ``dT (k, n, 3)`` about the flow ``x`` solved
+        last (:meth:`~fbmflow.flow.NavierStokesProblem.lifting_response`)."""
+        p, space = self.particles, self.flow.space
+        owner = self._owner(space.V)
+        sharp = self._sharp(space.V)
+        row_liftings = None if sharp is None else sharp.ghosts.liftings(free)
+        dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free), row_liftings)
+        dF = np.zeros((len(dX), p.n, p.dim))
+        dT = np.zeros((len(dX), p.n, 3))
+        for k, dx in enumerate(dX):
+            dF[k], dT[k] = self._forces(owner, dx, dt, about=x)
+        return dX, dF, dT
 
     def state(self) -> dict:
         """Everything a restart needs, as arrays and numbers: flow ``x``, time, step count, the
@@ -318,28 +430,26 @@ class Simulation:
         else:
             self._last_force = self._last_torque = None
         if self.contact is not None:
-            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items() if k.startswith("contact_")})
+            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
+                                    if k.startswith("contact_")})
         self._owner_of = None
         self.flow.forget_linearisation()
 
-    def step(self, dt: float) -> StepReport:
-        """Advance flow and particles over ``dt``; ConvergenceError names the step and time."""
+    def step(self, dt: float | None = None) -> StepReport:
+        """Advance flow and particles over ``dt`` [s] (default :attr:`dt`) by the coupling
+        scheme, then contact; ConvergenceError names the step and time."""
+        dt = self.dt if dt is None else float(dt)
+        if not dt > 0.0:
+            raise ValueError(f"the time step must be positive, got {dt}")
         where = f"step {self.step_count + 1} (t = {self.t:.6g} -> {self.t + dt:.6g})"
-        flow_solves = 1
         self._contact_report = None
         work = dataclasses.replace(self.flow.linear_work)
         try:
-            loose = (self.coupling == "implicit" and self.first_solve_rtol is not None
-                     and not self.particles.fixed.all())
-            x, reports, force, torque = self._flow_and_forces(dt, rtol=self.first_solve_rtol if loose else None)
-            if self.coupling == "implicit":
-                x, reports, force, torque, flow_solves = self._subiterate(dt, x, reports, force, torque,
-                                                                          exact=not loose)
-            new = self._integrate(force, torque, dt)
+            solved = self.coupling.advance(self, dt)
+            new = self.integrate(solved.force, solved.torque, dt)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
-        finally:
-            self._constraint_state = None
+        x, reports, force, torque = solved.x, solved.reports, solved.force, solved.torque
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(x))):
             raise ConvergenceError(f"{where}: non-finite state")
         sharp = self._sharp(self.flow.space.V)  # of the positions the flow was solved with
@@ -354,7 +464,7 @@ class Simulation:
         self.step_count += 1
         return StepReport(self.step_count, self.t, sum(r.iterations for r in reports), force, torque,
                           self.particles.position.copy(), self.particles.velocity.copy(),
-                          flow_solves, self._contact_report, self.flow.linear_work.since(work))
+                          solved.flow_solves, self._contact_report, self.flow.linear_work.since(work))
 
     def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:
         """Warn once when a step moves a particle more than a finest cell: the fictitious
@@ -365,92 +475,9 @@ class Simulation:
         k = int(np.argmax(cells))
         if cells[k] > 1.0:
             self._warned_fast = True
-            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above about "
-                        "one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less", self.step_count + 1,
-                        k, cells[k], dt, dt / cells[k])
-
-    def _subiterate(self, dt, x, reports, force, torque, exact: bool = True):
-        """Newton iteration on the particles' new generalised velocities ``v``.
-
-        The fixed point is ``v = Phi(v)``: integrate the particles with the forces of the flow
-        constrained by ``v``. Its Jacobian ``I - G S`` is built once per step from the flow's
-        response to unit rigid motions of each particle (``S = d f / d v``, the discrete added
-        mass and drag, :meth:`NavierStokesProblem.lifting_response`) and the particles' gain
-        ``G = d v_new / d f``; each sub-iteration then costs one flow solve, whose Newton iteration
-        starts from the flow those responses predict (``x + step dX``; its stopping rule stays
-        relative to the residual at the step's start). The iteration stops
-        when the error left after the next Newton step on ``v`` is below ``coupling_tol`` times
-        the velocity scale, estimated from the contraction ``theta = |step_k| / |step_(k-1)|`` as
-        ``theta / (1 - theta) |step_k|`` (Deuflhard's estimate; ``|step_0|`` itself for the first).
-        That last step is taken without a further flow solve, the flow and the forces following
-        it linearly through the same responses (``x + sum_k step_k dx_k``), if the flow's error in
-        doing so is below the tolerance too. The responses belong to the first flow of the step;
-        how much the flow's response bent over the previous step (``drift``, the part of its
-        change that they do not explain, largest over the velocity DOFs) gives that error as
-        ``2 drift |step_k| / |step_(k-1)|`` (a quadratic model). Otherwise the step is solved.
-        Two flow solves per time step are typical near density ratio 1 (the first from the
-        explicit prediction, the second after one Newton step, which contracts about 1e-4 times),
-        three at larger ratios. Broyden's rank-one
-        update corrects the Jacobian from each sub-iteration's change (the forces are not exactly
-        linear in ``v``). Contact is left out of the iterated map (its non-smooth response, a
-        constraint switching on and off between sub-iterations, stalls the iteration): it acts
-        once the coupling has converged, with the converged hydrodynamic force.
-        """
-        p, space = self.particles, self.flow.space
-        new = self._integrate(force, torque, dt, contact=False)
-        gain = velocity_gain(p, dt, self.integrator, history=self._last_force is not None)
-        r = gain.shape[1]
-        free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
-        free[~p.fixed] = symmetric_motion(p.dim, self.symmetry)
-        owner = self._owner(space.V)
-        sharp = self._sharp(space.V)
-        row_liftings = None if sharp is None else sharp.ghosts.liftings(free)
-        dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free), row_liftings)
-        sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every iterated component k
-        dF = np.zeros((len(dX),) + force.shape)
-        dT = np.zeros((len(dX),) + torque.shape)
-        for k, dx in enumerate(dX):
-            dF[k], dT[k] = self._forces(owner, dx, dt, about=x)
-            sens[:, :, k] = np.column_stack([dF[k], dT[k][:, 2:] if p.dim == 2 else dT[k]])
-        J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
-        guess = p.copy()
-        v_guess = pack_velocities(p)
-        # velocity scale of the convergence test: the step's velocities, at least what gravity adds
-        floor = max(float(np.linalg.norm(v_guess)), float(np.linalg.norm(self.gravity)) * dt, 1e-30)
-        all_reports = list(reports)
-        res_old = step = size_old = x_old = drift = None
-        for k in range(self.max_subiterations):
-            res = (pack_velocities(new) - v_guess)[free]
-            scale = max(float(np.linalg.norm(pack_velocities(new))), floor)
-            if step is not None:  # Broyden's update: contact and nonlinearity bend the map
-                dG = res_old - res
-                if step @ step > 0.0:  # (a zero step, e.g. a particle in balance, teaches nothing)
-                    J += np.outer(dG - J @ step, step) / (step @ step)
-                # the flow's change over the last step that the responses do not explain
-                drift = float(np.abs(x - x_old - step @ dX)[:space.n_u].max())
-            step = np.linalg.solve(J, res)
-            size = float(np.linalg.norm(step))
-            if k == 0 or size_old == 0.0:  # no contraction measured: the step bounds both errors
-                error = flow_error = size
-            else:
-                theta = size / size_old  # contraction of the iteration
-                error = size if theta >= 1.0 else min(size, theta / (1.0 - theta) * size)
-                flow_error = 2.0 * drift * size / size_old
-            log.debug("coupling sub-iteration %d: relative step %.3e, error after it %.3e, of the "
-                      "flow following it %.3e", k, size / scale, error / scale, flow_error / scale)
-            if (k > 0 or exact) and max(error, flow_error) <= self.coupling_tol * scale:  # the last step,
-                # without a solve (not from a first flow solved to a looser tolerance)
-                return (x + step @ dX, all_reports, force + np.tensordot(step, dF, 1),
-                        torque + np.tensordot(step, dT, 1), k + 1)
-            res_old, size_old, x_old = res, size, x
-            v_guess[free] += step
-            unpack_velocities(guess, v_guess)
-            self._constraint_state = guess
-            x, reports, force, torque = self._flow_and_forces(dt, guess=x + step @ dX)
-            all_reports += reports
-            new = self._integrate(force, torque, dt, contact=False)
-        raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
-                               f"sub-iterations (last step {np.linalg.norm(step) / scale:.1e})")
+            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above "
+                        "about one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less",
+                        self.step_count + 1, k, cells[k], dt, dt / cells[k])
 
 
 def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple):
@@ -463,7 +490,8 @@ def _check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple
             np.isclose(particles.position[:, a], mesh.upper[a], atol=tol)
         if not on.all():
             raise ValueError(f"symmetry plane with normal axis {a}: particles {np.flatnonzero(~on).tolist()} "
-                             "are not centred on it; put their centres on the domain face or drop the symmetry")
+                             "are not centred on it; put their centres on the domain face or drop the "
+                             "symmetry")
         if gravity[a] != 0.0:
             raise ValueError(f"symmetry plane with normal axis {a}: gravity has a component {gravity[a]} "
                              "across it; the motion would not be symmetric")
@@ -488,8 +516,8 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
         out = np.flatnonzero((X[:, a] - r < lo - tol) | (X[:, a] + r > hi + tol))
         if out.size:
             k = out[0]
-            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside the "
-                             f"domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
+            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside "
+                             f"the domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
     if radius is not None and n > 1:
         from scipy.spatial import cKDTree
         pairs = cKDTree(X).query_pairs(2.0 * float(radius.max()), output_type="ndarray")
@@ -498,8 +526,9 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
             bad = np.flatnonzero(gap < -1e-9 * radius[pairs].sum(axis=1))
             if bad.size:
                 i, j = pairs[bad[0]]
-                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres {X[i].tolist()} "
-                                 f"and {X[j].tolist()}){_more(bad)}; place them at least a diameter apart")
+                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres "
+                                 f"{X[i].tolist()} and {X[j].tolist()}){_more(bad)}; place them at least a "
+                                 "diameter apart")
     axes = mesh.axis_coordinates
     if axes is not None:  # the local cell size where each particle sits
         h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
@@ -507,17 +536,116 @@ def _check_placement(mesh, particles: Particles, symmetry: tuple):
         small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
         if small.size:
             k = small[0]
-            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller than "
-                             f"the velocity-node spacing, half the cell it sits in (cell size {h[k]:.4g})"
-                             f"{_more(small)}: it can cover no velocity node and feel no drag; refine the mesh "
-                             "(cells of at most two diameters; 4 or more cells per diameter for accurate "
-                             "forces) or enlarge the particles")
+            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller "
+                             "than the velocity-node spacing, half the cell it sits in (cell size "
+                             f"{h[k]:.4g}){_more(small)}: it can cover no velocity node and feel no drag; "
+                             "refine the mesh (cells of at most two diameters; 4 or more cells per diameter "
+                             "for accurate forces) or enlarge the particles")
 
 
 def _more(indices: np.ndarray) -> str:
     return f" (and {indices.size - 1} more)" if indices.size > 1 else ""
 
 
-COUPLINGS = ("explicit", "implicit")
-FBM_BOUNDARIES = ("nodes", "sharp")
-FORCES = ("volume", "test-function", "surface")
+def _walls(mesh, particles: Particles, symmetry: tuple):
+    """The domain faces ``(axis, side)`` that are walls for contact and repulsion: all of them
+    (None) without mirror planes, else all but the faces the particles are centred on."""
+    if not symmetry:
+        return None
+    walls = []
+    for a in range(mesh.dim):
+        for side, face in enumerate((mesh.lower[a], mesh.upper[a])):
+            on_plane = a in symmetry and np.allclose(particles.position[:, a], face,
+                                                     atol=1e-9 * (mesh.upper[a] - mesh.lower[a]))
+            if not on_plane:
+                walls.append((a, side))
+    return walls
+
+
+#: unknowns up to which ``solver.linear = "auto"`` keeps the direct solver in 3D, with PARDISO and
+#: with SuperLU (whose 3D fill grows much faster); multigrid above (2D: always direct)
+DIRECT_UP_TO_3D = {"pardiso": 150_000, "superlu": 50_000}
+
+
+def choose_linear_solver(solver: SolverParams, mesh):
+    """The linear solver of a particulate flow: ``solver.linear_solver()``, with ``"auto"``
+    resolved to ``"direct"``, or to multigrid for 3D meshes above :data:`DIRECT_UP_TO_3D`
+    unknowns (ten-cate level 1 and finer: benchmarks/results/tencate_solvers.md)."""
+    if solver.linear != "auto":
+        return solver.linear_solver()
+    limit = DIRECT_UP_TO_3D["pardiso" if pardiso_available() else "superlu"]
+    if mesh.dim == 3 and FlowSpace.estimate_dofs(mesh) > limit:
+        return dataclasses.replace(solver, linear="multigrid").linear_solver()
+    return "direct"
+
+
+class InsufficientMemory(ParamError):
+    """A run whose linear solver would need more memory than the machine has available."""
+
+
+#: peak resident memory of a run by (dimension, solver): ``(c, n_ref, e)``, the memory per unknown
+#: ``c`` [bytes] at ``n_ref`` unknowns, growing as ``(n / n_ref)^e`` (a factorisation fills more
+#: than linearly: nested dissection ``O(n^(4/3))`` in 3D, ``O(n log n)`` in 2D; multigrid is
+#: linear). Fitted, with a margin, to peak resident sets of whole runs (two time steps) measured
+#: on x86-64 Linux: ten-cate 64 547 / 278 739 unknowns PARDISO 2.0 / 10.3 GB, multigrid 0.8 /
+#: 2.9 GB (benchmarks/results/tencate_solvers.md); sedimentation-3d 32 707 unknowns PARDISO
+#: 1.22 GB, SuperLU 0.91 GB; glowinski-free-fall 17 106 / 52 818 / 164 946 unknowns PARDISO or
+#: SuperLU 0.33 / 0.55 / 1.30 GB, multigrid 0.81 GB at 164 946.
+MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (6_500, 165_000, 0.25),
+                (2, "multigrid"): (3_500, 165_000, 0.0), (3, "pardiso"): (40_000, 280_000, 0.15),
+                (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (11_000, 280_000, 0.0)}
+#: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
+MEMORY_BASE = 400e6
+
+
+def estimate_memory(n_unknowns: int, dim: int, linear_solver) -> tuple[float, str]:
+    """Rough, conservative peak memory of a run: ``(bytes, the solver in words)``.
+
+    ``linear_solver``: a solver object (``needs_hierarchy`` marks multigrid, ``backend`` the direct
+    solver's ``"pardiso"``, ``"superlu"`` or ``"auto"``) or the name ``"direct"`` or
+    ``"multigrid"``. The estimate is ``MEMORY_BASE + n c (n / n_ref)^e`` with ``(c, n_ref, e)``
+    from :data:`MEMORY_MODEL`; it is meant to tell a run that fits from one that cannot, not to
+    predict the figure to better than a few tens of per cent.
+    """
+    name = linear_solver if isinstance(linear_solver, str) else getattr(linear_solver, "name", "direct")
+    if name == "multigrid" or getattr(linear_solver, "needs_hierarchy", False):
+        kind, words = "multigrid", "multigrid"
+    else:
+        kind = getattr(linear_solver, "backend", "auto")
+        kind = auto_backend(dim, n_unknowns) if kind == "auto" else kind
+        words = f"the direct solver ({'PARDISO' if kind == 'pardiso' else 'SuperLU'})"
+    c, n_ref, growth = MEMORY_MODEL[(dim, kind)]
+    return MEMORY_BASE + n_unknowns * c * (n_unknowns / n_ref) ** growth, words
+
+
+def available_memory(meminfo="/proc/meminfo") -> float | None:
+    """Memory available to a new process [bytes]: ``MemAvailable`` of ``meminfo`` (Linux); None
+    where it cannot be read (no check is made then)."""
+    try:
+        for line in Path(meminfo).read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_memory(n_unknowns: int, dim: int, linear_solver) -> float:
+    """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` exceeds the
+    available memory, warn when it exceeds half of it; returns the estimate [bytes]. Called
+    before the first solve, so that a run too large for the machine stops with the figure and a
+    remedy instead of a MemoryError, or the kernel's out-of-memory killer, in the factorisation."""
+    need, words = estimate_memory(n_unknowns, dim, linear_solver)
+    have = available_memory()
+    if have is None:
+        return need
+    figure = f"{words} needs about {need / 1e9:.1f} GB for {n_unknowns} unknowns ({dim}D)"
+    if need > have:
+        remedy = "a coarser mesh (a lower --level)"
+        if words != "multigrid":
+            mg, _ = estimate_memory(n_unknowns, dim, "multigrid")
+            remedy += f" or solver.linear = multigrid (about {mg / 1e9:.1f} GB)"
+        raise InsufficientMemory(f"{figure}, more than the {have / 1e9:.1f} GB available; use {remedy}")
+    if need > 0.5 * have:
+        log.warning("%s, more than half of the %.1f GB available", figure, have / 1e9)
+    return need

@@ -15,10 +15,11 @@ def _run(cs, p, acc, h, steps):
 
 
 def _momentum_energy(p):
-    I = p.inertia_world()
+    inertia = p.inertia_world()
     w = np.reshape(p.angular_velocity, (p.n, -1))
-    rot = 0.5 * np.einsum("ni,nij,nj->", w, I, w)
-    return (p.mass[:, None] * p.velocity).sum(axis=0), 0.5 * (p.mass * (p.velocity**2).sum(axis=1)).sum() + rot
+    rot = 0.5 * np.einsum("ni,nij,nj->", w, inertia, w)
+    momentum = (p.mass[:, None] * p.velocity).sum(axis=0)
+    return momentum, 0.5 * (p.mass * (p.velocity**2).sum(axis=1)).sum() + rot
 
 
 @pytest.mark.parametrize("offset", [0.0, 0.4])
@@ -137,8 +138,10 @@ def test_warm_start_state_round_trip_and_validation():
         other.set_state(bad)
 
 
-@pytest.mark.parametrize("kwargs, match", [({"restitution": 1.5}, "restitution"), ({"friction": -1.0}, "non-negative"),
-                                           ({"iterations": 0}, "iterations"), ({"broadphase": "kd"}, "broadphase")])
+@pytest.mark.parametrize("kwargs, match", [({"restitution": 1.5}, "restitution"),
+                                           ({"friction": -1.0}, "non-negative"),
+                                           ({"iterations": 0}, "iterations"),
+                                           ({"broadphase": "kd"}, "broadphase")])
 def test_bad_settings_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
         ContactSet(**kwargs)
@@ -169,7 +172,9 @@ def test_lubrication_slows_an_approach_as_the_film_law_says(dim):
             break
     assert 0.0 < gap < 0.05
     Rs = R / 2
-    c = lambda g: lub.coefficient(np.array([g]), np.array([R]), np.array([R]), dim)[0]
+    def c(g):
+        return lub.coefficient(np.array([g]), np.array([R]), np.array([R]), dim)[0]
+
     expected = u0 - quad(c, gap, 0.4, limit=200)[0] / m_red
     assert expected > 0.0 and u == pytest.approx(expected, rel=0.01)
     if dim == 3:  # closed form of the same integral

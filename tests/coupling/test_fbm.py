@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from fbmflow.coupling import cut_cells, hydrodynamic_forces, node_owner, rigid_body_constraints
-from fbmflow.coupling import _kernels as ck
 from fbmflow.fem import FlowSpace
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball, Box, Ellipsoid, Particles, TriangulatedSurface
@@ -33,7 +32,8 @@ def test_owner_on_a_graded_mesh_matches_brute_force(dim):
     found by binary search on the node axes miss no inside node, a ball near the box corner
     included."""
     fine = np.linspace(0.2, 0.4, 11)
-    axes = [np.concatenate([[0.0, 0.1], fine, [0.6, 1.0]])] + [np.array([0.0, 0.15, 0.4, 0.5, 0.7, 1.0])] * (dim - 1)
+    axes = ([np.concatenate([[0.0, 0.1], fine, [0.6, 1.0]])]
+            + [np.array([0.0, 0.15, 0.4, 0.5, 0.7, 1.0])] * (dim - 1))
     space = FlowSpace(StructuredMesh.rectilinear(axes))
     centres = np.array([[0.31] + [0.45] * (dim - 1), [0.93] + [0.08] * (dim - 1)])
     shapes = [Ball(0.07, dim), Ball(0.12, dim)]
@@ -74,7 +74,8 @@ def test_owner_of_a_triangulated_box_equals_the_box():
     surface = TriangulatedSurface(corners * h, tris)
     space = FlowSpace(StructuredMesh.box((8, 8, 8)))
     centre = np.array([[0.52, 0.47, 0.5]])
-    assert np.array_equal(node_owner(space.V, centre, [surface]), node_owner(space.V, centre, [Box(tuple(h))]))
+    box = node_owner(space.V, centre, [Box(tuple(h))])
+    assert np.array_equal(node_owner(space.V, centre, [surface]), box)
 
 
 def test_rigid_body_constraint_values():
@@ -216,7 +217,8 @@ def test_orphaned_pressure_modes_span_the_null_space(centre, radius):
     cylinder = Cylinder(radius, 2.0)
 
     def obstacle(V, t):
-        return rigid_body_constraints(V, node_owner(V, centres, [cylinder]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+        return rigid_body_constraints(V, node_owner(V, centres, [cylinder]), centres, np.zeros((1, 3)),
+                                      np.zeros((1, 3)))
 
     bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
     flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
@@ -323,20 +325,20 @@ def test_surface_force_of_exact_fields_is_the_divergence_theorem(dim):
     space = FlowSpace(StructuredMesh.box((4,) * dim, upper=(0.5,) * dim))
     centre, axes = np.array([[0.0] * (dim - 1) + [0.25]]), tuple(range(dim - 1))
     p = _quadratic_shear_and_linear_pressure(space, mu, G)[1]
-    F, T = mirror_images(*SurfaceForces(space, centre, [Ball(0.2, dim)])(np.zeros(dim * space.n_v), p, mu), axes)
+    half = SurfaceForces(space, centre, [Ball(0.2, dim)])(np.zeros(dim * space.n_v), p, mu)
+    F, T = mirror_images(*half, axes)
     np.testing.assert_allclose(F[0, -1], G * Ball(0.2, dim).volume, rtol=1e-10)
     np.testing.assert_allclose(F[0, :-1], 0.0, atol=1e-12)
 
 
 def test_surface_force_is_for_balls_with_the_sharp_boundary():
     from fbmflow.coupling import SurfaceForces
-    from fbmflow.flow import NoSlip
+    from fbmflow.params import FictitiousBoundaryParams, FluidParams
     from fbmflow.simulation import Simulation
     space = FlowSpace(StructuredMesh.box((4, 4)))
     with pytest.raises(ValueError, match="balls"):
         SurfaceForces(space, [[0.5, 0.5]], [Box((0.1, 0.1))])
     mesh = StructuredMesh.box((4, 4))
-    bc = {t: NoSlip() for t in mesh.tags}
-    with pytest.raises(ValueError, match="fbm='sharp'"):
-        Simulation(mesh, 0.1, bc, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), [0.0, -9.8],
-                   fbm="nodes", force="surface")
+    with pytest.raises(ValueError, match="fbm.boundary = 'sharp'"):
+        Simulation(mesh, Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.5, 0.5]]), FluidParams(),
+                   fbm=FictitiousBoundaryParams(boundary="nodes", force="surface"))

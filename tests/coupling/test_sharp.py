@@ -38,7 +38,8 @@ def test_projection_is_the_closest_surface_point(shape):
 
 def _setup(dim, level=2):
     n = 4 * 2**level
-    mesh = StructuredMesh.rectilinear([np.linspace(0.0, 1.0, n + 1) ** 1.1] + [np.linspace(0.0, 1.0, n + 1)] * (dim - 1))
+    mesh = StructuredMesh.rectilinear([np.linspace(0.0, 1.0, n + 1) ** 1.1]
+                                      + [np.linspace(0.0, 1.0, n + 1)] * (dim - 1))
     space = FlowSpace(mesh)
     centres = np.array([[0.47] + [0.52] * (dim - 1)])
     shapes = [Ball(0.23, dim)]
@@ -124,8 +125,8 @@ def test_pressure_extension_continues_a_linear_pressure_exactly(dim):
     c, s = space.Q.centre, space.Q.scale
     p = np.zeros(space.n_p)  # P1disc coefficients of p(x) = a + b . x on every cell
     p[0::npl] = a + c @ b
-    for l in range(dim):
-        p[l + 1::npl] = b[l] * s[:, l]
+    for k in range(dim):
+        p[k + 1::npl] = b[k] * s[:, k]
     assert ext.dofs.size > 0
     np.testing.assert_allclose((ext.matrix @ p)[ext.dofs], p[ext.dofs], atol=1e-13)
     assert np.abs(ext.residual(p)).max() < 1e-13
@@ -147,10 +148,11 @@ def test_replace_rows_kernel_matches_numpy():
     B = A.copy()
     assert fk.replace_rows(B.indptr, B.indices, B.data, rows, R.indptr, R.indices, R.data)
     np.testing.assert_array_equal(B.toarray(), ref)
-    outside = sp.csr_matrix((np.array([9.0]), (np.array([0]), np.array([np.setdiff1d(np.arange(12), A[2].indices)[0]]))),
-                            shape=(1, 12))
+    column = np.setdiff1d(np.arange(12), A[2].indices)[0]
+    outside = sp.csr_matrix((np.array([9.0]), (np.array([0]), np.array([column]))), shape=(1, 12))
     C = A.copy()
-    assert not fk.replace_rows(C.indptr, C.indices, C.data, rows[:1], outside.indptr, outside.indices, outside.data)
+    assert not fk.replace_rows(C.indptr, C.indices, C.data, rows[:1], outside.indptr, outside.indices,
+                               outside.data)
     np.testing.assert_array_equal(C.toarray(), A.toarray())  # all or nothing
     written = RowConstraints(rows[:1], outside, np.zeros(1)).write_rows(A.copy(), np.array([2.0]))
     expected = A.toarray()
@@ -214,7 +216,8 @@ def test_channel_over_a_flat_face_is_far_more_accurate_than_the_nodal_boundary()
         for n in (8, 16, 32):
             mesh = StructuredMesh.box((n, n), periodic=(True, False))
             problem = NavierStokesProblem(mesh, 1.0, {"ymin": NoSlip(), "ymax": NoSlip()}, convection=False,
-                                          body_force=lambda x, t: np.column_stack([np.ones(len(x)), 0 * x[:, 0]]),
+                                          body_force=lambda x, t: np.column_stack([np.ones(len(x)),
+                                                                                   0 * x[:, 0]]),
                                           linear_solver="direct",
                                           extra_constraints=FixedObstacles([box], centres, boundary))
             x, _ = problem.solve_steady()
@@ -233,28 +236,26 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
     derivative of the solved flow (central differences), in a closed box, where the sharp
     boundary's continuity rows make the pressure border's left null vector unknown and the
     direct solver solves the bordered system exactly (balancing alone was 2-35 % off)."""
-    from fbmflow.coupling import rigid_liftings
-    from fbmflow.flow.time_schemes import advance
+    from fbmflow.params import CouplingParams, FictitiousBoundaryParams, FluidParams, SolverParams, TimeParams
     from fbmflow.particles import Particles
     from fbmflow.simulation import Simulation
 
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
-    sim = Simulation(mesh, 0.5, {t: NoSlip() for t in mesh.tags}, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
-                     [0.0, -9.81], coupling="implicit", fbm="sharp")
+    sim = Simulation(mesh, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
+                     FluidParams(density=1.0, viscosity=0.5), time=TimeParams(scheme="backward-euler"),
+                     solver=SolverParams(linear="direct", newton_reuse_jacobian=False),
+                     coupling=CouplingParams(first_rtol=1e-10),
+                     fbm=FictitiousBoundaryParams(boundary="sharp"))
     sim.step(0.01)
-    p, space = sim.particles, sim.flow.space
+    p = sim.particles
 
     def flow(vy):
         state = p.copy()
         state.velocity = p.velocity + [0.0, vy]
-        sim._constraint_state = state
-        x, _ = advance(sim.flow, sim.x, sim.t, 0.01, sim.scheme)
-        sim._constraint_state = None
-        return x
+        return sim.flow_and_forces(0.01, velocities=state)[0]
 
     x0 = flow(0.0)
     free = np.array([[False, True, False]])
-    dX = sim.flow.lifting_response(x0, rigid_liftings(space.V, sim._owner(space.V), p.position, free),
-                                   sim._sharp(space.V).ghosts.liftings(free))[0]
+    dX = sim.rigid_responses(x0, free, 0.01)[0][0]
     fd = (flow(1e-4) - flow(-1e-4)) / 2e-4
     assert np.abs(dX - fd).max() < 1e-7 * np.abs(fd).max()

@@ -12,9 +12,17 @@ quadrature with physical gradients from ``numpy.linalg.inv`` of the Jacobian, sc
 import numpy as np
 import pytest
 
-from fbmflow.fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
-                         assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights)
-from fbmflow.fem import _kernels
+from fbmflow.fem import (
+    FlowSpace,
+    _kernels,
+    assemble_convection,
+    assemble_divergence,
+    assemble_laplace,
+    assemble_load,
+    assemble_mass,
+    expand_to_coupled,
+    pressure_mean_weights,
+)
 from fbmflow.fem.constraints import DirichletConstraints
 from fbmflow.fem.elements import ElementQ1, ElementQ2
 from fbmflow.fem.quadrature import gauss_tensor
@@ -72,8 +80,8 @@ def q1_reference(xi):
         s = np.array([2 * ((v >> d) & 1) - 1 for d in range(dim)], dtype=float)  # x fastest
         f = 0.5 * (1.0 + s[None, :] * xi)  # (nq, d)
         N[:, v] = np.prod(f, axis=1)
-        for l in range(dim):
-            dN[:, v, l] = 0.5 * s[l] * np.prod(np.delete(f, l, axis=1), axis=1)
+        for k in range(dim):
+            dN[:, v, k] = 0.5 * s[k] * np.prod(np.delete(f, k, axis=1), axis=1)
     return N, dN
 
 

@@ -55,8 +55,8 @@ def test_killed_run_resumes_to_the_uninterrupted_final_state(tmp_path):
 
 
 def _short_run(out):
-    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
-                 "--checkpoint-every", "2", "--quiet", "--no-plot", "--out", str(out)]) == 0
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set",
+                 "time.dt=0.005", "--checkpoint-every", "2", "--quiet", "--no-plot", "--out", str(out)]) == 0
 
 
 def test_run_data_and_csv(tmp_path):
@@ -99,8 +99,9 @@ def test_checkpoint_from_before_a_new_parameter_resumes_with_its_default(tmp_pat
     """A checkpoint written before a parameter existed (here: without fbm.force) matches a run
     that has the parameter at its default, and is refused when the run sets another value."""
     from fbmflow.io import load_checkpoint, save_checkpoint
-    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
-                 "--checkpoint-every", "4", "--quiet", "--no-plot", "--out", str(tmp_path)]) == 0
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set",
+                 "time.dt=0.005", "--checkpoint-every", "4", "--quiet", "--no-plot", "--out",
+                 str(tmp_path)]) == 0
     state, meta, extra = load_checkpoint(tmp_path / "checkpoint.h5")
     del meta["params"]["fbm"]["force"]
     save_checkpoint(tmp_path / "checkpoint.h5", state, meta, extra)

@@ -21,7 +21,8 @@ def test_field_and_particle_output_round_trip(tmp_path, scene, level, dim):
             times.append(t)
             n_sub = len(cells[0].data)
             assert point_data["velocity"].shape == (len(points), 3)
-            assert point_data["owner"].shape == (len(points),) and point_data["vorticity"].shape == (len(points),)
+            assert point_data["owner"].shape == (len(points),)
+            assert point_data["vorticity"].shape == (len(points),)
             assert cell_data["pressure"][0].shape == (n_sub,)
             assert np.all(np.isfinite(point_data["velocity"]))
     assert cells[0].type == ("quad" if dim == 2 else "hexahedron")
@@ -40,8 +41,9 @@ def test_field_and_particle_output_round_trip(tmp_path, scene, level, dim):
 def test_vtu_field_output_reads_back(tmp_path):
     import meshio
 
-    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.01", "--set", "time.dt=0.005",
-                 "--fields-every", "1", "--fields-format", "vtu", "--quiet", "--no-plot", "--out", str(tmp_path)]) == 0
+    assert main(["run", "glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.01", "--set",
+                 "time.dt=0.005", "--fields-every", "1", "--fields-format", "vtu", "--quiet", "--no-plot",
+                 "--out", str(tmp_path)]) == 0
     assert (tmp_path / "fields.pvd").read_text().count("<DataSet") == 3
     m = meshio.read(tmp_path / "fields_000002.vtu")
     assert m.cells[0].type == "quad" and m.point_data["velocity"].shape == (len(m.points), 3)

@@ -313,7 +313,8 @@ def test_hierarchy_lengths():
 # -- rectilinear (graded) meshes --------------------------------------------------------------
 @pytest.mark.parametrize("dim", [2, 3])
 def test_rectilinear_axes_survive_refine_and_coarsen(dim):
-    axes = [np.array([0.0, 0.1, 0.15, 0.5, 2.0]), np.array([-1.0, 0.0, 0.25, 1.0]), np.array([0.0, 3.0])][:dim]
+    axes = [np.array([0.0, 0.1, 0.15, 0.5, 2.0]), np.array([-1.0, 0.0, 0.25, 1.0]),
+            np.array([0.0, 3.0])][:dim]
     mesh = StructuredMesh.rectilinear(axes)
     assert mesh.shape == tuple(a.size - 1 for a in axes) and not mesh.is_uniform
     for a, b in zip(mesh.axis_coordinates, axes):

@@ -58,8 +58,9 @@ def test_fixed_particles_do_not_move_and_bad_input_is_rejected():
         Particles.at_rest([Ball(0.1, 2)], -1.0, [[0.0, 0.0]])
 
 
-@pytest.mark.parametrize("scheme, start, order", [("semi-implicit-euler", "exact", 1), ("trapezoidal", "exact", 2),
-                                                  ("trapezoidal", "none", 2), ("trapezoidal", "zero", 1)])
+@pytest.mark.parametrize("scheme, start, order", [("semi-implicit-euler", "exact", 1),
+                                                  ("trapezoidal", "exact", 2), ("trapezoidal", "none", 2),
+                                                  ("trapezoidal", "zero", 1)])
 def test_convergence_order_under_a_time_dependent_force(scheme, start, order):
     """``F(t) = m cos t`` on a sphere from rest (no gravity): ``v = sin t``, ``x = 1 - cos t``.
     The trapezoidal rule (new force at the end of the step, the previous step's at its start)

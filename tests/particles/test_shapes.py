@@ -3,8 +3,7 @@ kernel against a NumPy reference; meshio file round trip; clear errors for bad s
 import numpy as np
 import pytest
 
-from fbmflow.particles import Ball, Box, Cylinder, Ellipsoid, ImplicitShape, TriangulatedSurface
-from fbmflow.particles import _kernels
+from fbmflow.particles import Ball, Box, Cylinder, Ellipsoid, ImplicitShape, TriangulatedSurface, _kernels
 
 
 def box_surface(h, centre=(0.0, 0.0, 0.0)):

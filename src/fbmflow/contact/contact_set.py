@@ -6,7 +6,8 @@ One contact sub-step of length ``h`` (:meth:`ContactSet.substep`):
 1. **kick**: ``v += h a``, ``w += h alpha`` with the accelerations from gravity, buoyancy and the
    hydrodynamic force (held constant over the fluid step);
 2. **detect**: broadphase with margin ``2 h max|v| + R_min / 10`` (every pair that could touch
-   within the sub-step, and near neighbours for the position projection), narrowphase (contact points, normals, gaps ``g``);
+   within the sub-step, and near neighbours for the position projection), narrowphase (contact
+   points, normals, gaps ``g``);
 3. **prepare**: per contact a normal row and (with friction) two tangent rows, their effective
    masses, and the normal target velocity ``u*``: *speculative* ``u* = -g / h`` for ``g > 0``
    (the pair may close its gap in this sub-step but not more) and ``0`` for ``g <= 0``; for a
@@ -83,7 +84,8 @@ class _Rows:
 
 
 def _pad(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(np.pad(a, ((0, 0), (0, 3 - a.shape[1]))) if a.shape[1] < 3 else a, dtype=float)
+    padded = np.pad(a, ((0, 0), (0, 3 - a.shape[1]))) if a.shape[1] < 3 else a
+    return np.ascontiguousarray(padded, dtype=float)
 
 
 def _tangents(n: np.ndarray, dim: int):
@@ -155,7 +157,8 @@ class ContactSet:
 
     def set_state(self, state: dict) -> None:
         keys = np.asarray(state["keys"], dtype=np.int64)
-        normal, friction = np.asarray(state["normal"], dtype=float), np.asarray(state["friction"], dtype=float)
+        normal = np.asarray(state["normal"], dtype=float)
+        friction = np.asarray(state["friction"], dtype=float)
         if normal.shape != keys.shape or friction.shape != (len(keys), 3) or np.any(np.diff(keys) <= 0):
             raise ValueError("contact warm-start state is inconsistent: keys must be sorted and unique, "
                              "with one normal impulse and one friction vector (3,) per key")
@@ -213,7 +216,8 @@ class ContactSet:
         R = p.bounding_radius
         R_j = np.where(rows.cj >= 0, R[np.maximum(rows.cj, 0)], np.inf)
         c = self.lubrication.coefficient(rows.contacts.gap + self.skin, R[rows.ci], R_j, p.dim)
-        _kernels.lubricate(rows.ci, rows.cj, rows.D, rows.Ai, rows.Aj, rows.Bi, rows.Bj, rows.K, c, h, inv_m, v, w)
+        _kernels.lubricate(rows.ci, rows.cj, rows.D, rows.Ai, rows.Aj, rows.Bi, rows.Bj, rows.K, c, h, inv_m,
+                           v, w)
 
     def warm_start(self, rows: _Rows, v, w, inv_m) -> None:
         """Start from the impulses of the same pairs at the last sub-step (stage 4); the friction
@@ -244,7 +248,8 @@ class ContactSet:
         self._stored_friction = np.einsum("mq,mqa->ma", rows.lam[order, 1:], rows.D[order, 1:])
 
     # --- time stepping -------------------------------------------------------------------------
-    def substep(self, p: Particles, lin_acc: np.ndarray, ang_acc: np.ndarray, h: float) -> tuple[Particles, ContactReport]:
+    def substep(self, p: Particles, lin_acc: np.ndarray, ang_acc: np.ndarray,
+                h: float) -> tuple[Particles, ContactReport]:
         """One contact sub-step of length ``h`` [s] (module docstring): the new particle state.
 
         ``lin_acc (n, dim)`` [m/s^2] and ``ang_acc`` ((n,) in 2D, (n, 3) in 3D) [1/s^2] are the
@@ -279,7 +284,8 @@ class ContactSet:
         if contacts.m:
             threshold = self.restitution_threshold
             if threshold is None:
-                threshold = 2.0 * h * float(np.linalg.norm(np.where(free[:, None], lin_acc, 0.0), axis=1).max(initial=0.0))
+                fastest = np.linalg.norm(np.where(free[:, None], lin_acc, 0.0), axis=1).max(initial=0.0)
+                threshold = 2.0 * h * float(fastest)
             rows = self.prepare(p, contacts, v, w, h, inv_m, inv_I, threshold)
             if self.lubrication is not None:
                 self.lubricate(p, rows, v, w, h, inv_m)

@@ -37,7 +37,8 @@ class Planes:
         pts = np.atleast_2d(np.asarray(self.points, dtype=float))
         nrm = np.atleast_2d(np.asarray(self.normals, dtype=float))
         if pts.shape != nrm.shape or pts.shape[1] not in (2, 3):
-            raise ValueError(f"plane points {pts.shape} and normals {nrm.shape} must both be (p, 2) or (p, 3)")
+            raise ValueError(f"plane points {pts.shape} and normals {nrm.shape} must both be (p, 2) or "
+                             "(p, 3)")
         length = np.linalg.norm(nrm, axis=1)
         if np.any(length == 0):
             raise ValueError("plane normals must be non-zero")
@@ -126,4 +127,5 @@ def plane_contacts(p: Particles, part: np.ndarray, plane: np.ndarray, planes: Pl
 
 
 def concatenate(a: Contacts, b: Contacts) -> Contacts:
-    return Contacts(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in ("i", "j", "normal", "point", "gap")))
+    return Contacts(*(np.concatenate([getattr(a, f), getattr(b, f)])
+                      for f in ("i", "j", "normal", "point", "gap")))

@@ -9,8 +9,9 @@ surface gaps ``s_ij = |X_i - X_j| - R_i - R_j`` (particle pairs) and ``s_iw = di
 with ``n`` the unit normal pushing the particle away, ``W_i = |m_i - rho_f V_i| |g|`` the weight
 in the fluid (``W_ij = min(W_i, W_j)``; for a neutrally buoyant particle, or without gravity,
 ``m_i max(|g|, 1 m/s^2)`` instead, so that the force does not vanish) and ``S = strength``: at
-contact the force is ``S`` times the weight, and it starts when the gap falls below ``rho``. This is Glowinski et al.'s quadratic
-law written with the gap (their wall law, via the mirror image, acts over half the range).
+contact the force is ``S`` times the weight, and it starts when the gap falls below ``rho``. This
+is Glowinski et al.'s quadratic law written with the gap (their wall law, via the mirror image,
+acts over half the range).
 Spheres/disks by their bounding radius; other shapes are treated as their bounding balls. Pairs
 are found by brute force (O(N^2)): a broadphase comes with the contact solver.
 """

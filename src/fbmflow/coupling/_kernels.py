@@ -41,8 +41,8 @@ def fbm_force_torque(cells, owner, n_particles, centres, u, p, mu, cell_dofs, ph
                     dof = cell_dofs[c, a]
                     for k in range(d):
                         g = 0.0
-                        for l in range(d):
-                            g += dphi[q, a, l] * Jinv[c, q, l, k]
+                        for m in range(d):
+                            g += dphi[q, a, m] * Jinv[c, q, m, k]
                         if owner[dof] == i:
                             grad_a[k] += g
                         for j in range(d):

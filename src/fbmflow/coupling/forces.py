@@ -246,7 +246,8 @@ class SurfaceForces:
         for d in np.flatnonzero(mesh.periodic):
             x[:, d] = lower[d] + np.mod(x[:, d] - lower[d], upper[d] - lower[d])
         keep = np.all((x >= lower) & (x <= upper), axis=1)
-        x, self.particle, self.normal, self.arm, self.weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
+        x, self.particle, self.normal = x[keep], particle[keep], normal[keep]
+        self.arm, self.weight = arm[keep], weight[keep]
         self.n_particles, self.space = len(shapes), space
         self.cells, xi = locate(mesh, x)
         _, dphi = space.V.element.tabulate(xi)
@@ -260,14 +261,15 @@ class SurfaceForces:
         local = u.reshape(dim, space.n_v)[:, space.V.cell_dofs[self.cells]]  # (dim, n, n_local)
         grad = np.einsum("ina,nad->nid", local, self.dphi)  # du_i / dx_d
         pressure = np.einsum("nm,nm->n", p.reshape(-1, dim + 1)[self.cells], self.psi)
-        traction = -pressure[:, None] * self.normal + mu * np.einsum("nij,nj->ni", grad + grad.transpose(0, 2, 1),
-                                                                      self.normal)
+        strain = grad + grad.transpose(0, 2, 1)
+        traction = -pressure[:, None] * self.normal + mu * np.einsum("nij,nj->ni", strain, self.normal)
         traction *= self.weight[:, None]
         if dim == 2:
             moment = np.zeros((len(traction), 3))
             moment[:, 2] = self.arm[:, 0] * traction[:, 1] - self.arm[:, 1] * traction[:, 0]
         else:
             moment = np.cross(self.arm, traction)
-        force = np.stack([np.bincount(self.particle, traction[:, d], self.n_particles) for d in range(dim)], -1)
+        force = np.stack([np.bincount(self.particle, traction[:, d], self.n_particles) for d in range(dim)],
+                         -1)
         torque = np.stack([np.bincount(self.particle, moment[:, d], self.n_particles) for d in range(3)], -1)
         return force, torque

@@ -62,7 +62,8 @@ def periodic_offset(V: DofMap, x: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return rel
 
 
-def node_owner(V: DofMap, centres: np.ndarray, shapes: list, rotations: np.ndarray | None = None) -> np.ndarray:
+def node_owner(V: DofMap, centres: np.ndarray, shapes: list,
+               rotations: np.ndarray | None = None) -> np.ndarray:
     """Particle owning every Q2 node (-1: fluid; the lowest index where particles overlap),
     (n_dofs,) int64. Candidate nodes of all particles at once; one vectorised inside test per
     distinct shape object.

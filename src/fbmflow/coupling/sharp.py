@@ -89,7 +89,8 @@ class GhostNodes:
         """Row constraints of every velocity component of the ghost nodes: ``C`` is the scalar
         rows repeated per component, ``g = (1 + a / l) U_b``."""
         value = self.weight[:, None] * _rigid_motion(self.surface, self.particle, velocities, angular)
-        return RowConstraints(self.dofs, sp.block_diag([self.matrix] * self.dim, format="csr"), value.T.ravel())
+        return RowConstraints(self.dofs, sp.block_diag([self.matrix] * self.dim, format="csr"),
+                              value.T.ravel())
 
     def uncovered(self, V: DofMap, owner: np.ndarray, centres: np.ndarray, velocities: np.ndarray,
                   angular: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -162,7 +163,8 @@ class SharpBoundary:
         return DirichletConstraints(rigid.dofs, rigid.values, rows, self.continuity, self.extension)
 
 
-def _rigid_motion(rel: np.ndarray, particle: np.ndarray, velocities: np.ndarray, angular: np.ndarray) -> np.ndarray:
+def _rigid_motion(rel: np.ndarray, particle: np.ndarray, velocities: np.ndarray,
+                  angular: np.ndarray) -> np.ndarray:
     """``U_i + omega_i x rel`` for points at ``rel (n, dim)`` from the centre of their particle."""
     vel = np.asarray(velocities, dtype=float)[particle].copy()
     if rel.shape[1] == 2:
@@ -275,7 +277,8 @@ def fluid_continuity(space: FlowSpace, owner: np.ndarray, cut: np.ndarray, centr
     return ContinuityRows(cut, data)
 
 
-def pressure_extension(space: FlowSpace, owner: np.ndarray, cut: np.ndarray, centres: np.ndarray) -> PressureExtension:
+def pressure_extension(space: FlowSpace, owner: np.ndarray, cut: np.ndarray,
+                       centres: np.ndarray) -> PressureExtension:
     """Each ``cut`` cell's P1disc pressure continued from a fluid cell (no node owned by a
     particle): among the cells up to two index steps away, the one whose centre lies most nearly
     along the outward direction ``x_c - X_i`` from the centre of the cell's particle. A cut cell
@@ -328,5 +331,6 @@ def _node_spacing(V: DofMap, nodes: np.ndarray) -> np.ndarray:
     for d, axis in enumerate(V.lattice_axes):
         gaps = np.diff(axis)
         i = lat[:, d]
-        out = np.maximum(out, np.maximum(gaps[np.clip(i - 1, 0, gaps.size - 1)], gaps[np.clip(i, 0, gaps.size - 1)]))
+        below, above = gaps[np.clip(i - 1, 0, gaps.size - 1)], gaps[np.clip(i, 0, gaps.size - 1)]
+        out = np.maximum(out, np.maximum(below, above))
     return out

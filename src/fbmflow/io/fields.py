@@ -38,7 +38,8 @@ class _Collection:
         self.path = path
         self.entries: list[tuple[float, str]] = []
         if keep and path.is_file():
-            self.entries = [(float(e.get("timestep")), e.get("file")) for e in ET.parse(path).getroot().iter("DataSet")]
+            self.entries = [(float(e.get("timestep")), e.get("file"))
+                            for e in ET.parse(path).getroot().iter("DataSet")]
 
     def add(self, t: float, name: str) -> None:
         self.entries.append((t, name))
@@ -101,10 +102,12 @@ class FieldWriter:
         if dim == 2:
             w = grad[1][0] - grad[0][1]
         else:
-            w = np.sqrt((grad[2][1] - grad[1][2])**2 + (grad[0][2] - grad[2][0])**2 + (grad[1][0] - grad[0][1])**2)
+            w = np.sqrt((grad[2][1] - grad[1][2])**2 + (grad[0][2] - grad[2][0])**2
+                        + (grad[1][0] - grad[0][1])**2)
         return np.abs(w).ravel(order="F")
 
-    def write(self, step: int, t: float, x: np.ndarray, owner: np.ndarray, particles, force: np.ndarray) -> None:
+    def write(self, step: int, t: float, x: np.ndarray, owner: np.ndarray, particles,
+              force: np.ndarray) -> None:
         """The flow ``x`` and the particles at time ``t`` (output number ``step``)."""
         import meshio
 
@@ -118,8 +121,9 @@ class FieldWriter:
             self._append(t, point, {"pressure": pressure})
         else:
             name = f"fields_{step:06d}.vtu"
-            meshio.write(self.out / name, meshio.Mesh(self.points, [("quad" if dim == 2 else "hexahedron", self.cells)],
-                                                      point_data=point, cell_data={"pressure": [pressure]}))
+            cells = [("quad" if dim == 2 else "hexahedron", self.cells)]
+            meshio.write(self.out / name, meshio.Mesh(self.points, cells, point_data=point,
+                                                      cell_data={"pressure": [pressure]}))
             self._fields.add(t, name)
         n = particles.n
         name = f"particles_{step:06d}.vtu"
@@ -162,7 +166,8 @@ class FieldWriter:
                 f'<Grid Name="step{k}" GridType="Uniform"><Time Value="{t!r}"/>'
                 f'<Topology TopologyType="{self.cell_type}" NumberOfElements="{n_cells}">'
                 f"{item('cells', self.cells.shape, 'Int')}</Topology>"
-                f'<Geometry GeometryType="XYZ">{item("points", (n_pts, 3))}</Geometry>' + "".join(attrs) + "</Grid>")
+                f'<Geometry GeometryType="XYZ">{item("points", (n_pts, 3))}</Geometry>' + "".join(attrs)
+                + "</Grid>")
         self._xdmf.write_text('<?xml version="1.0"?>\n<Xdmf Version="3.0"><Domain>'
                               '<Grid Name="fields" GridType="Collection" CollectionType="Temporal">'
                               + "".join(grids) + "</Grid></Domain></Xdmf>\n")

@@ -20,8 +20,8 @@ import numpy as np
 
 from .checkpoint import CheckpointError
 
-SCALARS = ("step", "t", "newton_iterations", "flow_solves", "linear_solves", "linear_iterations", "linear_sweeps",
-           "linear_time_s", "contacts")
+SCALARS = ("step", "t", "newton_iterations", "flow_solves", "linear_solves", "linear_iterations",
+           "linear_sweeps", "linear_time_s", "contacts")
 ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "torque")
 
 
@@ -77,7 +77,8 @@ def export_csv(h5_path, csv_path) -> Path:
     W = W.reshape(k, n, -1)
     axes = "xyz"[:dim]
     wnames = ["omega_z"] if W.shape[2] == 1 else ["omega_x", "omega_y", "omega_z"]
-    header = ["step", "t", "particle"] + list(axes) + [f"u_{a}" for a in axes] + wnames + [f"F_{a}" for a in axes]
+    header = (["step", "t", "particle"] + list(axes) + [f"u_{a}" for a in axes] + wnames
+              + [f"F_{a}" for a in axes])
     cols = [np.repeat(step, n), np.repeat(t, n), np.tile(np.arange(n), k), *X.reshape(-1, dim).T,
             *V.reshape(-1, dim).T, *W.reshape(k * n, -1).T, *F.reshape(-1, dim).T]
     csv_path = Path(csv_path)

@@ -41,12 +41,12 @@ def accelerations(p: Particles, force: np.ndarray, torque: np.ndarray, gravity: 
     """Linear (n, dim) and angular accelerations ((n,) in 2D, (n, 3) in 3D)."""
     mass = p.mass
     lin = force / mass[:, None] + (1.0 - fluid_density / p.density)[:, None] * gravity[None, :]
-    I = p.inertia_world()
+    inertia = p.inertia_world()
     if p.dim == 2:
-        ang = torque[:, 2] / I[:, 0, 0]
+        ang = torque[:, 2] / inertia[:, 0, 0]
     else:
-        Iw = np.einsum("nij,nj->ni", I, p.angular_velocity)
-        ang = np.linalg.solve(I, (torque - np.cross(p.angular_velocity, Iw))[:, :, None])[:, :, 0]
+        Iw = np.einsum("nij,nj->ni", inertia, p.angular_velocity)
+        ang = np.linalg.solve(inertia, (torque - np.cross(p.angular_velocity, Iw))[:, :, None])[:, :, 0]
     lin[p.fixed] = 0.0
     ang[p.fixed] = 0.0
     return lin, ang
@@ -78,7 +78,8 @@ def symmetric_motion(dim: int, axes) -> np.ndarray:
     return free
 
 
-def velocity_gain(p: Particles, dt: float, scheme: str = "semi-implicit-euler", history: bool = True) -> np.ndarray:
+def velocity_gain(p: Particles, dt: float, scheme: str = "semi-implicit-euler",
+                  history: bool = True) -> np.ndarray:
     """``d v_new / d f``: how the new generalised velocities of :func:`integrate` respond to the
     (new) generalised force ``f = [F, T_z]`` (2D) or ``[F, T]`` (3D); (n, r, r), zero for fixed
     particles: ``dt / M_i`` for the translation, ``dt I_i^{-1}`` (world axes) for the rotation,

@@ -108,7 +108,8 @@ class Particles:
 
     def copy(self) -> "Particles":
         return Particles(list(self.shapes), self.density.copy(), self.position.copy(), self.velocity.copy(),
-                         self.orientation.copy(), self.angular_velocity.copy(), self.fixed.copy(), self._table)
+                         self.orientation.copy(), self.angular_velocity.copy(), self.fixed.copy(),
+                         self._table)
 
 
 def _shape_table(shapes: list) -> dict:

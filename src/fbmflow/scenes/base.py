@@ -37,6 +37,23 @@ class SceneResult:
     linear_solver: str = ""
 
 
+def pyplot():
+    """``matplotlib.pyplot`` on the non-interactive Agg backend (scene plots are files)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path) -> bool:
+    """Lay ``fig`` out, write it to ``path`` (PNG, 120 dpi) and close it; True: a plot was written."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    pyplot().close(fig)
+    return True
+
+
 class Scene:
     """Base class of the built-in scenes (subclasses set the class attributes)."""
 
@@ -145,7 +162,8 @@ class SimulationScene(Scene):
             if files.fields_every:
                 fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
                 if not files.resume:
-                    fields.write(0, sim.t, sim.x, sim.owner(), sim.particles, np.zeros_like(sim.particles.position))
+                    fields.write(0, sim.t, sim.x, sim.owner(), sim.particles,
+                                 np.zeros_like(sim.particles.position))
 
         def checkpoint(step):
             save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
@@ -175,7 +193,8 @@ class SimulationScene(Scene):
                 fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, rep.force)
             if progress:
                 speed = np.linalg.norm(sim.particles.velocity, axis=1).max(initial=0.0)
-                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations, "solves": rep.linear.solves,
+                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations,
+                                                   "solves": rep.linear.solves,
                                                    "linear": rep.linear.iterations, "max|U|": float(speed)})
             if self.stop(params, row):
                 break

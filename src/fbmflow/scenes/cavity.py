@@ -11,10 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fem.functions import sample_velocity
-from ..flow import Dirichlet, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SteadySolverParams, param, section
-from .base import Scene, SceneResult
+from ..params import Section, SteadySolverParams, param, tree
+from .base import Scene, SceneResult, pyplot, save_figure
+from .builder import flow_problem, steady_result
 from .data import ghia1982
 
 
@@ -32,18 +33,14 @@ def recirculating_state(problem) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CavityFluid:
+class CavityFluid(Section):
     """Fluid of the cavity (density 1, lid speed 1, side 1, so viscosity = 1 / re)."""
 
     re: float = param(100.0, "Reynolds number U L / nu", positive=True, maximum=5000.0)
 
 
-@dataclass(frozen=True)
-class CavityParams:
-    """Parameters of ``cavity-2d``."""
-
-    fluid: CavityFluid = section(CavityFluid)
-    solver: SteadySolverParams = section(SteadySolverParams)
+CavityParams = tree("CavityParams", "Parameters of ``cavity-2d``.", fluid=CavityFluid,
+                    solver=SteadySolverParams)
 
 
 class Cavity2D(Scene):
@@ -64,8 +61,7 @@ class Cavity2D(Scene):
         re_path = [params.fluid.re]
         while re_path[0] > 100.0:
             re_path.insert(0, max(100.0, re_path[0] / 2))
-        problem = NavierStokesProblem(mesh, 1.0 / re_path[0], bcs, linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, 1.0 / re_path[0], bcs, params.solver)
         x, newton_its = None, 0
         for k, re in enumerate(re_path):
             problem.mu = 1.0 / re
@@ -81,15 +77,14 @@ class Cavity2D(Scene):
              "y_samples": s.tolist()}
         re_int = int(round(params.fluid.re))
         if re_int in ghia1982.U and abs(params.fluid.re - re_int) < 1e-12:
-            q["ghia_max_deviation_u"] = float(np.max(np.abs(np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int])))
-            q["ghia_max_deviation_v"] = float(np.max(np.abs(np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int])))
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=0, newton_iterations=newton_its,
-                           linear_solver=problem.linear_solver_description)
+            u_error = np.interp(ghia1982.Y, s, u_vert) - ghia1982.U[re_int]
+            v_error = np.interp(ghia1982.X, s, v_horiz) - ghia1982.V[re_int]
+            q["ghia_max_deviation_u"] = float(np.max(np.abs(u_error)))
+            q["ghia_max_deviation_v"] = float(np.max(np.abs(v_error)))
+        return steady_result(problem, q, newton_its)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         s = np.array(q["y_samples"])
@@ -109,7 +104,4 @@ class Cavity2D(Scene):
             a.grid(alpha=0.3)
             a.legend()
         fig.suptitle(f"cavity-2d, Re = {re:g}, level {summary['level']} ({summary['n_cells']} cells)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

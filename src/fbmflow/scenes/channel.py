@@ -13,14 +13,15 @@ import numpy as np
 
 from ..fem.functions import sample_pressure, sample_velocity
 from ..fem.quadrature import gauss_tensor
-from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import SteadySolverParams, param, section
+from ..params import Section, SteadySolverParams, param, tree
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 
 
 @dataclass(frozen=True)
-class ChannelFluid:
+class ChannelFluid(Section):
     """Newtonian fluid."""
 
     density: float = param(1.0, "density rho", "kg/m^3", positive=True)
@@ -28,24 +29,22 @@ class ChannelFluid:
 
 
 @dataclass(frozen=True)
-class ChannelInflow:
+class ChannelInflow(Section):
     """Inflow profile."""
 
     max_velocity: float = param(1.0, "centre-line inflow velocity U", "m/s", positive=True)
 
 
-@dataclass(frozen=True)
-class ChannelParams:
-    """Parameters of ``channel-2d`` and ``channel-3d``."""
-
-    fluid: ChannelFluid = section(ChannelFluid)
-    inflow: ChannelInflow = section(ChannelInflow)
-    solver: SteadySolverParams = section(SteadySolverParams)
+ChannelParams = tree("ChannelParams", "Parameters of ``channel-2d`` and ``channel-3d``.", fluid=ChannelFluid,
+                     inflow=ChannelInflow, solver=SteadySolverParams)
 
 
 class _Channel(Scene):
+    """The channel's steady solve; subclasses give ``dim`` and :meth:`measure`."""
+
     Params = ChannelParams
     dim = 2
+    default_level = 2
 
     def mesh(self, level: int) -> StructuredMesh:
         n = 2**level
@@ -57,50 +56,45 @@ class _Channel(Scene):
         return lambda x, t: np.stack([16 * U * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]),
                                       0 * x[:, 0], 0 * x[:, 0]], axis=1)
 
-    def solve(self, params: ChannelParams, level: int):
+    def run(self, params: ChannelParams, level: int, progress=None) -> SceneResult:
         mesh = self.mesh(level)
         bcs = {t: NoSlip() for t in mesh.tags}
         bcs["xmin"] = Dirichlet(self.profile(params.inflow.max_velocity))
         bcs["xmax"] = DoNothing()
-        problem = NavierStokesProblem(mesh, params.fluid.viscosity, bcs, density=params.fluid.density,
-                                      linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, params.fluid.viscosity, bcs, params.solver, density=params.fluid.density)
         x, report = problem.solve_steady()
-        return mesh, problem, x, report
+        return steady_result(problem, self.measure(params, problem, x), report.iterations)
+
+    def measure(self, params: ChannelParams, problem, x: np.ndarray) -> dict:
+        """The scene's quantities of the solved flow ``x (n_dofs,)``."""
+        raise NotImplementedError
 
 
 class Channel2D(_Channel):
     name = "channel-2d"
     description = "Poiseuille flow in [0,4]x[0,1], parabolic inflow, do-nothing outflow (exact solution)"
-    default_level = 2
     max_level = 6
-    dim = 2
 
-    def run(self, params: ChannelParams, level: int, progress=None) -> SceneResult:
-        mesh, problem, x, report = self.solve(params, level)
+    def measure(self, params: ChannelParams, problem, x: np.ndarray) -> dict:
         s = problem.space
         u, p = problem.split(x)
         exact = self.profile(params.inflow.max_velocity)(s.V.coordinates, 0.0).T
         drop = sample_pressure(s, p, np.array([[0.0, 0.5], [4.0, 0.5]]))
-        q = {"max_velocity_error": float(np.max(np.abs(u - exact))),
-             "pressure_drop": float(drop[0] - drop[1]),
-             "pressure_drop_exact": 32.0 * params.fluid.viscosity * params.inflow.max_velocity}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return {"max_velocity_error": float(np.max(np.abs(u - exact))),
+                "pressure_drop": float(drop[0] - drop[1]),
+                "pressure_drop_exact": 32.0 * params.fluid.viscosity * params.inflow.max_velocity}
 
 
 class Channel3D(_Channel):
     name = "channel-3d"
     description = "duct flow in [0,4]x[0,1]^2, inflow 16U y(1-y)z(1-z), do-nothing outflow"
-    default_level = 2
     max_level = 4
     dim = 3
 
-    def run(self, params: ChannelParams, level: int, progress=None) -> SceneResult:
-        mesh, problem, x, report = self.solve(params, level)
+    def measure(self, params: ChannelParams, problem, x: np.ndarray) -> dict:
         s = problem.space
         u = x[:s.n_u]
-        n = mesh.shape[1]
+        n = problem.mesh.shape[1]
         pts, w = gauss_tensor(2, 4)
         # composite Gauss rule on the n x n face cells of x = const
         ij = np.indices((n, n)).reshape(2, -1).T
@@ -112,8 +106,6 @@ class Channel3D(_Channel):
             return float(wts @ sample_velocity(s, u, points)[:, 0])
 
         centre = sample_velocity(s, u, np.array([[4.0, 0.5, 0.5]]))[0, 0]
-        q = {"flow_rate_in": flux(0.0), "flow_rate_out": flux(4.0),
-             "flow_rate_exact": 4.0 * params.inflow.max_velocity / 9.0,
-             "centerline_velocity_out": float(centre)}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return {"flow_rate_in": flux(0.0), "flow_rate_out": flux(4.0),
+                "flow_rate_exact": 4.0 * params.inflow.max_velocity / 9.0,
+                "centerline_velocity_out": float(centre)}

@@ -20,14 +20,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coupling import FixedObstacles, hydrodynamic_forces, node_owner, TestFunctionForces
+from ..coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
 from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
-from ..flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
+from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import NodalBoundaryParams, SolverParams, param, section
+from ..params import NodalBoundaryParams, Section, SolverParams, derive, param, tree
 from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
+from .builder import flow_problem, steady_result
 
 REFERENCE = {"drag_coefficient": 5.57953523384, "lift_coefficient": 0.010618948146,
              "pressure_difference": 0.11752016697}
@@ -37,7 +38,7 @@ DIRECT_LIMIT = {2: 400_000, 3: 300_000}  # unknowns up to which solver.linear = 
 
 
 @dataclass(frozen=True)
-class DFGFluid:
+class DFGFluid(Section):
     """Fluid of the DFG 2D benchmark."""
 
     density: float = param(1.0, "density rho", "kg/m^3", positive=True)
@@ -45,27 +46,13 @@ class DFGFluid:
     max_inflow: float = param(0.3, "centre-line inflow velocity U (mean 2U/3)", "m/s", positive=True)
 
 
-@dataclass(frozen=True)
-class DFGParams:
-    """Parameters of ``dfg-2d-1``."""
-
-    fluid: DFGFluid = section(DFGFluid)
-    solver: SolverParams = section(SolverParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-
-
-@dataclass(frozen=True)
-class DFG3DFluid(DFGFluid):
-    """Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow)."""
-
-    max_inflow: float = param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True)
-
-
-@dataclass(frozen=True)
-class DFG3DParams(DFGParams):
-    """Parameters of ``dfg-3d-1z``."""
-
-    fluid: DFG3DFluid = section(DFG3DFluid)
+DFGParams = tree("DFGParams", "Parameters of ``dfg-2d-1``.", fluid=DFGFluid, solver=SolverParams,
+                 fbm=NodalBoundaryParams)
+DFG3DFluid = derive(DFGFluid, "DFG3DFluid",
+                    "Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow).",
+                    max_inflow=param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True))
+DFG3DParams = tree("DFG3DParams", "Parameters of ``dfg-3d-1z``.", fluid=DFG3DFluid, solver=SolverParams,
+                   fbm=NodalBoundaryParams)
 
 
 class _DFGScene(Scene):
@@ -108,9 +95,9 @@ class _DFGScene(Scene):
             linear = "direct" if sharp or FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
-        problem = NavierStokesProblem(mesh, f.viscosity, bcs, density=f.density, linear_solver=linear,
-                                      newton=params.solver.newton_settings(), extra_constraints=obstacle,
-                                      coarse_cells=mesh.n_cells // 2**(dim * max(level - 2, 0)))
+        coarse_cells = mesh.n_cells // 2**(dim * max(level - 2, 0))
+        problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density, linear=linear,
+                               extra_constraints=obstacle, coarse_cells=coarse_cells)
         x, report = problem.solve_steady()
         space = problem.space
         u, p = x[:space.n_u], x[space.n_u:]
@@ -129,14 +116,14 @@ class _DFGScene(Scene):
         shift = np.zeros(dim)
         shift[0] = D / 2
         front_back = self.centre + np.array([-shift, shift])
-        dp = sample_pressure(space, p, front_back, cells_at=front_back + 3 * h * np.array([-shift, shift]) / D)
+        behind = front_back + 3 * h * np.array([-shift, shift]) / D
+        dp = sample_pressure(space, p, front_back, cells_at=behind)
         q = {"drag_coefficient": float(scale * force[0, 0]), "lift_coefficient": float(scale * force[0, 1]),
              "pressure_difference": float(dp[0] - dp[1]),
              "cells_per_diameter": self.cells_per_diameter(mesh)}
         for key, ref in self.reference.items():
             q[f"{key}_error"] = abs(q[key] - ref) / abs(ref)
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, newton_iterations=report.iterations,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, report.iterations)
 
     def cells_per_diameter(self, mesh: StructuredMesh) -> float:
         """Cells across the diameter along x at the cylinder centre."""
@@ -181,7 +168,8 @@ class DFG3D1Z(_DFGScene):
 
     def mesh(self, level: int) -> StructuredMesh:
         h = D / 2**level
-        return StructuredMesh.rectilinear([graded_axis(0.0, 2.5, (0.4, 0.6), h), graded_axis(0.0, H, (0.1, 0.3), h),
+        return StructuredMesh.rectilinear([graded_axis(0.0, 2.5, (0.4, 0.6), h),
+                                           graded_axis(0.0, H, (0.1, 0.3), h),
                                            np.linspace(0.0, H, 2**level + 1)])
 
     def cylinder(self):

@@ -20,17 +20,16 @@ Hard contact (restitution 0) keeps the disks apart and off the walls.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..flow import NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams,
-                      SolverParams, TimeParams, param, section)
+from ..params import FluidParams, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from .base import Setup, SimulationScene
+from .base import pyplot, save_figure
+from .builder import CONTACT_SECTIONS, Layout, ParticleScene, particle_params
 
 # setup: (box (width, height) [cm], diameter [cm], rho_s, rho_f, nu [cm^2/s], leading centre,
 # trailing centre, (leading, trailing) x offsets in units of `offset`, cells per cm at level 0)
@@ -40,12 +39,13 @@ SETUPS = {
     "uhlmann": dict(box=(2.0, 6.0), d=0.25, rho_s=1.5, rho_f=1.0, nu=0.01, leading=(1.0, 4.5),
                     trailing=(1.0, 5.0), shift=(-1.0, 1.0), cells_per_cm=4),
 }
-DEFAULTS = {"glowinski": dict(dt=0.01, t_end=4.0, offset=1e-4), "uhlmann": dict(dt=0.002, t_end=0.4, offset=0.25 / 250)}
+DEFAULTS = {"glowinski": dict(dt=0.01, t_end=4.0, offset=1e-4),
+            "uhlmann": dict(dt=0.002, t_end=0.4, offset=0.25 / 250)}
 REFERENCE = {"uhlmann": {"t_kiss": 0.175, "t_tumble": 0.26}}  # Koblitz et al. 2017, Fig. 10c
 
 
 @dataclass(frozen=True)
-class DktCase:
+class DktCase(Section):
     """The set-up."""
 
     setup: str = param("glowinski", "glowinski (rho_s 1.01, 2 x 8 cm) or uhlmann (rho_s 1.5, 2 x 6 cm)",
@@ -56,27 +56,13 @@ class DktCase:
     kiss_distance: float = param(1.05, "kissing: centre distance below this many diameters", minimum=1.0)
 
 
-@dataclass(frozen=True)
-class DktTime(TimeParams):
-    """Time stepping (``t_end = 0``: 4 s for glowinski, 0.4 s for uhlmann)."""
-
-    dt: float = param(0.0, "time step (0: 0.01 s for glowinski, 0.002 s for uhlmann)", "s", nonnegative=True)
-    t_end: float = param(0.0, "final time", "s", nonnegative=True)
-    scheme: str = param("backward-euler", "implicit time scheme",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
-
-
-@dataclass(frozen=True)
-class DktParams:
-    """Parameters of ``dkt-2d``."""
-
-    case: DktCase = section(DktCase)
-    time: DktTime = section(DktTime)
-    coupling: CouplingParams = section(CouplingParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-    contact: ContactParams = section(ContactParams)
-    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
-    solver: SolverParams = section(SolverParams)
+DktTime = derive(TimeParams, "DktTime",
+                 "Time stepping (``t_end = 0``: 4 s for glowinski, 0.4 s for uhlmann).",
+                 dt=param(0.0, "time step (0: 0.01 s for glowinski, 0.002 s for uhlmann)", "s",
+                          nonnegative=True),
+                 t_end=param(0.0, "final time", "s", nonnegative=True), scheme="backward-euler")
+DktParams = particle_params("DktParams", "Parameters of ``dkt-2d``.", case=DktCase, time=DktTime,
+                            **CONTACT_SECTIONS)
 
 
 def _first_crossing(t: np.ndarray, f: np.ndarray) -> float | None:
@@ -90,7 +76,7 @@ def _first_crossing(t: np.ndarray, f: np.ndarray) -> float | None:
     return float(t[k - 1] + (t[k] - t[k - 1]) * f[k - 1] / (f[k - 1] - f[k]))
 
 
-class DKT2D(SimulationScene):
+class DKT2D(ParticleScene):
     name = "dkt-2d"
     description = "drafting, kissing and tumbling of two settling disks (Glowinski / Uhlmann set-ups)"
     Params = DktParams
@@ -103,28 +89,19 @@ class DKT2D(SimulationScene):
         n = s["cells_per_cm"] * 2**level
         return StructuredMesh.box((int(s["box"][0] * n), int(s["box"][1] * n)), upper=s["box"])
 
-    def build(self, params: DktParams, level: int) -> Setup:
+    def layout(self, params: DktParams, level: int) -> Layout:
         c = params.case
         s = SETUPS[c.setup]
-        default = DEFAULTS[c.setup]
-        dt = params.time.dt or default["dt"]
-        t_end = params.time.t_end or default["t_end"]
-        mesh = self.mesh(c.setup, level)
         centres = np.array([s["leading"], s["trailing"]], dtype=float)
-        centres[:, 0] += (c.offset or default["offset"]) * np.array(s["shift"])
+        centres[:, 0] += (c.offset or DEFAULTS[c.setup]["offset"]) * np.array(s["shift"])
         disk = Ball(s["d"] / 2, 2)
-        particles = Particles.at_rest([disk, disk], s["rho_s"], centres)
-        linear = params.solver.linear_solver()
-        sim = Simulation(mesh, s["nu"] * s["rho_f"], {t: NoSlip() for t in mesh.tags}, particles,
-                         [0.0, -c.gravity], density=s["rho_f"], scheme=params.time.scheme,
-                         linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         repulsion=params.repulsion.make(mesh),
-                         contact=params.contact.make(mesh, viscosity=s["nu"] * s["rho_f"]),
-                         contact_substeps=params.contact.substeps)
-        n_steps = max(1, int(np.ceil(t_end / dt - 1e-9)))
-        return Setup(sim, t_end / n_steps, n_steps)
+        fluid = FluidParams(density=s["rho_f"], viscosity=s["nu"] * s["rho_f"], gravity=c.gravity)
+        return Layout(self.mesh(c.setup, level), Particles.at_rest([disk, disk], s["rho_s"], centres), fluid)
+
+    def time(self, params: DktParams) -> TimeParams:
+        """``params.time`` with the set-up's time step and final time where it leaves them 0."""
+        default, t = DEFAULTS[params.case.setup], params.time
+        return dataclasses.replace(t, dt=t.dt or default["dt"], t_end=t.t_end or default["t_end"])
 
     def observe(self, params: DktParams, sim) -> dict:
         X, V = sim.particles.position, sim.particles.velocity
@@ -151,9 +128,7 @@ class DKT2D(SimulationScene):
         return q
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         setup = summary["params"]["case"]["setup"]
@@ -170,10 +145,8 @@ class DKT2D(SimulationScene):
                 if q.get(key) is not None:
                     a.axvline(q[key], c=colour, lw=0.8, label=f"{key} = {q[key]:.3f} s")
                 if f"{key}_reference" in q:
-                    a.axvline(q[f"{key}_reference"], c=colour, ls=":", lw=0.8, label=f"{key}, Koblitz et al. 2017")
+                    a.axvline(q[f"{key}_reference"], c=colour, ls=":", lw=0.8,
+                              label=f"{key}, Koblitz et al. 2017")
         ax[0].legend(fontsize=8)
         fig.suptitle(f"dkt-2d ({setup}), level {summary['level']} ({q['cells_per_diameter']:.0f} cells/d)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

@@ -25,27 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..flow import NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SecondOrderCouplingParams,
-                      SolverParams, TimeParams, param, section)
+from ..params import SCHEMES, ParamError, SecondOrderCouplingParams, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from .base import Setup, SimulationScene
+from .base import pyplot, save_figure
+from .builder import CgsFluid, DomainParams, Layout, ParticleScene, particle_params
 from .data import koblitz2017
 
 
 @dataclass(frozen=True)
-class GlowinskiFluid:
-    """Fluid (CGS units)."""
-
-    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
-    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
-    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
-
-
-@dataclass(frozen=True)
-class GlowinskiParticle:
+class GlowinskiParticle(Section):
     """The disk."""
 
     diameter: float = param(0.25, "disk diameter", "cm", positive=True)
@@ -54,48 +43,26 @@ class GlowinskiParticle:
     y: float = param(4.0, "initial centre y", "cm")
 
 
-@dataclass(frozen=True)
-class GlowinskiDomain:
-    """Mesh."""
-
-    mesh: str = param("graded", "graded: uniform cells along the disk's path, growing towards the "
-                      "side walls and the lid; uniform: the same cells everywhere",
-                      choices=("graded", "uniform"))
+GlowinskiTime = derive(TimeParams, "GlowinskiTime", "Time stepping.", dt=0.002,
+                       t_end=param(0.65, "final time (the settling velocity peaks between about 0.45 and "
+                                   "0.6 s; the disk lands at about 0.75 s)", "s", positive=True),
+                       scheme=param("crank-nicolson", "implicit time scheme (crank-nicolson with the "
+                                    "trapezoidal particle integrator: second order)", choices=SCHEMES))
 
 
-@dataclass(frozen=True)
-class GlowinskiTime(TimeParams):
-    """Time stepping."""
-
-    dt: float = param(0.002, "time step", "s", positive=True)
-    t_end: float = param(0.65, "final time (the settling velocity peaks between about 0.45 and 0.6 s; "
-                         "the disk lands at about 0.75 s)", "s", positive=True)
-    scheme: str = param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal "
-                        "particle integrator: second order)",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
+def _inside_the_box(params) -> None:
+    r = params.particle.diameter / 2
+    if not (r < params.particle.x < 2.0 - r and r < params.particle.y < 6.0 - r):
+        raise ParamError(f"particle at ({params.particle.x}, {params.particle.y}) with radius {r} is not "
+                         "inside the 2 x 6 cm box; move it inside")
 
 
-@dataclass(frozen=True)
-class GlowinskiParams:
-    """Parameters of ``glowinski-free-fall``."""
-
-    fluid: GlowinskiFluid = section(GlowinskiFluid)
-    particle: GlowinskiParticle = section(GlowinskiParticle)
-    domain: GlowinskiDomain = section(GlowinskiDomain)
-    time: GlowinskiTime = section(GlowinskiTime)
-    coupling: SecondOrderCouplingParams = section(SecondOrderCouplingParams)
-    fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
-    repulsion: RepulsionParams = section(RepulsionParams)
-    solver: SolverParams = section(SolverParams)
-
-    def validate(self):
-        r = self.particle.diameter / 2
-        if not (r < self.particle.x < 2.0 - r and r < self.particle.y < 6.0 - r):
-            raise ParamError(f"particle at ({self.particle.x}, {self.particle.y}) with radius {r} is not "
-                             "inside the 2 x 6 cm box; move it inside")
+GlowinskiParams = particle_params("GlowinskiParams", "Parameters of ``glowinski-free-fall``.",
+                                  _inside_the_box, fluid=CgsFluid, particle=GlowinskiParticle,
+                                  domain=DomainParams, time=GlowinskiTime, coupling=SecondOrderCouplingParams)
 
 
-class GlowinskiFreeFall(SimulationScene):
+class GlowinskiFreeFall(ParticleScene):
     name = "glowinski-free-fall"
     description = "2D disk settling in a closed 2 x 6 cm channel (Glowinski et al.)"
     Params = GlowinskiParams
@@ -103,7 +70,8 @@ class GlowinskiFreeFall(SimulationScene):
     max_level = 5
 
     @staticmethod
-    def mesh(level: int, kind: str = "graded", particle: GlowinskiParticle = GlowinskiParticle()) -> StructuredMesh:
+    def mesh(level: int, kind: str = "graded",
+             particle: GlowinskiParticle = GlowinskiParticle()) -> StructuredMesh:
         """The 2 x 6 cm box with cells of ``h = 0.25 cm / 2^level`` along the disk's path
         (``kind = "graded"``: only there, within one diameter of ``x = particle.x`` and below one
         diameter above ``particle.y``)."""
@@ -112,21 +80,13 @@ class GlowinskiFreeFall(SimulationScene):
             return StructuredMesh.box((8 * n, 24 * n), upper=(2.0, 6.0))
         fine_x = (max(particle.x - d, 0.0), min(particle.x + d, 2.0))
         top = min(particle.y + d, 6.0)
-        return StructuredMesh.rectilinear([graded_axis(0.0, 2.0, fine_x, h), graded_axis(0.0, 6.0, (0.0, top), h)])
+        return StructuredMesh.rectilinear([graded_axis(0.0, 2.0, fine_x, h),
+                                           graded_axis(0.0, 6.0, (0.0, top), h)])
 
-    def build(self, params: GlowinskiParams, level: int) -> Setup:
-        f, pp = params.fluid, params.particle
-        mesh = self.mesh(level, params.domain.mesh, pp)
+    def layout(self, params: GlowinskiParams, level: int) -> Layout:
+        pp = params.particle
         particles = Particles.at_rest([Ball(pp.diameter / 2, 2)], pp.density, [[pp.x, pp.y]])
-        linear = params.solver.linear_solver()
-        sim = Simulation(mesh, f.viscosity, {t: NoSlip() for t in mesh.tags}, particles,
-                         [0.0, -f.gravity], density=f.density, scheme=params.time.scheme,
-                         linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         repulsion=params.repulsion.make(mesh))
-        n_steps = params.time.n_steps
-        return Setup(sim, params.time.t_end / n_steps, n_steps)
+        return Layout(self.mesh(level, params.domain.mesh, pp), particles, params.fluid)
 
     def observe(self, params: GlowinskiParams, sim) -> dict:
         p = sim.particles
@@ -140,9 +100,7 @@ class GlowinskiFreeFall(SimulationScene):
                 "final_position": sim.particles.position[0].tolist(), **series}
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q, f = summary["quantities"], summary["params"]["fluid"]
         d = summary["params"]["particle"]["diameter"]
@@ -161,7 +119,4 @@ class GlowinskiFreeFall(SimulationScene):
             a.set_xlabel("t [s]")
             a.grid(alpha=0.3)
         fig.suptitle(f"glowinski-free-fall, level {summary['level']}: Re_max {q['max_reynolds_number']:.2f}")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

@@ -8,8 +8,8 @@ import tomllib
 from pathlib import Path
 
 from .. import __version__
-from ..params import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
+from ..params import ParamError, from_dict, parse_value, set_dotted, to_dict
 from .base import RunFiles, Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
@@ -22,9 +22,9 @@ from .tencate import TenCate
 
 log = logging.getLogger(__name__)
 
-SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(), DFG2D1(), DFG3D1Z(),
-                                              GlowinskiFreeFall(), TenCate(), DKT2D(),
-                                              Sedimentation2D(), Sedimentation3D(), FluidizedBed2D())}
+SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(),
+                                                DFG2D1(), DFG3D1Z(), GlowinskiFreeFall(), TenCate(), DKT2D(),
+                                                Sedimentation2D(), Sedimentation3D(), FluidizedBed2D())}
 
 
 def get_scene(name: str) -> Scene:
@@ -80,7 +80,8 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
 def check_level(scene: Scene, level) -> int:
     """``level`` if it is an integer from 0 to the scene's ``max_level``, else ParamError."""
     if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= scene.max_level:
-        raise ParamError(f"level must be an integer from 0 to {scene.max_level} for {scene.name}, got {level!r}")
+        raise ParamError(f"level must be an integer from 0 to {scene.max_level} for {scene.name}, "
+                         f"got {level!r}")
     return level
 
 
@@ -137,7 +138,8 @@ def output_directory(out) -> Path:
         probe.touch()
         probe.unlink()
     except OSError as err:
-        raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; give another --out") from None
+        raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; "
+                         "give another --out") from None
     return out
 
 

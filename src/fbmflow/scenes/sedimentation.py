@@ -30,34 +30,16 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import (ContactParams, ContactRepulsionParams, CouplingParams, NodalBoundaryParams, ParamError,
-                      SolverParams, TimeParams, param, section)
+from ..params import ParamError, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from .base import Setup, SimulationScene
+from .base import pyplot, save_figure
+from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle_params
+
+ManyTime = derive(TimeParams, "ManyTime", "Time stepping.", dt=0.005, scheme="backward-euler")
 
 
 @dataclass(frozen=True)
-class ManyFluid:
-    """Fluid (CGS units)."""
-
-    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
-    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
-    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
-
-
-@dataclass(frozen=True)
-class ManyTime(TimeParams):
-    """Time stepping."""
-
-    dt: float = param(0.005, "time step", "s", positive=True)
-    t_end: float = param(1.0, "final time", "s", positive=True)
-    scheme: str = param("backward-euler", "implicit time scheme",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
-
-
-@dataclass(frozen=True)
-class ManyParticles:
+class ManyParticles(Section):
     """The particles."""
 
     count: int = param(100, "number of particles", minimum=1)
@@ -67,55 +49,23 @@ class ManyParticles:
 
 
 @dataclass(frozen=True)
-class SphereParticles(ManyParticles):
-    """The particles."""
-
-    count: int = param(20, "number of particles", minimum=1)
-    diameter: float = param(0.2, "particle diameter", "cm", positive=True)
-
-
-@dataclass(frozen=True)
-class BedParticles(ManyParticles):
-    """The particles."""
-
-    count: int = param(60, "number of particles", minimum=1)
-    density: float = param(1.5, "particle density", "g/cm^3", positive=True)
-
-
-@dataclass(frozen=True)
-class BedInflow:
+class BedInflow(Section):
     """Inflow through the bottom."""
 
     velocity: float = param(1.0, "uniform inflow velocity", "cm/s", positive=True)
 
 
-@dataclass(frozen=True)
-class Sedimentation2DParams:
-    """Parameters of ``sedimentation-2d``."""
-
-    fluid: ManyFluid = section(ManyFluid)
-    particles: ManyParticles = section(ManyParticles)
-    time: ManyTime = section(ManyTime)
-    coupling: CouplingParams = section(CouplingParams)
-    fbm: NodalBoundaryParams = section(NodalBoundaryParams)
-    contact: ContactParams = section(ContactParams)
-    repulsion: ContactRepulsionParams = section(ContactRepulsionParams)
-    solver: SolverParams = section(SolverParams)
-
-
-@dataclass(frozen=True)
-class Sedimentation3DParams(Sedimentation2DParams):
-    """Parameters of ``sedimentation-3d``."""
-
-    particles: SphereParticles = section(SphereParticles)
-
-
-@dataclass(frozen=True)
-class FluidizedBedParams(Sedimentation2DParams):
-    """Parameters of ``fluidized-bed-2d``."""
-
-    particles: BedParticles = section(BedParticles)
-    inflow: BedInflow = section(BedInflow)
+SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", count=20, diameter=0.2)
+BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5)
+Sedimentation2DParams = particle_params("Sedimentation2DParams", "Parameters of ``sedimentation-2d``.",
+                                        fluid=CgsFluid, particles=ManyParticles, time=ManyTime,
+                                        **CONTACT_SECTIONS)
+Sedimentation3DParams = particle_params("Sedimentation3DParams", "Parameters of ``sedimentation-3d``.",
+                                        fluid=CgsFluid, particles=SphereParticles, time=ManyTime,
+                                        **CONTACT_SECTIONS)
+FluidizedBedParams = particle_params("FluidizedBedParams", "Parameters of ``fluidized-bed-2d``.",
+                                     fluid=CgsFluid, particles=BedParticles, inflow=BedInflow, time=ManyTime,
+                                     **CONTACT_SECTIONS)
 
 
 def lattice(count: int, d: float, lower: np.ndarray, upper: np.ndarray, seed: int) -> np.ndarray:
@@ -149,11 +99,12 @@ def max_overlap(p: Particles, lower, upper) -> float:
         i, j = pairs[:, 0], pairs[:, 1]
         dist = np.linalg.norm(p.position[i] - p.position[j], axis=1)
         worst = max(worst, float(np.max((R[i] + R[j] - dist) / np.minimum(R[i], R[j]))))
-    wall = np.maximum(R[:, None] - (p.position - np.asarray(lower)), R[:, None] - (np.asarray(upper) - p.position))
+    wall = np.maximum(R[:, None] - (p.position - np.asarray(lower)),
+                      R[:, None] - (np.asarray(upper) - p.position))
     return max(worst, float(np.max(wall / R[:, None])), 0.0)
 
 
-class _ManyParticles(SimulationScene):
+class _ManyParticles(ParticleScene):
     """Shared set-up and loop of the many-particle scenes."""
 
     dim = 2
@@ -167,8 +118,9 @@ class _ManyParticles(SimulationScene):
     def mesh(self, level: int) -> StructuredMesh:
         return StructuredMesh.box(tuple(n * 2**level for n in self.cells_level0), upper=self.box)
 
-    def boundary(self, mesh, params) -> dict:
-        return {t: NoSlip() for t in mesh.tags}
+    def boundary(self, mesh, params) -> dict | None:
+        """The flow's boundary conditions (None: no-slip walls all round)."""
+        return None
 
     def initial_positions(self, params) -> np.ndarray:
         pp = params.particles
@@ -177,24 +129,12 @@ class _ManyParticles(SimulationScene):
         lower[-1], upper[-1] = self.fill[0] * self.box[-1], self.fill[1] * self.box[-1]
         return lattice(pp.count, pp.diameter, lower, upper, pp.seed)
 
-    def build(self, params, level: int) -> Setup:
-        f, pp = params.fluid, params.particles
+    def layout(self, params, level: int) -> Layout:
+        pp = params.particles
+        particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density,
+                                      self.initial_positions(params))
         mesh = self.mesh(level)
-        X = self.initial_positions(params)
-        particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density, X)
-        gravity = np.zeros(self.dim)
-        gravity[-1] = -f.gravity
-        linear = params.solver.linear_solver()
-        sim = Simulation(mesh, f.viscosity, self.boundary(mesh, params), particles, gravity,
-                         density=f.density, scheme=params.time.scheme,
-                         linear_solver="direct" if linear == "auto" else linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         repulsion=params.repulsion.make(mesh),
-                         contact=params.contact.make(mesh, viscosity=f.viscosity),
-                         contact_substeps=params.contact.substeps)
-        n_steps = params.time.n_steps
-        return Setup(sim, params.time.t_end / n_steps, n_steps)
+        return Layout(mesh, particles, params.fluid, self.boundary(mesh, params))
 
     def observe(self, params, sim) -> dict:
         p, mesh = sim.particles, sim.flow.mesh
@@ -222,9 +162,7 @@ class _ManyParticles(SimulationScene):
         return float(z[-max(1, len(z) // 10):].mean() + d / 2)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         panels = 2 if "bed_height" in q else 1
@@ -247,10 +185,7 @@ class _ManyParticles(SimulationScene):
             last.add_patch(plt.Circle((x[0], x[-1]), d / 2, fc="C0", ec="k", lw=0.3))
         last.set_title(f"t = {q['t'][-1]:.3g} s" + (" (projected on x-z)" if X.shape[1] == 3 else ""))
         fig.suptitle(f"{summary['scene']}, level {summary['level']}, max overlap {q['max_overlap']:.2g} r")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)
 
 
 class Sedimentation2D(_ManyParticles):

@@ -10,12 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fem.functions import error_norms
-from ..flow import NavierStokesProblem
 from ..flow.time_schemes import advance
-from ..solvers import ConvergenceError
 from ..mesh import StructuredMesh
-from ..params import SolverParams, TimeParams, param, section
-from .base import Scene, SceneResult
+from ..params import Section, SolverParams, TimeParams, derive, param, tree
+from ..solvers import ConvergenceError
+from .base import Scene, SceneResult, pyplot, save_figure
+from .builder import flow_problem, steady_result
 
 TWO_PI = 2.0 * np.pi
 
@@ -40,27 +40,15 @@ def taylor_green_gradient(x: np.ndarray, t: float, nu: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class TaylorGreenFluid:
+class TaylorGreenFluid(Section):
     """Fluid (density 1)."""
 
     viscosity: float = param(0.01, "kinematic viscosity nu", "m^2/s", positive=True)
 
 
-@dataclass(frozen=True)
-class TaylorGreenTime(TimeParams):
-    """Time stepping of the vortex."""
-
-    dt: float = param(0.025, "time step", "s", positive=True)
-    t_end: float = param(0.5, "final time", "s", positive=True)
-
-
-@dataclass(frozen=True)
-class TaylorGreenParams:
-    """Parameters of ``taylor-green-2d``."""
-
-    fluid: TaylorGreenFluid = section(TaylorGreenFluid)
-    time: TaylorGreenTime = section(TaylorGreenTime)
-    solver: SolverParams = section(SolverParams)
+TaylorGreenTime = derive(TimeParams, "TaylorGreenTime", "Time stepping of the vortex.", dt=0.025, t_end=0.5)
+TaylorGreenParams = tree("TaylorGreenParams", "Parameters of ``taylor-green-2d``.", fluid=TaylorGreenFluid,
+                         time=TaylorGreenTime, solver=SolverParams)
 
 
 class TaylorGreen2D(Scene):
@@ -85,8 +73,7 @@ class TaylorGreen2D(Scene):
     def run(self, params: TaylorGreenParams, level: int, progress=None) -> SceneResult:
         nu = params.fluid.viscosity
         mesh = self.mesh(level)
-        problem = NavierStokesProblem(mesh, nu, {}, linear_solver=params.solver.linear_solver(),
-                                      newton=params.solver.newton_settings())
+        problem = flow_problem(mesh, nu, {}, params.solver)
         x = self.initial_state(problem, nu)
         n_steps = params.time.n_steps
         dt = params.time.t_end / n_steps
@@ -115,13 +102,10 @@ class TaylorGreen2D(Scene):
         exact_energy = 0.25 * np.exp(-4.0 * TWO_PI**2 * nu * np.array(times))
         q = {"velocity_l2_error": err["u_l2"], "kinetic_energy": energies, "t": times,
              "kinetic_energy_exact": exact_energy.tolist()}
-        return SceneResult(q, mesh.n_cells, problem.n_dofs, steps=n_steps, newton_iterations=newton_its,
-                           linear_solver=problem.linear_solver_description)
+        return steady_result(problem, q, newton_its, steps=n_steps)
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q = summary["quantities"]
         fig, ax = plt.subplots(figsize=(6, 4.5))
@@ -132,7 +116,4 @@ class TaylorGreen2D(Scene):
         ax.grid(alpha=0.3)
         ax.legend()
         ax.set_title(f"taylor-green-2d, level {summary['level']}, {summary['params']['time']['scheme']}")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

@@ -27,27 +27,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fem import FlowSpace
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (FictitiousBoundaryParams, ParamError, RepulsionParams, SecondOrderCouplingParams,
-                      SolverParams, TimeParams, param, section)
+from ..params import (
+    SCHEMES,
+    FluidParams,
+    ParamError,
+    SecondOrderCouplingParams,
+    Section,
+    SolverParams,
+    TimeParams,
+    derive,
+    param,
+)
 from ..particles import Ball, Particles
-from ..simulation import Simulation
-from ..solvers.linear import pardiso_available
-from .base import Setup, SimulationScene
+from .base import pyplot, save_figure
+from .builder import DomainParams, Layout, ParticleScene, particle_params
 from .data import tencate2002
 
 CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
 T_END = {"E1": 4.0, "E2": 2.5, "E3": 1.7, "E4": 1.3}  # the experiment's sphere reached the bottom
-#: unknowns above which ``solver.linear = "auto"`` takes multigrid where PARDISO is installed
-#: (always without it): level 1 and up (the measured costs: benchmarks/results/tencate_solvers.md).
-MULTIGRID_ABOVE = 150_000
 BOX = np.array([0.1, 0.1, 0.16])
 
 
 @dataclass(frozen=True)
-class TenCateFluid:
+class TenCateFluid(Section):
     """Fluid (silicone oil) and gravity."""
 
     case: str = param("E4", "experiment: E1 | E2 | E3 | E4 sets (density, viscosity)",
@@ -56,7 +60,7 @@ class TenCateFluid:
 
 
 @dataclass(frozen=True)
-class TenCateParticle:
+class TenCateParticle(Section):
     """The sphere."""
 
     diameter: float = param(0.015, "sphere diameter", "m", positive=True)
@@ -67,61 +71,41 @@ class TenCateParticle:
 
 
 @dataclass(frozen=True)
-class TenCateDomain:
-    """Domain."""
+class TenCateDomain(DomainParams):
+    """Domain and mesh."""
 
     symmetry: str = param("quarter", "quarter box with two mirror planes, or the whole box",
                           choices=("quarter", "none"))
-    mesh: str = param("graded", "graded: uniform cells near the sphere's path, growing towards the "
-                      "side walls and the lid; uniform: the same cells everywhere",
-                      choices=("graded", "uniform"))
 
 
-@dataclass(frozen=True)
-class TenCateTime(TimeParams):
-    """Time stepping (``t_end = 0``: the time the experiment's sphere reached the bottom)."""
-
-    dt: float = param(0.01, "time step", "s", positive=True)
-    t_end: float = param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True)
-    scheme: str = param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal "
-                        "particle integrator: second order for a fixed boundary, lower with the sphere "
-                        "crossing the mesh)",
-                        choices=("backward-euler", "crank-nicolson", "fractional-step-theta"))
-
-
-@dataclass(frozen=True)
-class TenCateSolver(SolverParams):
-    """Nonlinear and linear solver settings (Newton stops at a 1e-6 residual reduction: in E4 at
-    3 cells/d, dt 0.02 s, that takes 27 % fewer Newton iterations than 1e-10 and moves the peak
-    velocity by 3e-7 relative; docs/method.md on the linear and Newton tolerances)."""
-
-    newton_rtol: float = param(1e-6, "Newton stop: residual reduction", positive=True, maximum=1.0)
-    linear_rtol: float = param(1e-3, "relative residual per linear solve (the chord-Newton steps "
-                               "contract the residual 50-300x each, so a tighter solve changes nothing: "
-                               "at E4 level 0 the velocities of 1e-3 and 1e-8 agree to 1e-8, with 2.4x "
-                               "fewer multigrid cycles)", positive=True, maximum=0.1)
+TenCateTime = derive(
+    TimeParams, "TenCateTime",
+    "Time stepping (``t_end = 0``: the time the experiment's sphere reached the bottom).",
+    t_end=param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True),
+    scheme=param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal particle "
+                 "integrator: second order for a fixed boundary, lower with the sphere crossing the mesh)",
+                 choices=SCHEMES))
+TenCateSolver = derive(
+    SolverParams, "TenCateSolver", "Nonlinear and linear solver settings: Newton stops at a 1e-6 residual "
+    "reduction (docs/method.md on the linear and Newton tolerances).", newton_rtol=1e-6,
+    linear_rtol=param(1e-3, "relative residual per linear solve (the chord-Newton steps contract the "
+                      "residual 50-300x each, so a tighter solve changes nothing: at E4 level 0 the "
+                      "velocities of 1e-3 and 1e-8 agree to 1e-8, with 2.4x fewer multigrid cycles)",
+                      positive=True, maximum=0.1))
 
 
-@dataclass(frozen=True)
-class TenCateParams:
-    """Parameters of ``ten-cate``."""
+def _inside_the_box(params) -> None:
+    r = params.particle.diameter / 2
+    if not r < params.particle.height < BOX[2] - r:
+        raise ParamError(f"particle.height = {params.particle.height} m puts the sphere (radius {r} m) "
+                         f"outside the {BOX[2]} m high box; choose a height in ({r}, {BOX[2] - r})")
+    if not params.particle.diameter < BOX[0]:
+        raise ParamError(f"particle.diameter = {params.particle.diameter} m does not fit the {BOX[0]} m box")
 
-    fluid: TenCateFluid = section(TenCateFluid)
-    particle: TenCateParticle = section(TenCateParticle)
-    domain: TenCateDomain = section(TenCateDomain)
-    time: TenCateTime = section(TenCateTime)
-    coupling: SecondOrderCouplingParams = section(SecondOrderCouplingParams)
-    fbm: FictitiousBoundaryParams = section(FictitiousBoundaryParams)
-    repulsion: RepulsionParams = section(RepulsionParams)
-    solver: TenCateSolver = section(TenCateSolver)
 
-    def validate(self):
-        r = self.particle.diameter / 2
-        if not r < self.particle.height < BOX[2] - r:
-            raise ParamError(f"particle.height = {self.particle.height} m puts the sphere (radius {r} m) "
-                             f"outside the {BOX[2]} m high box; choose a height in ({r}, {BOX[2] - r})")
-        if not self.particle.diameter < BOX[0]:
-            raise ParamError(f"particle.diameter = {self.particle.diameter} m does not fit the {BOX[0]} m box")
+TenCateParams = particle_params("TenCateParams", "Parameters of ``ten-cate``.", _inside_the_box,
+                                fluid=TenCateFluid, particle=TenCateParticle, domain=TenCateDomain,
+                                time=TenCateTime, coupling=SecondOrderCouplingParams, solver=TenCateSolver)
 
 
 def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0,
@@ -136,7 +120,7 @@ def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0,
     return float(np.max(np.abs(sim - ref[sel, 1]) / ref[sel, 1])) if sel.any() else float("nan")
 
 
-class TenCate(SimulationScene):
+class TenCate(ParticleScene):
     name = "ten-cate"
     description = "3D sphere settling in a closed box, ten Cate et al. (2002) E1-E4"
     Params = TenCateParams
@@ -153,38 +137,28 @@ class TenCate(SimulationScene):
         n, h = 2**level, 0.005 / 2**level
         lower = (0.05, 0.05, 0.0) if symmetry == "quarter" else (0.0, 0.0, 0.0)
         if kind == "uniform":
-            return StructuredMesh.box((10 * n, 10 * n, 32 * n) if symmetry == "quarter" else (20 * n, 20 * n, 32 * n),
-                                      lower=lower, upper=tuple(BOX))
+            cells = (10 * n, 10 * n, 32 * n) if symmetry == "quarter" else (20 * n, 20 * n, 32 * n)
+            return StructuredMesh.box(cells, lower=lower, upper=tuple(BOX))
         reach = 0.05 + diameter  # the fine zone about the axis x = y = 50 mm
-        side = [graded_axis(lower[a], BOX[a], (max(lower[a], 0.1 - reach), min(reach, BOX[a])), h, multiple=2 * n)
-                for a in (0, 1)]
+        side = [graded_axis(lower[a], BOX[a], (max(lower[a], 0.1 - reach), min(reach, BOX[a])), h,
+                            multiple=2 * n) for a in (0, 1)]
         top = min(height + diameter, BOX[2])
         return StructuredMesh.rectilinear(side + [graded_axis(0.0, BOX[2], (0.0, top), h, multiple=2 * n)])
 
-    def build(self, params: TenCateParams, level: int) -> Setup:
-        pp, case = params.particle, params.fluid.case
-        rho_f, mu = CASES[case]
-        quarter = params.domain.symmetry == "quarter"
+    def layout(self, params: TenCateParams, level: int) -> Layout:
+        pp, quarter = params.particle, params.domain.symmetry == "quarter"
+        rho_f, mu = CASES[params.fluid.case]
         mesh = self.mesh(level, params.domain.symmetry, params.domain.mesh, pp.diameter, pp.height)
         bc = {t: NoSlip() for t in mesh.tags}
         if quarter:
             bc["xmin"] = bc["ymin"] = Slip()
         particles = Particles.at_rest([Ball(pp.diameter / 2, 3)], pp.density, [[0.05, 0.05, pp.height]])
-        linear = params.solver.linear_solver()
-        if linear == "auto":  # SuperLU's 3D fill exhausts the memory here: PARDISO or multigrid
-            small = FlowSpace.estimate_dofs(mesh) <= MULTIGRID_ABOVE
-            linear = "direct" if small and pardiso_available() else dataclasses.replace(
-                params.solver, linear="multigrid").linear_solver()
-        sim = Simulation(mesh, mu, bc, particles, [0.0, 0.0, -params.fluid.gravity], density=rho_f,
-                         scheme=params.time.scheme, linear_solver=linear,
-                         newton=params.solver.newton_settings(), **params.coupling.settings(),
-                         **params.fbm.settings(),
-                         symmetry=(0, 1) if quarter else (),
-                         repulsion=params.repulsion.make(mesh, walls=[(0, 1), (1, 1), (2, 0), (2, 1)] if quarter
-                                                         else None))
-        t_end = params.time.t_end or T_END[case]
-        n_steps = max(1, int(round(t_end / params.time.dt)))
-        return Setup(sim, t_end / n_steps, n_steps)
+        fluid = FluidParams(density=rho_f, viscosity=mu, gravity=params.fluid.gravity)
+        return Layout(mesh, particles, fluid, bc, (0, 1) if quarter else ())
+
+    def time(self, params: TenCateParams) -> TimeParams:
+        """``params.time`` with the case's final time where it leaves it 0."""
+        return dataclasses.replace(params.time, t_end=params.time.t_end or T_END[params.fluid.case])
 
     def observe(self, params: TenCateParams, sim) -> dict:
         d, p = params.particle.diameter, sim.particles
@@ -199,7 +173,8 @@ class TenCate(SimulationScene):
         u_max = max(series["settling_velocity"])
         return {"max_settling_velocity": u_max,
                 "max_settling_velocity_error": u_max / tencate2002.U_MAX[case] - 1.0,
-                "gap_max_deviation": gap_deviation(np.array(series["t"]), np.array(series["gap_over_d"]), case),
+                "gap_max_deviation": gap_deviation(np.array(series["t"]), np.array(series["gap_over_d"]),
+                                                   case),
                 "gap_max_deviation_from_velocity": gap_deviation(
                     np.array(series["t"]), np.array(series["gap_over_d"]), case,
                     reference=tencate2002.gap_from_velocity(case)),
@@ -207,9 +182,7 @@ class TenCate(SimulationScene):
                 **series}
 
     def plot(self, summary: dict, path) -> bool:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         q, case = summary["quantities"], summary["params"]["fluid"]["case"]
         fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
@@ -227,7 +200,4 @@ class TenCate(SimulationScene):
             a.legend()
         fig.suptitle(f"ten-cate {case}, level {summary['level']} "
                      f"({q['cells_per_diameter']:.0f} cells/d, {summary['n_cells']} cells)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return True
+        return save_figure(fig, path)

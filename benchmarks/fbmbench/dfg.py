@@ -1,0 +1,132 @@
+"""DFG 2D-1 and 3D-1Z (Schäfer & Turek 1996): steady flow around a cylinder that is a fixed
+fictitious boundary, Re = 20; drag, lift and pressure difference against the reference values
+per mesh level.
+
+Results: ``benchmarks/results/<scene>.md``, ``.json``, ``.png`` (drag error against cells per
+diameter and against wall time) and ``<scene>-tradeoff.png``.
+"""
+
+from __future__ import annotations
+
+from fbmflow.scenes.registry import load_scene
+
+from .common import (
+    RESULTS,
+    cpu,
+    merge_row,
+    percent,
+    provenance,
+    run_scene,
+    tradeoff_plot,
+    warm_up,
+    write_text,
+)
+
+SCENES = ("dfg-2d-1", "dfg-3d-1z")
+QUANTITIES = ("drag_coefficient", "lift_coefficient", "pressure_difference")
+
+
+def run(scene: str, level: int, solver: str = "direct") -> dict:
+    """One steady solve; the row."""
+    warm_up(scene, **{"solver.linear": solver})
+    s = run_scene(scene, level, {"solver.linear": solver})
+    q = s["quantities"]
+    row = dict(
+        level=level,
+        solver=solver,
+        cells_per_diameter=q["cells_per_diameter"],
+        n_dofs=s["n_dofs"],
+        wall_s=s["wall_s"],
+        stopped_s=s["stopped_s"],
+        cpu_s=s["cpu_s"],
+        newton=s["newton_iterations"],
+        linear_solver=s["linear_solver"],
+        **{k: q[k] for k in QUANTITIES},
+        **{k + "_error": q.get(k + "_error") for k in QUANTITIES},
+        **provenance(),
+    )
+    print(
+        f"{scene} level {level}: {row['n_dofs']} unknowns, {row['wall_s']:.1f} s, "
+        f"C_D {row['drag_coefficient']:.4f} "
+        f"({percent(row['drag_coefficient_error'])}), dp {percent(row['pressure_difference_error'])}",
+        flush=True,
+    )
+    return row
+
+
+def record(scene: str, row: dict) -> list[dict]:
+    rows = merge_row(
+        scene, row, lambda a, b: (a["level"], a.get("solver", "direct")) == (b["level"], b["solver"])
+    )
+    write(scene, rows)
+    return rows
+
+
+def write(scene: str, rows: list[dict]) -> None:
+    rows = sorted(rows, key=lambda r: (r.get("solver", "direct"), r["level"]))
+    the_scene = load_scene(scene)[0]
+    refs = ", ".join(f"{k} = {v}" for k, v in the_scene.reference.items())
+    lines = [
+        f"# {the_scene.description} ({scene})",
+        "",
+        f"Reference {refs} (docstring of fbmflow.scenes.dfg). Wall time of the run on a 2-core machine "
+        "(assembly, all Newton "
+        "steps and the force evaluation, not the JIT compilation); PARDISO, when installed, takes 3D "
+        "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python benchmarks/bench_dfg.py "
+        f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`.",
+        "",
+        "| level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L | dp "
+        "| err dp | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['level']} | {r['cells_per_diameter']:.1f} | {r['n_dofs']} | {r['linear_solver']} | "
+        f"{r['wall_s']:.1f} | {cpu(r)} | "
+        f"{r['newton']} | {r['drag_coefficient']:.4f} | {percent(r['drag_coefficient_error'], '.2f')} | "
+        f"{r['lift_coefficient']:.4f} | {r['pressure_difference']:.4f} | "
+        f"{percent(r.get('pressure_difference_error'), '.2f')} | {r.get('date', 'earlier session')} "
+        f"{r.get('commit', '')} |"
+        for r in rows
+    ]
+    write_text(RESULTS / f"{scene}.md", "\n".join(lines) + "\n")
+    plot(scene, rows)
+    curves = {}
+    for r in rows:
+        curves.setdefault(f"{scene}, {r.get('solver', 'direct')} solver", []).append(
+            (r["wall_s"], abs(r["drag_coefficient_error"]), f"{r['cells_per_diameter']:g}/D")
+        )
+    tradeoff_plot(
+        RESULTS / f"{scene}-tradeoff.png",
+        curves,
+        "|C_D error|",
+        f"{scene}: drag against cost (labels: cells per diameter)",
+    )
+
+
+def plot(scene: str, rows: list[dict]) -> None:
+    """Drag error against cells per diameter and against wall time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    rows = [r for r in rows if r.get("solver", "direct") == "direct"] or rows
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
+    err = [100 * abs(r["drag_coefficient_error"]) for r in rows]
+    cells = [r["cells_per_diameter"] for r in rows]
+    a.loglog(cells, err, "o-")
+    a.set_xticks(cells, [f"{c:g}" for c in cells])
+    a.xaxis.set_minor_formatter(NullFormatter())
+    a.set(xlabel="cells per diameter", ylabel="|C_D error| (%)", title=scene)
+    b.loglog([r["wall_s"] for r in rows], err, "s-")
+    for r, e in zip(rows, err):
+        b.annotate(
+            f"level {r['level']}", (r["wall_s"], e), textcoords="offset points", xytext=(4, 4), fontsize=8
+        )
+    b.set(xlabel="wall time (s)", ylabel="|C_D error| (%)", title="accuracy against cost")
+    for ax in (a, b):
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(RESULTS / f"{scene}.png", dpi=120)
+    plt.close(fig)

@@ -1,0 +1,110 @@
+"""Force estimators: strategies that turn a solved flow into the hydrodynamic force and torque on
+every particle, registered by name in :data:`FORCE_ESTIMATORS` (the parameter ``fbm.force``).
+
+An estimator has
+
+* ``name`` and ``lags_pressure``: whether the pressure's part may be taken on the particles moved
+  back to where the step's pressure belongs (the simulation then evaluates the velocity's and the
+  pressure's parts separately, each with a rule for its own positions);
+* ``check(shapes, sharp)``: ValueError with a remedy when it cannot serve these shapes with this
+  fictitious boundary (``sharp``: the sharp boundary is on);
+* ``prepare(space, centres, shapes, rotations, owner, walls)``: the rule for particles at
+  ``centres (n, dim)`` with rotations ``(n, dim, dim)``; ``owner (n_v,)`` int64 is their node
+  owner where known (None: computed), ``walls`` the velocity nodes held by the walls;
+* ``evaluate(rule, u, p, mu, rho, u_old, dt, about)``: force ``(n, dim)`` and torque ``(n, 3)``
+  of the flow ``u (dim * n_v,)``, ``p (n_p,)``; ``u_old`` is the velocity at the step's start
+  and ``about`` the flow a response ``u`` is a change of (the estimators linear in the flow ignore
+  both).
+"""
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+
+from ..fem.space import FlowSpace
+from .forces import SurfaceForces, TestFunctionForces, hydrodynamic_forces, supports_surface_force
+from .indicator import node_owner
+
+
+class ForceEstimator:
+    """Base of the estimators: any shape, either boundary, the pressure's part lagged; the rule's
+    node owner computed where not given."""
+
+    name = ""
+    lags_pressure = True
+
+    def check(self, shapes: list, sharp: bool) -> None:
+        return None
+
+    @staticmethod
+    def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
+               owner: np.ndarray | None) -> np.ndarray:
+        return node_owner(space.V, centres, shapes, rotations) if owner is None else owner
+
+
+class VolumeForce(ForceEstimator):
+    """``F_i = -int sigma . grad alpha_i`` over the cells the particle cuts
+    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary."""
+
+    name = "volume"
+
+    def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+        owner = self._owner(space, centres, shapes, rotations, owner)
+        return partial(hydrodynamic_forces, space, owner, centres)
+
+    def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
+        return rule(u, p, mu)
+
+
+class TestFunctionForce(ForceEstimator):
+    """The momentum balance tested with a function that is one on the particle
+    (:class:`~fbmflow.coupling.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
+    ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is."""
+
+    __test__ = False  # not a pytest class
+    name = "test-function"
+    lags_pressure = False
+
+    def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+        owner = self._owner(space, centres, shapes, rotations, owner)
+        return TestFunctionForces(space, owner, centres, shapes, rotations, walls)
+
+    def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
+        return rule(u, p, mu, rho, u_old=u_old, dt=dt, about=about)
+
+
+class SurfaceForce(ForceEstimator):
+    """The traction integrated over the true surface (:class:`~fbmflow.coupling.SurfaceForces`);
+    balls with the sharp boundary only (the nodal boundary's cut cells carry no flow up to the
+    surface)."""
+
+    name = "surface"
+
+    def check(self, shapes: list, sharp: bool) -> None:
+        if not (sharp and supports_surface_force(shapes)):
+            raise ValueError("force 'surface' integrates the traction over the true surface of balls with "
+                             "the sharp boundary (the nodal boundary's cut cells carry no flow up to the "
+                             "surface); use fbm.boundary = 'sharp' with balls, or fbm.force = 'volume'")
+
+    def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+        return SurfaceForces(space, centres, shapes)
+
+    def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
+        return rule(u, p, mu)
+
+
+#: force estimators by name (the parameter ``fbm.force``)
+FORCE_ESTIMATORS = {cls.name: cls for cls in (VolumeForce, TestFunctionForce, SurfaceForce)}
+
+
+def make_force_estimator(name: str):
+    """The registered estimator ``name``; ValueError listing the names otherwise."""
+    try:
+        return FORCE_ESTIMATORS[name]()
+    except KeyError:
+        raise ValueError(f"unknown hydrodynamic force {name!r}; choose one of "
+                         f"{sorted(FORCE_ESTIMATORS)}") from None

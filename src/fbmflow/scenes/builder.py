@@ -1,0 +1,155 @@
+"""The one scene builder: how a scene's parameters become a simulation or a flow problem.
+
+A particle scene (:class:`ParticleScene`) only places things: its :meth:`~ParticleScene.layout`
+gives the mesh, the particles, the fluid, the boundary conditions and the mirror planes of a
+level. The builder adds everything else the same way for every scene, from the parameter
+sections every particle scene has (``time``, ``solver``, ``coupling``, ``fbm``, ``repulsion`` and,
+where the scene has it, ``contact``): the linear solver (``solver.linear = "auto"``:
+:func:`~fbmflow.simulation.choose_linear_solver`), the coupling scheme and the force estimator
+(by name from their registries), the step count (:attr:`~fbmflow.params.TimeParams.n_steps`), the
+memory check (:func:`~fbmflow.simulation.check_memory`) and the warning about a contact skin too
+coarse for the particles. The steady scenes build their flow problem with :func:`flow_problem`.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import sys
+from dataclasses import dataclass
+
+from ..flow import NavierStokesProblem
+from ..params import (
+    ContactParams,
+    ContactRepulsionParams,
+    CouplingParams,
+    FictitiousBoundaryParams,
+    FluidParams,
+    NodalBoundaryParams,
+    RepulsionParams,
+    Section,
+    SolverParams,
+    TimeParams,
+    param,
+    tree,
+)
+from ..simulation import Simulation, check_memory
+from .base import SceneResult, Setup, SimulationScene
+
+log = logging.getLogger(__name__)
+
+#: the largest contact skin, as a fraction of the smallest particle radius, that contact times and
+#: distances survive: beyond it the builder warns and names the level that brings it below
+SKIN_FRACTION = 0.5
+
+
+@dataclass(frozen=True)
+class CgsFluid(FluidParams):
+    """Fluid and gravity (CGS units)."""
+
+    density: float = param(1.0, "fluid density", "g/cm^3", positive=True)
+    viscosity: float = param(0.1, "dynamic viscosity", "g/(cm s)", positive=True)
+    gravity: float = param(980.0, "gravitational acceleration (downwards)", "cm/s^2", nonnegative=True)
+
+
+@dataclass(frozen=True)
+class DomainParams(Section):
+    """Mesh of a single particle's fall."""
+
+    mesh: str = param("graded", "graded: uniform cells along the particle's path, growing towards the "
+                      "side walls and the lid; uniform: the same cells everywhere",
+                      choices=("graded", "uniform"))
+
+
+#: the sections every particle scene has, after its own, with their default classes (``contact``:
+#: only where the scene passes one)
+STANDARD_SECTIONS = {"time": TimeParams, "coupling": CouplingParams, "fbm": FictitiousBoundaryParams,
+                     "contact": None, "repulsion": RepulsionParams, "solver": SolverParams}
+#: the sections of the scenes with many particles in hard contact: the nodal boundary, contact on,
+#: repulsion off
+CONTACT_SECTIONS = {"fbm": NodalBoundaryParams, "contact": ContactParams, "repulsion": ContactRepulsionParams}
+
+
+def particle_params(name: str, doc: str, validate=None, **sections) -> type:
+    """The parameter tree of a particle scene (:func:`~fbmflow.params.tree`): its own sections
+    in the order given, then those of :data:`STANDARD_SECTIONS`, each the class given here or the
+    default one. The class belongs to the calling module."""
+    own = {key: cls for key, cls in sections.items() if key not in STANDARD_SECTIONS}
+    standard = {key: sections.get(key, cls) for key, cls in STANDARD_SECTIONS.items()}
+    return tree(name, doc, validate, sys._getframe(1).f_globals["__name__"], **own,
+                **{key: cls for key, cls in standard.items() if cls is not None})
+
+
+@dataclass
+class Layout:
+    """What a particle scene places at a level: ``mesh`` (StructuredMesh), ``particles``
+    (Particles), ``fluid`` (FluidParams), ``boundary`` (tag -> condition; None: no-slip walls all
+    round) and ``symmetry`` (normal axes of mirror planes through the particles)."""
+
+    mesh: object
+    particles: object
+    fluid: FluidParams
+    boundary: dict | None = None
+    symmetry: tuple = ()
+
+
+class ParticleScene(SimulationScene):
+    """A time-dependent scene of rigid particles in a flow, built by :meth:`build`.
+
+    Subclasses give :meth:`layout`, :meth:`observe` and :meth:`quantities`, and override
+    :meth:`time` when their time section leaves values to the set-up.
+    """
+
+    def layout(self, params, level: int) -> Layout:
+        raise NotImplementedError
+
+    def time(self, params) -> TimeParams:
+        """The time stepping of a run: ``params.time``."""
+        return params.time
+
+    def build(self, params, level: int) -> Setup:
+        place = self.layout(params, level)
+        sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary,
+                         time=self.time(params), solver=params.solver, coupling=params.coupling,
+                         fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
+                         symmetry=place.symmetry)
+        self._check_contact_skin(sim, level)
+        return Setup(sim, sim.dt, sim.n_steps)
+
+    def _check_contact_skin(self, sim: Simulation, level: int) -> None:
+        """Warn when hard contact keeps surfaces more than :data:`SKIN_FRACTION` of the smallest
+        radius apart (the skin is counted in cells: at a coarse level it can exceed a diameter,
+        and contact times and distances lose their meaning), naming the level that avoids it."""
+        if sim.contact is None or sim.contact.skin == 0.0:
+            return
+        radius = float(sim.particles.bounding_radius.min())
+        ratio = sim.contact.skin / radius
+        if ratio <= SKIN_FRACTION:
+            return
+        needed = level + math.ceil(math.log2(ratio / SKIN_FRACTION) - 1e-9)
+        remedy = (f"use --level {needed} or finer" if needed <= self.max_level
+                  else f"levels up to {self.max_level} do not reach it")
+        cell = float(max(sim.flow.mesh.finest_spacing))
+        log.warning("%s at level %d: the contact skin (%.3g, %.3g cells of %.3g) is %.2g particle radii, so "
+                    "contact stops the particles that far apart and contact times and distances lose their "
+                    "meaning; %s (a skin of at most %.2g radii) or lower contact.skin_cells", self.name,
+                    level, sim.contact.skin, sim.contact.skin / cell, cell, ratio, remedy, SKIN_FRACTION)
+
+
+def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,
+                 linear=None, **kwargs) -> NavierStokesProblem:
+    """The flow problem of a scene without particles, with the Newton and linear solver settings
+    of ``solver`` (``linear``: a solver chosen by the scene instead of ``solver.linear_solver()``)
+    and its memory checked before the first solve (:func:`~fbmflow.simulation.check_memory`);
+    ``kwargs`` go to :class:`~fbmflow.flow.NavierStokesProblem`."""
+    problem = NavierStokesProblem(mesh, viscosity, boundary, density=density,
+                                  linear_solver=solver.linear_solver() if linear is None else linear,
+                                  newton=solver.newton_settings(), **kwargs)
+    check_memory(problem.n_dofs, mesh.dim, problem.linear_solver)
+    return problem
+
+
+def steady_result(problem: NavierStokesProblem, quantities: dict, newton_iterations: int,
+                  steps: int = 0) -> SceneResult:
+    """The :class:`~fbmflow.scenes.base.SceneResult` of a scene that solved ``problem``."""
+    return SceneResult(quantities, problem.mesh.n_cells, problem.n_dofs, steps=steps,
+                       newton_iterations=newton_iterations, linear_solver=problem.linear_solver_description)

@@ -1,0 +1,47 @@
+"""The one scene builder: every particle scene is built the same way from its parameter sections."""
+import logging
+
+import pytest
+
+import fbmflow.simulation as simulation
+from fbmflow.params import from_dict
+from fbmflow.scenes import SCENES, get_scene
+from fbmflow.scenes.base import SimulationScene
+from fbmflow.scenes.builder import STANDARD_SECTIONS, ParticleScene
+
+PARTICLE_SCENES = [name for name, scene in SCENES.items() if isinstance(scene, SimulationScene)]
+
+
+@pytest.mark.parametrize("name", PARTICLE_SCENES)
+def test_every_particle_scene_is_built_by_the_builder_from_its_sections(name, monkeypatch):
+    """The scheme, estimator, integrator, time scheme, step count and time step come from the
+    parameter sections alone; every standard section is there."""
+    monkeypatch.setattr(simulation, "available_memory", lambda: None)
+    scene = get_scene(name)
+    assert isinstance(scene, ParticleScene)
+    params = from_dict(scene.Params, {"coupling": {"scheme": "explicit"}, "fbm": {"force": "test-function"}})
+    standard = {k for k, cls in STANDARD_SECTIONS.items() if cls is not None}
+    assert standard <= set(scene.Params.__dataclass_fields__)
+    setup = scene.build(params, 0)
+    sim, time = setup.sim, scene.time(params)
+    assert (sim.coupling.name, sim.estimator.name) == ("explicit", "test-function")
+    assert (sim.integrator, sim.scheme) == (params.coupling.integrator, time.scheme)
+    assert setup.n_steps == time.n_steps and setup.dt * setup.n_steps == pytest.approx(time.t_end)
+    assert (sim.contact is not None) == ("contact" in scene.Params.__dataclass_fields__)
+
+
+def test_a_contact_skin_of_a_diameter_warns_and_names_the_level(caplog):
+    """dkt-2d at level 0: the skin of one cell is a whole diameter, which made t_kiss = 0 without a
+    word; level 2 brings it to half a radius."""
+    scene = get_scene("dkt-2d")
+    params = from_dict(scene.Params, {})
+    with caplog.at_level(logging.WARNING, logger="fbmflow.scenes.builder"):
+        scene.build(params, 0)
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1 and "is 2 particle radii" in messages[0]
+    assert "use --level 2 or finer" in messages[0]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="fbmflow.scenes.builder"):
+        scene.build(params, 2)
+        scene.build(from_dict(scene.Params, {"contact": {"skin_cells": 0.25}}), 0)  # a thinner skin
+    assert not caplog.records

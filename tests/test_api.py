@@ -1,0 +1,86 @@
+"""The typed Python API: sections checked when made, registries behind the choices, a simulation
+built, stepped and read through public names only."""
+import numpy as np
+import pytest
+
+import fbmflow as fb
+from fbmflow.params import derive, tree
+
+
+def test_sections_check_their_values_when_made():
+    with pytest.raises(fb.ParamError, match=r"FluidParams.viscosity: must be positive, got -1.0"):
+        fb.FluidParams(viscosity=-1.0)
+    with pytest.raises(fb.ParamError, match=r"TimeParams.scheme: 'euler' is not allowed; choose one of"):
+        fb.TimeParams(scheme="euler")
+    assert fb.TimeParams(dt=1).dt == 1.0 and isinstance(fb.TimeParams(dt=1).dt, float)
+    with pytest.raises(fb.ParamError, match="expected a number"):
+        fb.FluidParams(density="water")
+
+
+def test_derive_changes_defaults_and_keeps_the_rest():
+    Slow = derive(fb.TimeParams, "Slow", "Slow time stepping.", dt=0.5)
+    assert Slow() == Slow(dt=0.5, t_end=1.0, scheme="fractional-step-theta")
+    assert issubclass(Slow, fb.TimeParams)
+    assert Slow.__dataclass_fields__["dt"].metadata["doc"] == "time step"
+    with pytest.raises(fb.ParamError, match="must be positive"):
+        Slow(dt=0.0)
+    with pytest.raises(ValueError, match="TimeParams has no field 'dtt'"):
+        derive(fb.TimeParams, "Bad", "", dtt=0.5)
+    Both = tree("Both", "Two sections.", fluid=fb.FluidParams, time=Slow)
+    assert fb.from_dict(Both, {"time": {"t_end": 2}}).time == Slow(t_end=2.0)
+
+
+@pytest.mark.parametrize("registry, key", [(fb.COUPLINGS, "scheme"), (fb.FORCE_ESTIMATORS, "force")])
+def test_the_registries_are_the_parameter_choices(registry, key):
+    section = fb.CouplingParams if key == "scheme" else fb.FictitiousBoundaryParams
+    assert tuple(registry) == section.__dataclass_fields__[key].metadata["choices"]
+
+
+def _falling_disk(**sections):
+    mesh = fb.StructuredMesh.box((16, 24), upper=(2.0, 3.0))
+    disk = fb.Particles.at_rest([fb.Ball(0.5, dim=2)], density=1.5, position=[[1.0, 1.5]])
+    return fb.Simulation(mesh, disk, fb.FluidParams(density=1.0, viscosity=0.1, gravity=980.0),
+                         time=fb.TimeParams(dt=0.005, t_end=0.01, scheme="backward-euler"), **sections)
+
+
+@pytest.mark.parametrize("scheme", list(fb.COUPLINGS))
+def test_every_coupling_scheme_steps(scheme):
+    """Each registered scheme: a falling disk slows the fall below reduced-gravity free fall."""
+    sim = _falling_disk(coupling=fb.CouplingParams(scheme=scheme))
+    reports = sim.run()
+    assert [r.step for r in reports] == [1, 2] and reports[-1].t == pytest.approx(0.01)
+    v = reports[-1].velocity[0, 1]
+    assert -(1 - 1 / 1.5) * 980.0 * 0.01 < v < 0.0
+    assert (reports[-1].flow_solves == 1) == (scheme == "explicit")
+
+
+@pytest.mark.parametrize("force", list(fb.FORCE_ESTIMATORS))
+def test_every_force_estimator_resists_the_fall(force):
+    """Each registered estimator (sharp boundary, balls): the drag points up, less than the net
+    weight early in the fall."""
+    sim = _falling_disk(fbm=fb.FictitiousBoundaryParams(boundary="sharp", force=force))
+    report = sim.run()[-1]
+    net_weight = (1.5 - 1.0) * np.pi * 0.5**2 * 980.0
+    assert 0.0 < report.force[0, 1] < net_weight
+    np.testing.assert_array_equal(sim.force, report.force)
+
+
+def test_positions_forces_and_fields_are_read_without_internals(tmp_path):
+    sim = _falling_disk()
+    assert sim.force.shape == (1, 2) and not sim.force.any()  # before the first step
+    report = sim.step()
+    assert report.step == 1 and sim.t == pytest.approx(sim.dt)
+    np.testing.assert_array_equal(report.position, sim.particles.position)
+    # inside the disk the flow is the disk's rigid motion (no rotation on the axis)
+    np.testing.assert_allclose(sim.velocity_at(sim.particles.position), sim.particles.velocity, atol=1e-12)
+    far = sim.velocity_at([[0.1, 0.1], [1.0, 2.8]])
+    assert far.shape == (2, 2) and np.all(np.abs(far) < np.abs(sim.particles.velocity).max())
+    assert np.all(np.isfinite(sim.pressure_at([[0.5, 2.5]])))
+    out = sim.write_fields(tmp_path / "fields")
+    assert any(out.glob("*.vtu"))
+
+
+def test_a_wrong_section_type_names_the_fix():
+    with pytest.raises(TypeError, match="fluid must be a FluidParams, got dict; make it with FluidParams"):
+        fb.Simulation(fb.StructuredMesh.box((4, 4)),
+                      fb.Particles.at_rest([fb.Ball(0.2, 2)], 1.5, [[0.5, 0.5]]), {"viscosity": 0.1})
