@@ -245,6 +245,9 @@ class SolverParams(Section):
                                   "(FGMRES applies the Newton matrix; dim times fewer velocity entries) or "
                                   "auto (picard in time steps, newton in steady solves)",
                                   choices=("auto", "newton", "picard"))
+    mg_sweeps: str = param("auto", "order of the smoothing sweeps: forward, symmetric (forward and backward "
+                           "in turn) or auto (forward in time steps, symmetric in steady solves)",
+                           choices=("auto", "forward", "symmetric"))
     newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
     newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
@@ -259,7 +262,7 @@ class SolverParams(Section):
         return MultigridSolver(MultigridSettings(
             cycle=self.mg_cycle, smoother=self.mg_smoother, pre_smooth=self.mg_smoothing_steps,
             post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov,
-            coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation))
+            coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation, sweeps=self.mg_sweeps))
 
     def newton_settings(self) -> NewtonSettings:
         """The Newton stopping rule and Jacobian reuse of these settings."""
@@ -274,8 +277,12 @@ class SteadySolverParams(SolverParams):
     nonlinear residual, so the accuracy is Newton's; measured cost: docs/validation.md)."""
 
     linear_rtol: float = param(1e-2, "relative residual per linear solve (inexact Newton steps; the "
-                               "Newton stop on the nonlinear residual decides the accuracy)",
+                               "Newton stop on the nonlinear residual decides the accuracy; multigrid: "
+                               "at most this, tighter near the solution by Eisenstat-Walker)",
                                positive=True, maximum=0.1)
+    continuation_rtol: float = param(1e-3, "Newton stop of the intermediate steady solves of a continuation "
+                                     "(they only start the next one; the last solves to newton_rtol)",
+                                     positive=True, maximum=1.0)
 
 
 _INTEGRATORS = ("semi-implicit-euler", "trapezoidal")  # the integrators that couple with a flow

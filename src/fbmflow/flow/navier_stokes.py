@@ -302,12 +302,13 @@ class NavierStokesProblem:
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
-              guess: np.ndarray | None = None, rtol: float | None = None):
+              guess: np.ndarray | None = None, rtol: float | None = None, newton: NewtonSettings | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
         the stopping rule stays relative to the residual at ``x0``, so the accuracy is the same.
-        ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``).
+        ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``);
+        ``newton``: settings for this solve instead of ``self.newton``.
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t)
@@ -325,7 +326,8 @@ class NavierStokesProblem:
             reference = float(np.linalg.norm(self.residual(x0, m, a, rhs, con, orphans)))
             x0 = guess.copy()
             con.apply_to_vector(x0)
-        settings = self.newton if rtol is None else dataclasses.replace(self.newton, rtol=rtol)
+        settings = newton or self.newton
+        settings = settings if rtol is None else dataclasses.replace(settings, rtol=rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
                                  settings, reference)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
@@ -413,17 +415,27 @@ class NavierStokesProblem:
         From rest, a flow driven by inflow has a first Newton step (the Stokes flow) whose
         convection residual is thousands of times the starting residual, and the line search on
         ``|F|`` can fail (measured: dfg-3d-1z at level 1); from the Stokes flow it does not.
+
+        With an iterative linear solver (multigrid) every Newton step takes a fresh Jacobian and
+        Eisenstat–Walker forcing terms (:class:`~fbmflow.solvers.NewtonSettings`): its set-up is
+        cheap next to its cycles, and Newton then converges quadratically where chord steps with
+        the linear solves at ``linear_rtol`` converge linearly (the cavity at Re 1000: 17 Newton
+        steps instead of 23, docs/validation.md). A direct solver keeps its factorisation
+        (``newton.reuse_jacobian``), which costs more than its solves.
         """
+        newton = self.newton
+        if getattr(self.linear_solver, "needs_hierarchy", False):
+            newton = dataclasses.replace(newton, reuse_jacobian=False, adaptive_linear_rtol=True)
         if x0 is None:
             x0 = self.zero_state(t)
             if self.convection:
                 self.convection = False
                 try:
-                    x0, _ = self.solve(x0, 0.0, 1.0, self.load(t), t)
+                    x0, _ = self.solve(x0, 0.0, 1.0, self.load(t), t, newton=newton)
                 finally:
                     self.convection = True
                     self.forget_linearisation()
-        x, report = self.solve(x0, 0.0, 1.0, self.load(t), t)
+        x, report = self.solve(x0, 0.0, 1.0, self.load(t), t, newton=newton)
         log.info("steady solve: %d Newton iterations, |F| %.2e -> %.2e", report.iterations,
                  report.residuals[0], report.residuals[-1])
         return x, report
