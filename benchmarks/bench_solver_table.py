@@ -11,6 +11,7 @@ listed with the reason (SuperLU's fill in 3D above a few 10^4 unknowns; PARDISO'
 
     python benchmarks/bench_solver_table.py                  # every case
     python benchmarks/bench_solver_table.py --cases cavity-re400 channel-3d-4
+    python benchmarks/bench_solver_table.py --cases cavity-re400 --busy 1   # beside a busy process
 
 writes benchmarks/results/solver_table.{json,md} (rows of cases not run are kept from the last
 file).
@@ -117,18 +118,19 @@ def table(rows: list[dict]) -> str:
              "in Re from 100); particle scenes: the first steps (s per step: the mean over the steps after "
              "the first, which includes the set-up). Cycles: FGMRES iterations, one multigrid cycle each. "
              "Matvec-equivalents: linear time per solve over one product with the fine system.", "",
-             "| case | scene | level | unknowns | solver | Newton | solves | cycles / solve | matvec-eq / solve "
+             "Busy: other processes running a pure-Python loop beside the case.", "",
+             "| case | scene | level | unknowns | solver | busy | Newton | solves | cycles / solve | matvec-eq / solve "
              "| s / solve | s / step | total s | peak GB |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "skipped" in r:
-            lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | not run: {r['skipped']} "
-                         "| | | | | | | |")
+            lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | {r.get('busy', 0)} | "
+                         f"not run: {r['skipped']} | | | | | | | |")
             continue
         cyc = f"{r['cycles_per_solve']:.1f}" if r["cycles_per_solve"] is not None else ""
         step = f"{r['s_per_step']:.1f}" if r["s_per_step"] else ""
         lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | {r['unknowns']} | {r['description']} | "
-                     f"{r['newton']} | {r['solves']} | {cyc} | {r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
+                     f"{r.get('busy', 0)} | {r['newton']} | {r['solves']} | {cyc} | {r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
                      f"{step} | {r['total_s']:.1f} | {r['peak_gb']:.1f} |")
     return "\n".join(lines) + "\n"
 
@@ -137,6 +139,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--solvers", nargs="+", default=list(SOLVERS), choices=SOLVERS)
+    ap.add_argument("--busy", type=int, default=0, help="run each case beside this many busy processes "
+                    "(a pure-Python loop each; they share the 2 cores)")
     ap.add_argument("--one", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
@@ -145,23 +149,30 @@ def main():
     from fbmflow.solvers.linear import pardiso_available
     path = RESULTS / "solver_table.json"
     old = json.loads(path.read_text()) if path.exists() else []
-    rows = {(r["case"], r["solver"]): r for r in old}
+    rows = {(r["case"], r["solver"], r.get("busy", 0)): r for r in old}
     for case in args.cases:
         for solver in args.solvers:
             scene, level = CASES[case][:2]
             reason = SKIP.get((case, solver)) or (None if solver != "pardiso" or pardiso_available()
                                                    else "PARDISO not installed")
+            key = case, solver, args.busy
             if reason:
-                rows[case, solver] = dict(case=case, scene=scene, level=level, solver=solver, skipped=reason)
+                rows[key] = dict(case=case, scene=scene, level=level, solver=solver, busy=args.busy, skipped=reason)
                 continue
-            proc = subprocess.run([sys.executable, __file__, "--one", case, solver], capture_output=True, text=True)
+            busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
+            try:
+                proc = subprocess.run([sys.executable, __file__, "--one", case, solver], capture_output=True,
+                                      text=True)
+            finally:
+                for p in busy:
+                    p.kill()
             if proc.returncode:
-                rows[case, solver] = dict(case=case, scene=scene, level=level, solver=solver,
-                                          skipped=f"failed: {proc.stderr.strip().splitlines()[-1][:120]}")
+                rows[key] = dict(case=case, scene=scene, level=level, solver=solver, busy=args.busy,
+                                 skipped=f"failed: {proc.stderr.strip().splitlines()[-1][:120]}")
             else:
-                rows[case, solver] = json.loads(proc.stdout.strip().splitlines()[-1])
-            print(rows[case, solver], flush=True)
-    ordered = [rows[c, s] for c in CASES for s in SOLVERS if (c, s) in rows]
+                rows[key] = dict(json.loads(proc.stdout.strip().splitlines()[-1]), busy=args.busy)
+            print(rows[key], flush=True)
+    ordered = [rows[k] for k in sorted(rows, key=lambda k: (list(CASES).index(k[0]), k[2], SOLVERS.index(k[1])))]
     path.write_text(json.dumps(ordered, indent=1))
     (RESULTS / "solver_table.md").write_text(table(ordered))
 
