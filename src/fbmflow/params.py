@@ -233,8 +233,8 @@ class SolverParams(Section):
                                "rule; direct with PARDISO: its refinement target in Newton steps)",
                                positive=True, maximum=0.1)
     mg_cycle: str = param("V", "multigrid cycle", choices=("V", "W", "F"))
-    mg_smoother: str = param("auto", "multigrid smoother ('auto': vanka-factored with the sharp fictitious "
-                             "boundary or Galerkin coarse rows, which only it smooths, else vanka-full)",
+    mg_smoother: str = param("auto", "multigrid smoother ('auto': vanka-factored, local factors stored; "
+                             "vanka-full stores none and factorises in every sweep)",
                              choices=("auto", "vanka-full", "vanka-factored", "vanka-diagonal"))
     mg_coarse_obstacle: str = param("nodes", "how coarse multigrid levels see particles: their own nodes "
                                     "inside them, or Galerkin rows of the truncated prolongation",

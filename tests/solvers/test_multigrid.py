@@ -367,4 +367,5 @@ def test_settings_refuse_galerkin_rows_with_a_smoother_that_cannot_see_them():
         MultigridSettings(smoother="vanka-full", coarse_obstacle="galerkin")
     _, system, _ = _ball_system("nodes", n=8, coarse_obstacle="galerkin")
     assert MultigridSolver(MultigridSettings(coarse_obstacle="galerkin")).smoother_for(system) == "vanka-factored"
-    assert MultigridSolver(MultigridSettings()).smoother_for(system) == "vanka-full"
+    assert MultigridSolver(MultigridSettings()).smoother_for(system) == "vanka-factored"
+    assert MultigridSolver(MultigridSettings(smoother="vanka-full")).smoother_for(system) == "vanka-full"
