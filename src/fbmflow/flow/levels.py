@@ -196,21 +196,16 @@ class FlowLevel:
 
 
 def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cells: int,
-                  max_spacing: float = np.inf, extra_constraints=None) -> list[FlowLevel]:
+                  extra_constraints=None) -> list[FlowLevel]:
     """Coarser levels below ``fine`` (finest first); sets the transfer operators.
 
-    Coarsening goes on while every axis has an even cell count, the coarser mesh keeps at least
-    ``min_cells`` cells and its cell size stays at most ``max_spacing`` (the flow problem passes
-    the size at which the cell Reynolds number reaches its limit; ``inf`` for Stokes). The
-    unstabilised Galerkin
-    operator on a mesh that does not resolve the convection is a poor coarse-grid correction
-    (at Re = 1000 the 4 x 4 cavity level makes the cycle diverge), so the coarsest level must
-    still see the flow.
+    Coarsening goes on while every axis has an even cell count and the coarser mesh keeps at
+    least ``min_cells`` cells. (Which of them a linearisation uses, the flow problem decides by
+    their cell Reynolds number: :meth:`NavierStokesProblem._resolving_levels`.)
     """
     levels = [fine]
     mesh = fine.mesh
-    while (all(n % 2 == 0 for n in mesh.shape) and mesh.n_cells // 2**mesh.dim >= min_cells
-           and 2.0 * float(np.max(mesh.spacing)) <= max_spacing):
+    while all(n % 2 == 0 for n in mesh.shape) and mesh.n_cells // 2**mesh.dim >= min_cells:
         try:
             mesh = mesh.coarsen()
         except ValueError:

@@ -34,6 +34,11 @@ log = logging.getLogger(__name__)
 #: unknowns above which ``linear_solver="auto"`` picks multigrid (measured crossover against
 #: SuperLU, see benchmarks/bench_solvers.py)
 AUTO_MULTIGRID_DOFS = {2: 20_000, 3: 15_000}
+#: Newton's residual reduction for the Stokes flow that starts a steady solve from rest
+STOKES_START_RTOL = 1e-3
+#: unknowns above which a coarsest multigrid level is kept coarsened further, whatever the cell
+#: Reynolds number of the coarser levels (:meth:`NavierStokesProblem._resolving_levels`)
+COARSEST_UNKNOWNS = {2: 50_000, 3: 20_000}
 #: the same in 3D when the PARDISO backend is installed: limited by memory (252 000 unknowns
 #: took a 12.5 GB peak), not by speed; with fictitious boundaries multigrid is far slower (ten-cate
 #: level 0, 99 000 unknowns: 11 s per time step direct, over 20 minutes with multigrid)
@@ -107,7 +112,8 @@ class NavierStokesProblem:
         self._pressure_fixed = pressure_fixed
         self.coarse_cells = coarse_cells
         self.max_cell_reynolds = max_cell_reynolds
-        self.coarse: list[FlowLevel] | None = None  # built at the first linearisation
+        self._levels: list[FlowLevel] | None = None  # every coarser level, built at the first linearisation
+        self.coarse: list[FlowLevel] | None = None  # those of the last linearisation
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
@@ -235,11 +241,7 @@ class NavierStokesProblem:
         The velocity blocks live in buffers of the levels and are overwritten by the next call.
         """
         u = x[:self.space.n_u]
-        if self.coarse is None:
-            self.coarse = self._build_coarse_levels(u)
-        else:  # the flow got faster or the viscosity smaller: drop levels that no longer resolve it
-            limit = self._coarse_spacing_limit(u)
-            self.coarse = [lv for lv in self.coarse if float(np.max(lv.mesh.spacing)) <= limit]
+        self.coarse = self._resolving_levels(u)
         args = (m, a, self.rho, self.mu, self.convection)
         settings = getattr(self.linear_solver, "settings", None)
         picard = getattr(settings, "picard_hierarchy", None)
@@ -284,20 +286,36 @@ class NavierStokesProblem:
         return dilate_cells(s.V.cell_dofs, s.n_v, np.flatnonzero(cells), 2)
 
     def _coarse_spacing_limit(self, u: np.ndarray) -> float:
-        """Largest cell size with cell Reynolds number ``rho max|u| h / mu <= max_cell_reynolds``."""
+        """Largest cell size with cell Reynolds number ``rho max|u| h / mu <= max_cell_reynolds``.
+        The unstabilised Galerkin operator on a mesh that does not resolve the convection is a
+        poor coarse-grid correction (at Re = 1000 the 4 x 4 cavity level makes the cycle
+        diverge), so the coarsest level should still see the flow."""
         scale = float(np.max(np.abs(u))) if u.size else 0.0
         if not self.convection or scale == 0.0:
             return np.inf
         return self.max_cell_reynolds * self.mu / (self.rho * scale)
 
-    def _build_coarse_levels(self, u: np.ndarray) -> list[FlowLevel]:
-        """Multigrid levels below the fine one, limited by the cell Reynolds number of the
-        velocity scale ``max |u|`` at the first linearisation (boundary values included)."""
+    def _resolving_levels(self, u: np.ndarray) -> list[FlowLevel]:
+        """The multigrid levels below the fine one for the velocity ``u``: those whose cells stay
+        within the cell Reynolds number limit (:meth:`_coarse_spacing_limit`; the flow got faster
+        or the viscosity smaller: fewer levels), and coarser ones as long as the coarsest level
+        would otherwise be larger than :data:`COARSEST_UNKNOWNS` (a weak coarse correction
+        costs cycles; a direct solve of the fine system, hours or more memory than there is:
+        dfg-3d-1z level 3 on its graded mesh exceeds the limit on its one coarse level, and
+        converges with it). All levels are built at the first call (:func:`coarse_levels`)."""
         if not getattr(self.linear_solver, "needs_hierarchy", False):
             return []
-        levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells,
-                               self._coarse_spacing_limit(u), self.extra_constraints)
-        log.info("multigrid levels: %s", [self.mesh.shape] + [lv.mesh.shape for lv in levels])
+        if self._levels is None:
+            self._levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells,
+                                         extra_constraints=self.extra_constraints)
+        limit = self._coarse_spacing_limit(u)
+        n = sum(float(np.max(lv.mesh.spacing)) <= limit for lv in self._levels)
+        while n < len(self._levels) and ((self._levels[n - 1].space if n else self.space).n_dofs
+                                         > COARSEST_UNKNOWNS[self.mesh.dim]):
+            n += 1
+        levels = self._levels[:n]
+        if self.coarse is None or len(levels) != len(self.coarse):
+            log.info("multigrid levels: %s", [self.mesh.shape] + [lv.mesh.shape for lv in levels])
         return levels
 
     # -- solves -------------------------------------------------------------------------------
@@ -410,7 +428,8 @@ class NavierStokesProblem:
 
     def solve_steady(self, x0: np.ndarray | None = None, t: float = 0.0):
         """Steady solution by Newton from ``x0``; by default from the Stokes solution (one more
-        linear solve). Returns x, NewtonReport (of the Navier–Stokes iteration).
+        linear solve, to :data:`STOKES_START_RTOL`). Returns x, NewtonReport (of the
+        Navier–Stokes iteration).
 
         From rest, a flow driven by inflow has a first Newton step (the Stokes flow) whose
         convection residual is thousands of times the starting residual, and the line search on
@@ -430,8 +449,9 @@ class NavierStokesProblem:
             x0 = self.zero_state(t)
             if self.convection:
                 self.convection = False
-                try:
-                    x0, _ = self.solve(x0, 0.0, 1.0, self.load(t), t, newton=newton)
+                try:  # only a start: to a loose tolerance
+                    x0, _ = self.solve(x0, 0.0, 1.0, self.load(t), t, newton=newton,
+                                       rtol=max(STOKES_START_RTOL, newton.rtol))
                 finally:
                     self.convection = True
                     self.forget_linearisation()

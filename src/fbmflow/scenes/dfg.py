@@ -25,7 +25,7 @@ from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import NodalBoundaryParams, Section, SolverParams, derive, param, tree
+from ..params import NodalBoundaryParams, Section, SteadySolverParams, derive, param, tree
 from ..particles import Ball, Cylinder
 from .base import Scene, SceneResult
 from .builder import flow_problem, steady_result
@@ -46,12 +46,12 @@ class DFGFluid(Section):
     max_inflow: float = param(0.3, "centre-line inflow velocity U (mean 2U/3)", "m/s", positive=True)
 
 
-DFGParams = tree("DFGParams", "Parameters of ``dfg-2d-1``.", fluid=DFGFluid, solver=SolverParams,
+DFGParams = tree("DFGParams", "Parameters of ``dfg-2d-1``.", fluid=DFGFluid, solver=SteadySolverParams,
                  fbm=NodalBoundaryParams)
 DFG3DFluid = derive(DFGFluid, "DFG3DFluid",
                     "Fluid of the DFG 3D benchmark (the 2D fluid with the 3D inflow).",
                     max_inflow=param(0.45, "centre-line inflow velocity U (mean 4U/9)", "m/s", positive=True))
-DFG3DParams = tree("DFG3DParams", "Parameters of ``dfg-3d-1z``.", fluid=DFG3DFluid, solver=SolverParams,
+DFG3DParams = tree("DFG3DParams", "Parameters of ``dfg-3d-1z``.", fluid=DFG3DFluid, solver=SteadySolverParams,
                    fbm=NodalBoundaryParams)
 
 

@@ -33,8 +33,9 @@ class NewtonSettings:
     ``adaptive_linear_rtol``: Eisenstat and Walker's forcing terms (1996, choice 2) instead:
     ``eta_k = 0.9 (|F_k| / |F_(k-1)|)^2``, safeguarded by ``0.9 eta_(k-1)^2`` where that exceeds
     0.1, at most ``linear_rtol`` and at least half the final target over ``|F_k|`` and
-    :data:`MIN_FORCING` (an iterative solver's attainable accuracy): loose solves far from the
-    solution, tight ones where Newton converges quadratically.
+    :data:`MIN_FORCING` (an iterative solver's attainable accuracy; ``linear_rtol`` where that is
+    smaller): loose solves far from the solution, tight ones where Newton converges
+    quadratically.
     """
 
     rtol: float = 1e-10
@@ -147,4 +148,4 @@ def _forcing_term(eta: float | None, residuals: list[float], eta_max: float, tar
         new = 0.9 * (residuals[-1] / residuals[-2]) ** 2
         if 0.9 * eta**2 > 0.1:
             new = max(new, 0.9 * eta**2)
-    return float(max(min(new, eta_max), 0.5 * target / residuals[-1], MIN_FORCING))
+    return float(max(min(new, eta_max), 0.5 * target / residuals[-1], min(MIN_FORCING, eta_max)))
