@@ -5,7 +5,8 @@ Run:  python benchmarks/bench_force_estimators.py CHECKPOINT [--step]
 
 ``CHECKPOINT``: a ``checkpoint.h5`` of ``ten-cate`` (e.g. from ``python
 benchmarks/bench_tencate.py --cases E4 --levels 1 --checkpoint-every 5``, in
-``out/bench-tencate/E4-level1-dt0.01/``). Evaluated on its flow:
+``out/bench/ten-cate-level1-fluid.case=E4-time.dt=0.01/``; runs from before the pytest suite kept
+theirs in ``out/bench-tencate/``). Evaluated on its flow:
 
 * the **volume force** over the cut cells (what the particle dynamics use by default), of the
   step that computed the flow ('dynamics') and of the stored flow itself, whose ghost nodes that

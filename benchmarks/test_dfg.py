@@ -15,7 +15,7 @@ from fbmbench.common import bound
 quick = pytest.mark.quick
 needs_pardiso = pytest.mark.skipif(
     importlib.util.find_spec("pypardiso") is None,
-    reason="needs the pardiso extra (SuperLU cannot factorise this size)",
+    reason="measured with the pardiso extra only (7-13 GB with it); install fbmflow[pardiso]",
 )
 
 # scene, level, measured |C_D error|, measured |dp error| (None: not asserted)

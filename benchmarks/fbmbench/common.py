@@ -59,7 +59,8 @@ def slug(scene: str, level: int, settings: dict) -> str:
 def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]], float]:
     """Run ``cmd`` and return its exit status, the intervals ``[t0, t1]`` (epoch seconds) in
     which it was stopped (state T: another job's timing run can SIGSTOP the others on this
-    shared machine) and its CPU time (user + system, start-up included: on a machine shared
+    shared machine; seen in the child's state, or as a gap in this process's own looks) and its
+    CPU time (user + system, start-up included: on a machine shared
     with other jobs a better measure of the work than the wall time). ``record(intervals)`` is
     called every 30 s and at the end."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -74,9 +75,9 @@ def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]], floa
             stopped = stat.read_text().rsplit(")", 1)[1].split()[0] in "Tt"
         except (OSError, IndexError):
             stopped = False
-        # This process is stopped together with the child: a gap in its own looks, with the child
-        # stopped at either end, counts as stopped too.
-        if prev is not None and (stopped and prev[1] or (now - prev[0] > 2.0 and (stopped or prev[1]))):
+        # Whoever stops the child stops this process too (both niced): a gap of more than 2 s
+        # between its looks, 0.25 s apart, counts as stopped as well.
+        if prev is not None and (stopped and prev[1] or now - prev[0] > 2.0):
             if intervals and prev[0] - intervals[-1][1] < 1.0:
                 intervals[-1][1] = now
             else:
@@ -257,8 +258,8 @@ def tradeoff_plot(path: Path, curves: dict, ylabel: str, title: str) -> None:
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=8.5)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), frameon=False)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)

@@ -33,6 +33,13 @@ from .common import (
 
 SCENE = "glowinski-free-fall"
 INTEGRATOR = {"crank-nicolson": "trapezoidal", "backward-euler": "semi-implicit-euler"}
+LABELS = {
+    "glowinski": "sharp, Crank–Nicolson",
+    "glowinski-be": "sharp, backward Euler",
+    "glowinski-nodes": "nodal, backward Euler",
+    "glowinski-nodes-cn": "nodal, Crank–Nicolson",
+    "glowinski-uniform": "nodal, backward Euler, uniform mesh, to 0.5 s",
+}
 STEMS = ("glowinski", "glowinski-be", "glowinski-nodes", "glowinski-nodes-cn", "glowinski-uniform")
 
 
@@ -260,7 +267,7 @@ def plot_tradeoff() -> None:
         mesh_groups, _ = groups(load_rows(name))
         for (dt, t_end, code), rows in mesh_groups.items():
             if len(rows) > 1:
-                label = f"{name}, dt {dt} s{', ' + code if code else ''}"
+                label = f"{LABELS[name]}, dt {dt} s{', ' + code if code else ''}"
                 curves[label] = [
                     (r["wall_s"], abs(r["vs_koblitz"]), f"{r['cells_per_diameter']}/D") for r in rows
                 ]

@@ -55,7 +55,7 @@ class ExplicitCoupling:
     name = "explicit"
 
     def __init__(self, params=None, newton_rtol: float | None = None):
-        self.params = params
+        """Nothing to set: the arguments are those every scheme is made with."""
 
     def advance(self, sim, dt: float) -> CoupledFlow:
         x, reports, force, torque = sim.flow_and_forces(dt)
