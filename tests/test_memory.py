@@ -11,11 +11,12 @@ from fbmflow.params import FluidParams, SolverParams
 from fbmflow.particles import Ball, Particles
 from fbmflow.simulation import InsufficientMemory, Simulation, available_memory, estimate_memory
 
-#: peak resident sets of whole runs (two steps) [GB]: (unknowns, dim, solver, measured)
+#: peak resident sets of whole runs (two or three steps, or a steady solve) [GB]: (unknowns, dim,
+#: solver, measured)
 MEASURED = [(17_106, 2, "direct", 0.33), (52_818, 2, "direct", 0.55), (164_946, 2, "direct", 1.30),
             (544_674, 2, "direct", 3.60), (164_946, 2, "multigrid", 0.81), (32_707, 3, "direct", 1.22),
             (64_547, 3, "direct", 2.0), (278_739, 3, "direct", 10.3), (64_547, 3, "multigrid", 0.8),
-            (278_739, 3, "multigrid", 2.9)]
+            (278_739, 3, "multigrid", 1.44), (486_979, 3, "multigrid", 3.4), (2_012_403, 3, "multigrid", 8.9)]
 
 
 @pytest.mark.parametrize("n, dim, solver, measured", MEASURED)

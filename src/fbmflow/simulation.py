@@ -586,14 +586,16 @@ class InsufficientMemory(ParamError):
 #: peak resident memory of a run by (dimension, solver): ``(c, n_ref, e)``, the memory per unknown
 #: ``c`` [bytes] at ``n_ref`` unknowns, growing as ``(n / n_ref)^e`` (a factorisation fills more
 #: than linearly: nested dissection ``O(n^(4/3))`` in 3D, ``O(n log n)`` in 2D; multigrid is
-#: linear). Fitted, with a margin, to peak resident sets of whole runs (two time steps) measured
-#: on x86-64 Linux: ten-cate 64 547 / 278 739 unknowns PARDISO 2.0 / 10.3 GB, multigrid 0.8 /
-#: 2.9 GB (benchmarks/results/tencate_solvers.md); sedimentation-3d 32 707 unknowns PARDISO
-#: 1.22 GB, SuperLU 0.91 GB; glowinski-free-fall 17 106 / 52 818 / 164 946 unknowns PARDISO or
-#: SuperLU 0.33 / 0.55 / 1.30 GB, multigrid 0.81 GB at 164 946.
+#: linear). Fitted, with a margin, to peak resident sets of whole runs measured on x86-64 Linux:
+#: ten-cate 64 547 / 278 739 unknowns PARDISO 2.0 / 10.3 GB (benchmarks/results/tencate_solvers.md),
+#: multigrid 278 739 / 2 012 403 unknowns 1.44 / 8.9 GB (three and two steps), channel-3d level 4
+#: (486 979 unknowns, steady, Newton hierarchy) 3.4 GB (benchmarks/results/solver_table.md);
+#: sedimentation-3d 32 707 unknowns PARDISO 1.22 GB, SuperLU 0.91 GB; glowinski-free-fall
+#: 17 106 / 52 818 / 164 946 unknowns PARDISO or SuperLU 0.33 / 0.55 / 1.30 GB, multigrid 0.81 GB
+#: at 164 946.
 MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (6_500, 165_000, 0.25),
                 (2, "multigrid"): (3_500, 165_000, 0.0), (3, "pardiso"): (40_000, 280_000, 0.15),
-                (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (11_000, 280_000, 0.0)}
+                (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (6_500, 280_000, 0.0)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
 
