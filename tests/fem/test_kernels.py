@@ -533,7 +533,8 @@ def test_pressure_mean_weights(case):
 def test_reaction_coefficients(space):
     d = space.dim
     u = np.random.default_rng(40).normal(size=(d, space.n_v))
-    react = _kernels.reaction_coefficients(u, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv)
+    react = _kernels.reaction_coefficients(u, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
+                                           space.Jinv)
     gref = np.einsum("icb,qbl->cqil", u[:, space.V.cell_dofs], space.dphi)
     assert_rel(react, np.einsum("cqil,cqlk,cq->cqik", gref, space.Jinv, space.detJw))
 

@@ -52,7 +52,8 @@ def test_symmetry_plane_halves_the_channel():
     inflow = Dirichlet(lambda x, t: np.column_stack([4 * x[:, 1] * (1 - x[:, 1]), 0 * x[:, 0]]))
     res = []
     for mesh, top in ((full, NoSlip()), (half, Slip())):
-        prob = NavierStokesProblem(mesh, mu, {"xmin": inflow, "xmax": DoNothing(), "ymin": NoSlip(), "ymax": top})
+        prob = NavierStokesProblem(mesh, mu, {"xmin": inflow, "xmax": DoNothing(), "ymin": NoSlip(),
+                                              "ymax": top})
         x, _ = prob.solve_steady()
         pts = np.array([[1.0, 0.25], [1.7, 0.4], [0.3, 0.1]])
         res.append(sample_velocity(prob.space, x[:prob.space.n_u], pts))

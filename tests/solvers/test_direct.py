@@ -6,8 +6,7 @@ from fbmflow.coupling import node_owner, rigid_body_constraints
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
-from fbmflow.solvers import DirectSolver
-from fbmflow.solvers import linear
+from fbmflow.solvers import DirectSolver, linear
 from fbmflow.solvers.linear import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
 
 
@@ -16,7 +15,8 @@ def sphere_at_rest(centre, radius):
     centres = np.array([centre])
 
     def obstacle(V, t):
-        return rigid_body_constraints(V, node_owner(V, centres, [Ball(radius, 3)]), centres, np.zeros((1, 3)), np.zeros((1, 3)))
+        return rigid_body_constraints(V, node_owner(V, centres, [Ball(radius, 3)]), centres, np.zeros((1, 3)),
+                                      np.zeros((1, 3)))
     return obstacle
 
 
@@ -54,7 +54,8 @@ def test_linear_solver_description(monkeypatch, installed):
     assert direct.linear_solver_description == ("direct (PARDISO)" if installed else "direct (SuperLU)")
     forced = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver("superlu"))
     assert forced.linear_solver_description == "direct (SuperLU)"
-    assert NavierStokesProblem(mesh, 1.0, bcs, linear_solver="multigrid").linear_solver_description == "multigrid"
+    assert (NavierStokesProblem(mesh, 1.0, bcs, linear_solver="multigrid").linear_solver_description
+            == "multigrid")
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
@@ -146,7 +147,8 @@ def test_scatter_into_pattern_matches_numpy():
     ref = np.zeros(P.nnz)
     ref[np.searchsorted(key, Kc.row * 40 + Kc.col)] = Kc.data
     np.testing.assert_array_equal(out, ref)
-    np.testing.assert_array_equal(sp.csr_matrix((out, P.indices, P.indptr), shape=P.shape).toarray(), K.toarray())
+    np.testing.assert_array_equal(sp.csr_matrix((out, P.indices, P.indptr), shape=P.shape).toarray(),
+                                  K.toarray())
     missing = np.setdiff1d(np.arange(40), P.indices[P.indptr[0]:P.indptr[1]])[0]  # in row 0
     outside = (K + sp.csr_matrix(([1.0], ([0], [missing])), shape=K.shape)).tocsr()
     outside.sort_indices()
@@ -227,7 +229,8 @@ def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
     f, g = rng.normal(size=system.n_u), rng.normal(size=system.n_p)
     calls = []
     original = linear.PardisoAnalysis.solve
-    monkeypatch.setattr(linear.PardisoAnalysis, "solve", lambda self, M, B: calls.append(1) or original(self, M, B))
+    monkeypatch.setattr(linear.PardisoAnalysis, "solve",
+                        lambda self, M, B: calls.append(1) or original(self, M, B))
     lu_solves = {}
     for rtol in (1e-12, 1e-4):
         calls.clear()
@@ -249,16 +252,19 @@ def test_newton_asks_its_linear_rtol_of_pardiso(monkeypatch):
     obstacle = sphere_at_rest([0.45, 0.5, 0.5], 0.3)
 
     def inflow(x, t):
-        return np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]), 0 * x[:, 0], 0 * x[:, 0]], axis=1)
+        return np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]), 0 * x[:, 0], 0 * x[:, 0]],
+                        axis=1)
 
     calls = []
     original = linear.PardisoAnalysis.solve
-    monkeypatch.setattr(linear.PardisoAnalysis, "solve", lambda self, M, B: calls.append(1) or original(self, M, B))
+    monkeypatch.setattr(linear.PardisoAnalysis, "solve",
+                        lambda self, M, B: calls.append(1) or original(self, M, B))
     solutions, lu_solves = {}, {}
     for rtol in (None, 1e-6):
-        bcs = {"xmin": Dirichlet(inflow), "xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t not in ("xmin", "xmax")}}
-        flow = NavierStokesProblem(mesh, 0.02, bcs, linear_solver=DirectSolver("pardiso"), extra_constraints=obstacle,
-                                   newton=NewtonSettings(linear_rtol=rtol))
+        bcs = {"xmin": Dirichlet(inflow), "xmax": DoNothing(),
+               **{t: NoSlip() for t in mesh.tags if t not in ("xmin", "xmax")}}
+        flow = NavierStokesProblem(mesh, 0.02, bcs, linear_solver=DirectSolver("pardiso"),
+                                   extra_constraints=obstacle, newton=NewtonSettings(linear_rtol=rtol))
         calls.clear()
         solutions[rtol], report = flow.solve_steady()
         lu_solves[rtol] = len(calls)
@@ -289,7 +295,8 @@ def test_incompatible_continuity_data_get_the_bordered_systems_solution():
     centre = np.array([[0.5, 0.25]])  # gap 0.05: 0.4 cells
 
     def obstacle(V, t):
-        return rigid_body_constraints(V, node_owner(V, centre, [Ball(0.2, 2)]), centre, np.array([[0.0, -1.0]]), np.zeros(1))
+        return rigid_body_constraints(V, node_owner(V, centre, [Ball(0.2, 2)]), centre,
+                                      np.array([[0.0, -1.0]]), np.zeros(1))
 
     flow = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
                                linear_solver="direct", extra_constraints=obstacle)

@@ -1,7 +1,17 @@
 """Reference elements, quadrature, DOF maps, Numba kernels and assembly of Q2/P1disc."""
-from .assembly import (apply_convection, apply_reaction, apply_scalar_pair, assemble_convection, assemble_divergence,
-                       assemble_laplace, assemble_load, assemble_mass, expand_to_coupled, pressure_mean_weights,
-                       reaction_coefficients)
+from .assembly import (
+                       apply_convection,
+                       apply_reaction,
+                       apply_scalar_pair,
+                       assemble_convection,
+                       assemble_divergence,
+                       assemble_laplace,
+                       assemble_load,
+                       assemble_mass,
+                       expand_to_coupled,
+                       pressure_mean_weights,
+                       reaction_coefficients,
+)
 from .dofmap import DofMap, PressureDofMap
 from .elements import ElementP1Disc, ElementQ1, ElementQ2
 from .quadrature import gauss_tensor

@@ -35,8 +35,8 @@ def cell_geometry(cell_coords, dN, weights):
             J[:, :] = 0.0
             for v in range(n_v):
                 for i in range(d):
-                    for l in range(d):
-                        J[i, l] += cell_coords[c, v, i] * dN[q, v, l]  # J[i, l] = dx_i/dxi_l
+                    for ax in range(d):
+                        J[i, ax] += cell_coords[c, v, i] * dN[q, v, ax]  # J[i, ax] = dx_i/dxi_ax
             if d == 2:
                 det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
                 Jinv[c, q, 0, 0] = J[1, 1] / det
@@ -47,12 +47,12 @@ def cell_geometry(cell_coords, dN, weights):
                 det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1])
                        - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
                        + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
-                for l in range(3):
+                for ax in range(3):
                     for i in range(3):
-                        # inverse = adjugate / det; adj[l, i] = cofactor[i, l]
+                        # inverse = adjugate / det; adj[ax, i] = cofactor[i, ax]
                         r0, r1 = (i + 1) % 3, (i + 2) % 3
-                        c0, c1 = (l + 1) % 3, (l + 2) % 3
-                        Jinv[c, q, l, i] = (J[r0, c0] * J[r1, c1] - J[r0, c1] * J[r1, c0]) / det
+                        c0, c1 = (ax + 1) % 3, (ax + 2) % 3
+                        Jinv[c, q, ax, i] = (J[r0, c0] * J[r1, c1] - J[r0, c1] * J[r1, c0]) / det
             detJw[c, q] = abs(det) * weights[q]
     return detJw, Jinv
 
@@ -100,20 +100,20 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
                 for i in range(d):
                     ua = u[i, dof]
                     uq[i] += ua * phi[q, a]
-                    for l in range(d):
-                        gref[i, l] += ua * dphi[q, a, l]
+                    for ax in range(d):
+                        gref[i, ax] += ua * dphi[q, a, ax]
             w = detJw[c, q]
-            for l in range(d):
+            for ax in range(d):
                 s = 0.0
                 for i in range(d):
-                    s += Jinv[c, q, l, i] * uq[i]
-                conv[e, q * d + l] = w * s
+                    s += Jinv[c, q, ax, i] * uq[i]
+                conv[e, q * d + ax] = w * s
             if newton:
                 for i in range(d):
                     for k in range(d):
                         s = 0.0
-                        for l in range(d):
-                            s += gref[i, l] * Jinv[c, q, l, k]
+                        for ax in range(d):
+                            s += gref[i, ax] * Jinv[c, q, ax, k]
                         react[(e * d + i) * d + k, q] = w * s
     return conv, react
 
@@ -125,12 +125,12 @@ def laplace_coefficients(detJw, Jinv):
     out = np.zeros((n_cells, nq * d * d))
     for c in prange(n_cells):
         for q in range(nq):
-            for l in range(d):
+            for ax in range(d):
                 for m in range(d):
                     s = 0.0
                     for i in range(d):
-                        s += Jinv[c, q, l, i] * Jinv[c, q, m, i]
-                    out[c, (q * d + l) * d + m] = detJw[c, q] * s
+                        s += Jinv[c, q, ax, i] * Jinv[c, q, m, i]
+                    out[c, (q * d + ax) * d + m] = detJw[c, q] * s
     return out
 
 
@@ -238,8 +238,8 @@ def divergence_local(dphi, detJw, Jinv, psi, rank, out):
             for a in range(nl):
                 for i in range(d):
                     g = 0.0
-                    for l in range(d):
-                        g += dphi[q, a, l] * Jinv[c, q, l, i]
+                    for ax in range(d):
+                        g += dphi[q, a, ax] * Jinv[c, q, ax, i]
                     g *= detJw[c, q]
                     for m in range(npl):
                         local[m, i, a] += psi[c, q, m] * g
@@ -305,16 +305,16 @@ def _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq):
             for a in range(nl):
                 s += ul[i, a] * phi[q, a]
             uq[q, i] = s
-            for l in range(d):
+            for ax in range(d):
                 s = 0.0
                 for a in range(nl):
-                    s += ul[i, a] * dphi[q, a, l]
-                gref[i, l] = s
+                    s += ul[i, a] * dphi[q, a, ax]
+                gref[i, ax] = s
         for i in range(d):
             for k in range(d):
                 s = 0.0
-                for l in range(d):
-                    s += gref[i, l] * Jinv[c, q, l, k]
+                for ax in range(d):
+                    s += gref[i, ax] * Jinv[c, q, ax, k]
                 gq[q, i, k] = s
 
 

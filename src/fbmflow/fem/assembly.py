@@ -150,15 +150,16 @@ def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndar
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     target = out.reshape(space.dim, space.n_v)
     for cells in space.colour_groups:
-        _kernels.apply_convection(cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv,
-                                  scale, target)
+        _kernels.apply_convection(cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
+                                  space.Jinv, scale, target)
 
 
 def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
     """``|det J| w_q d u_i / d x_k`` at every quadrature point, (n_cells, nq, dim, dim) float64:
     what :func:`apply_reaction` needs of the velocity ``u`` (dim * n_v,)."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
-    return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv)
+    return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
+                                          space.Jinv)
 
 
 def apply_scalar_pair(space: FlowSpace, alpha: float, X: np.ndarray, beta: float, Y: np.ndarray,

@@ -213,7 +213,8 @@ class DirichletConstraints:
             rows = rows.select(~np.isin(rows.dofs, self.dofs))
         if rows is not None and rows.dofs.size == 0:
             rows = None
-        return DirichletConstraints(rev_unique, values[::-1][rev_index], rows, source.continuity, source.extension)
+        return DirichletConstraints(rev_unique, values[::-1][rev_index], rows, source.continuity,
+                                    source.extension)
 
     def homogeneous(self) -> "DirichletConstraints":
         """The same DOFs, all with fixed zero values (for coarse multigrid levels)."""

@@ -82,7 +82,8 @@ class DofMap:
 
     def all_boundary_dofs(self) -> np.ndarray:
         """DOFs on any non-periodic box face, (n,) int64 sorted."""
-        return np.unique(np.concatenate([self.boundary_dofs(t) for t in self.mesh.tags] or [np.zeros(0, np.int64)]))
+        return np.unique(np.concatenate([self.boundary_dofs(t) for t in self.mesh.tags]
+                                        or [np.zeros(0, np.int64)]))
 
     def __repr__(self) -> str:
         axes = "x".join(str(n) for n in self.lattice_shape)

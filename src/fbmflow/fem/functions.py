@@ -5,8 +5,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import _kernels
 from ..mesh import StructuredMesh
+from . import _kernels
 from .elements import ElementQ1
 from .quadrature import gauss_tensor
 from .space import FlowSpace

@@ -12,8 +12,8 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from ..mesh import StructuredMesh
 from .._jit import numba_threads
+from ..mesh import StructuredMesh
 from . import _kernels
 from .dofmap import DofMap, PressureDofMap
 from .elements import ElementQ1

@@ -299,8 +299,8 @@ def graded_axis(lower: float, upper: float, fine: tuple[float, float], h: float,
     """
     a, b = fine
     if not (lower <= a < b <= upper and h > 0 and ratio >= 1.0 and multiple >= 2 and multiple % 2 == 0):
-        raise ValueError(f"need lower <= a < b <= upper, h > 0, ratio >= 1 and an even multiple; got {lower}, "
-                         f"{fine}, {upper}, h = {h}, ratio = {ratio}, multiple = {multiple}")
+        raise ValueError(f"need lower <= a < b <= upper, h > 0, ratio >= 1 and an even multiple; got "
+                         f"{lower}, {fine}, {upper}, h = {h}, ratio = {ratio}, multiple = {multiple}")
 
     def side(length, extra=0):  # cell sizes from the fine zone outwards
         if length <= 1e-12 * (upper - lower):

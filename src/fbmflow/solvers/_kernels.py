@@ -85,8 +85,8 @@ def vanka_diagonal(gptr, order, b, x, omega, d, nb, n_v, indptr, indices, a_data
 
     The local system ``[[D_c, B_c], [B_c^T, C_c]]`` with ``D_c`` the diagonal of ``A`` and
     ``C_c = pblock[c]`` is solved through its Schur complement ``S_c = B_c^T D_c^-1 B_c + C_c``
-    (``schur_inv (n_cells, d+1, d+1)``, a pseudo-inverse where ``S_c`` is singular): ``dp = S^-1 (B^T D^-1 r_u - r_p)``,
-    ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``.
+    (``schur_inv (n_cells, d+1, d+1)``, a pseudo-inverse where ``S_c`` is singular):
+    ``dp = S^-1 (B^T D^-1 r_u - r_p)``, ``du = D^-1 (r_u - B dp)``. ``diag_inv (n_u,)``.
     """
     nl = cell_dofs.shape[1]
     npl = d + 1
@@ -309,7 +309,8 @@ def regular_nodes(a_ptr, a_idx, a_val, n_v, d):
                 out[a] = False
                 break
             for k in range(ln):
-                if a_idx[a_ptr[r] + k] != a_idx[start + k] + i * n_v or a_val[a_ptr[r] + k] != a_val[start + k]:
+                if (a_idx[a_ptr[r] + k] != a_idx[start + k] + i * n_v
+                        or a_val[a_ptr[r] + k] != a_val[start + k]):
                     out[a] = False
                     break
             if not out[a]:
@@ -344,7 +345,8 @@ def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_v
 
 
 @njit
-def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx,
+                  k_val):
     """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
     n = S.shape[0]
     K[:, :] = 0.0
@@ -384,8 +386,8 @@ def _inverse(K, piv, inv, rel):
 
 
 @njit(parallel=True)
-def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular, s_ptr,
-                 s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
+                 s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
@@ -419,8 +421,8 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, s
             for a in range(nk):
                 loc[S[a]] = a
             K = work[:nk, :nk]
-            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx,
-                          k_val)
+            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
+                          k_idx, k_val)
             for a in range(nk):
                 loc[S[a]] = -1
             base = lu_ptr[k]
@@ -530,8 +532,8 @@ def _schur_solve(store, base, nl, d, r, w, out):
 
 
 @njit
-def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
-                     regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v,
+                     n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
     residual is taken."""
@@ -561,15 +563,15 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                         s += g_val[j] * x[n_u + g_idx[j]]
                     r[i * nl + a] = b[q] - s
             for a in range(nu, nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
-                                             k_ptr, k_idx, k_val)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
+                                             g_val, k_ptr, k_idx, k_val)
             _schur_solve(store, lu_ptr[k], nl, d, r, w64, out)
         else:
             for a in range(nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
-                                             k_ptr, k_idx, k_val)
-            _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]], r, w,
-                             out)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
+                                             g_val, k_ptr, k_idx, k_val)
+            _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]],
+                             r, w, out)
         for a in range(nk):
             x[S[a]] += omega * out[a]
 
@@ -582,8 +584,9 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
-        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d,
-                         width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
+        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl,
+                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx,
+                         k_val)
 
 
 @njit

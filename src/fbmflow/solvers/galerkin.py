@@ -62,7 +62,8 @@ def system_rows(system: SaddlePointSystem, rows: np.ndarray) -> sp.csr_matrix:
     return sp.vstack([top, bottom], format="csr")
 
 
-def truncated_prolongation(system: SaddlePointSystem, P_v: sp.csr_matrix, P_p: sp.csr_matrix) -> sp.csr_matrix:
+def truncated_prolongation(system: SaddlePointSystem, P_v: sp.csr_matrix,
+                           P_p: sp.csr_matrix) -> sp.csr_matrix:
     """The block prolongation ``diag(P_v, ..., P_v, P_p)`` onto ``system``'s level with the rows
     of the fine DOFs that are no PDE unknowns zeroed: fixed and row-constrained velocities,
     pressure DOFs in rows of the pressure block (orphaned or continued modes). CSR."""
@@ -81,7 +82,8 @@ def truncated_prolongation(system: SaddlePointSystem, P_v: sp.csr_matrix, P_p: s
 
 
 def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P_v: sp.csr_matrix,
-                           P_p: sp.csr_matrix, injection: np.ndarray, irregular: np.ndarray) -> tuple[SaddlePointSystem, np.ndarray]:
+                           P_p: sp.csr_matrix, injection: np.ndarray,
+                           irregular: np.ndarray) -> tuple[SaddlePointSystem, np.ndarray]:
     """``coarse`` (re-discretised, walls constrained) with the rows of the zone around the fine
     ``irregular (k,)`` cells replaced by Galerkin rows (see the module docstring). ``injection
     (n_v_coarse,)``: the fine node at every coarse node.
@@ -90,7 +92,7 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     next coarser level. ``coarse`` must carry no row constraints.
     """
     space = coarse.space
-    d, npl, n_u, n_p = space.dim, space.dim + 1, coarse.n_u, coarse.n_p
+    d, npl, n_u = space.dim, space.dim + 1, coarse.n_u
     cd = space.V.cell_dofs
     parent = parent_cells(P_p, npl)
     zone = dilate_cells(cd, space.n_v, np.unique(parent[irregular]), 1)
@@ -106,7 +108,8 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     n_v_fine = P_v.shape[0]
     cut = np.diff(Pt.indptr[:d * n_v_fine + 1]) == 0  # truncated fine velocity DOFs (empty rows)
     on_cut = cut.reshape(d, n_v_fine)[:, injection].ravel()
-    fixed = np.union1d(coarse.fixed if coarse.fixed is not None else np.zeros(0, np.int64), np.flatnonzero(on_cut))
+    fixed = np.union1d(coarse.fixed if coarse.fixed is not None else np.zeros(0, np.int64),
+                       np.flatnonzero(on_cut))
     K = _replace_rows(coarse.matrix(bordered=False), zone_rows, G)
     A = K[:n_u, :n_u].tocsr()
     is_fixed = np.zeros(n_u, dtype=bool)

@@ -66,7 +66,8 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
             if H[k + 1, k] > 0:
                 V[k + 1] = w / H[k + 1, k]
             for j in range(k):  # apply previous Givens rotations
-                H[j, k], H[j + 1, k] = cs[j] * H[j, k] + sn[j] * H[j + 1, k], -sn[j] * H[j, k] + cs[j] * H[j + 1, k]
+                H[j, k], H[j + 1, k] = (cs[j] * H[j, k] + sn[j] * H[j + 1, k],
+                                        -sn[j] * H[j, k] + cs[j] * H[j + 1, k])
             denom = np.hypot(H[k, k], H[k + 1, k])
             cs[k], sn[k] = (1.0, 0.0) if denom == 0 else (H[k, k] / denom, H[k + 1, k] / denom)
             H[k, k] = cs[k] * H[k, k] + sn[k] * H[k + 1, k]

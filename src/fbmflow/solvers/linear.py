@@ -232,7 +232,8 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
         vals.append(blocks.ravel())
     if not rows:
         return None
-    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(colidx))), shape=(n_p, n_p))
+    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(colidx))),
+                      shape=(n_p, n_p))
     P.data[np.abs(P.data) < 1e-14] = 0.0
     P.eliminate_zeros()
     if closed and P.nnz:
@@ -652,8 +653,9 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
     ``ROUNDOFF | |K| |x| + |b| |`` (entrywise absolute values) where that is larger: when ``b``
     is a nearly converged Newton residual, ``rtol |b|`` lies below the rounding error of ``K x``
     itself, and FGMRES then ran 60 useless iterations per solve. Only if the residual ends above
-    ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh analysis if ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then
-    with SuperLU, with a warning."""
+    ``max(accept, rtol)`` (same measure) is ``K`` factorised again, after a fresh analysis if
+    ``analysis`` (a :class:`PardisoAnalysis`, else a private one) was reused, then with SuperLU,
+    with a warning."""
     A = sp.csr_matrix(K)
     A.sort_indices()
     live = {"analysis": analysis if analysis is not None else PardisoAnalysis()}
@@ -674,7 +676,8 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
 
     abs_A = abs(A)
 
-    def error(B, X, tol):  # per column (k,): |B - A X| over the larger of |B| and its round-off floor / tol; and B - A X
+    # per column (k,): |B - A X| over the larger of |B| and its round-off floor / tol; and B - A X
+    def error(B, X, tol):
         R = B - A @ X
         floor = ROUNDOFF * np.linalg.norm(abs_A @ abs(X) + abs(B), axis=0) / tol
         return np.linalg.norm(R, axis=0) / np.maximum(np.maximum(np.linalg.norm(B, axis=0), floor), 1e-300), R
@@ -721,7 +724,8 @@ def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, acc
             factor()
             X, size, _, _ = refined(B, tol)
         if size > accepted:
-            log.warning("PARDISO solve inaccurate (relative residual %.1e); factorising with SuperLU instead", size)
+            log.warning("PARDISO solve inaccurate (relative residual %.1e); factorising with SuperLU instead",
+                        size)
             fallback.append(_superlu(A))
             return fallback[0](b)
         return X.reshape(b.shape)

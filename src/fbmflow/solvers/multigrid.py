@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .krylov import fgmres
 from .galerkin import truncated_prolongation
+from .krylov import fgmres
 from .linear import LinearReport, SaddlePointSystem, expansion, factorize
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
@@ -67,13 +67,16 @@ class MultigridSettings:
         if self.cycle not in CYCLES:
             raise ValueError(f"unknown cycle {self.cycle!r}; choose one of {CYCLES}")
         if self.smoother != "auto" and self.smoother not in VANKA_VARIANTS:
-            raise ValueError(f"unknown smoother {self.smoother!r}; choose 'auto' or one of {sorted(VANKA_VARIANTS)}")
+            raise ValueError(f"unknown smoother {self.smoother!r}; choose 'auto' or one of "
+                             f"{sorted(VANKA_VARIANTS)}")
         if self.coarse_obstacle not in COARSE_OBSTACLES:
-            raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of {COARSE_OBSTACLES}")
+            raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of "
+                             f"{COARSE_OBSTACLES}")
         if self.coarse_obstacle == "galerkin" and self.smoother not in ("auto", "vanka-factored"):
             # the other smoothers re-assemble cell blocks from the element matrices, not the
             # Galerkin rows (measured: overflow on the 3D ball, 8^3)
-            raise ValueError(f"coarse_obstacle 'galerkin' needs the vanka-factored smoother, not {self.smoother!r}")
+            raise ValueError("coarse_obstacle 'galerkin' needs the vanka-factored smoother, not "
+                             f"{self.smoother!r}")
         if self.krylov not in ("fgmres", "none"):
             raise ValueError(f"unknown Krylov method {self.krylov!r}; choose 'fgmres' or 'none'")
         if self.sweeps not in SWEEPS:
@@ -165,31 +168,31 @@ class MultigridSolver:
         return [_Level(s, self.settings, smoother, coarsest=(i == len(chain) - 1), symmetric=symmetric)
                 for i, s in enumerate(chain)]
 
-    def cycle(self, levels: list[_Level], b: np.ndarray, x: np.ndarray, l: int = 0,
+    def cycle(self, levels: list[_Level], b: np.ndarray, x: np.ndarray, depth: int = 0,
               kind: str | None = None) -> np.ndarray:
-        """One cycle on level ``l`` for ``K x = b`` from ``x`` (updated and returned)."""
+        """One cycle on level ``depth`` for ``K x = b`` from ``x`` (updated and returned)."""
         kind = kind or self.settings.cycle
-        level = levels[l]
-        if l == len(levels) - 1:
+        level = levels[depth]
+        if depth == len(levels) - 1:
             u, p = level.direct(b[:level.n_u], b[level.n_u:])
             return np.concatenate([u, p])
         s = self.settings
         level.smoother.smooth(b, x, s.pre_smooth)
         self._sweeps += s.pre_smooth
         r = b - level.system.apply(x)
-        coarse = levels[l + 1]
+        coarse = levels[depth + 1]
         rc = level.restrict(r, coarse)
         ec = np.zeros_like(rc)
         if kind == "V":
-            ec = self.cycle(levels, rc, ec, l + 1, "V")
+            ec = self.cycle(levels, rc, ec, depth + 1, "V")
         elif kind == "W":
-            ec = self.cycle(levels, rc, ec, l + 1, "W")
-            if l + 1 < len(levels) - 1:
-                ec = self.cycle(levels, rc, ec, l + 1, "W")
+            ec = self.cycle(levels, rc, ec, depth + 1, "W")
+            if depth + 1 < len(levels) - 1:
+                ec = self.cycle(levels, rc, ec, depth + 1, "W")
         else:  # F: an F-cycle then a V-cycle on the coarser level
-            ec = self.cycle(levels, rc, ec, l + 1, "F")
-            if l + 1 < len(levels) - 1:
-                ec = self.cycle(levels, rc, ec, l + 1, "V")
+            ec = self.cycle(levels, rc, ec, depth + 1, "F")
+            if depth + 1 < len(levels) - 1:
+                ec = self.cycle(levels, rc, ec, depth + 1, "V")
         x += level.prolongate(ec, coarse)
         level.smoother.smooth(b, x, s.post_smooth)
         self._sweeps += s.post_smooth
@@ -207,8 +210,8 @@ class MultigridSolver:
                              "multiplier, which FGMRES solves for); set solver.mg_krylov = \"fgmres\"")
         if system.rows is not None and self.smoother_for(system) != "vanka-factored":
             raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
-                             f"boundary), not {self.settings.smoother!r}; set solver.mg_smoother = \"auto\" or "
-                             "\"vanka-factored\", or use the direct solver")
+                             f"boundary), not {self.settings.smoother!r}; set solver.mg_smoother = "
+                             "\"auto\" or \"vanka-factored\", or use the direct solver")
         t0 = time.perf_counter()
         levels = self.setup(system if system.preconditioner is None else system.preconditioner)
         pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only

@@ -47,8 +47,9 @@ def plane_reach(k_ptr: np.ndarray, k_idx: np.ndarray, planes: np.ndarray, period
                 row_offset: int = 0, col_offset: int = 0) -> int:
     """How far a row of the CSR matrix ``(k_ptr, k_idx)`` reaches along the axis: the largest
     ``|planes[col_offset + column] - planes[row_offset + row]|`` (modulo ``period`` half-cells on a
-    periodic axis, 0: not periodic; the offsets place the rows and columns of a block). 2 for the plain Q2/P1disc discretisation; ghost-node rows of the sharp boundary
-    or Galerkin coarse rows may reach further."""
+    periodic axis, 0: not periodic; the offsets place the rows and columns of a block). 2 for the
+    plain Q2/P1disc discretisation; ghost-node rows of the sharp boundary or Galerkin coarse rows
+    may reach further."""
     return int(_kernels.plane_reach(k_ptr, k_idx, planes, period, row_offset, col_offset))
 
 
@@ -56,7 +57,8 @@ def system_reach(system, planes: np.ndarray, period: int = 0) -> int:
     """:func:`plane_reach` of every block of a saddle-point system (velocity block ``A``,
     gradient, continuity rows ``B^T``, pressure block)."""
     n_u = system.n_u
-    blocks = [(system.A, 0, 0), (system.gradient, 0, n_u), (system.BT, n_u, 0), (system.pressure_block, n_u, n_u)]
+    blocks = [(system.A, 0, 0), (system.gradient, 0, n_u), (system.BT, n_u, 0),
+              (system.pressure_block, n_u, n_u)]
     return max(plane_reach(sp.csr_matrix(M).indptr, sp.csr_matrix(M).indices, planes, period, r, c)
                for M, r, c in blocks if M is not None)
 

@@ -54,10 +54,10 @@ def prolongation_p1disc(coarse: PressureDofMap, fine: PressureDofMap) -> sp.csr_
     C, S = coarse.centre[parent], coarse.scale[parent]
     c, s = fine.centre, fine.scale
     rows, cols, vals = [np.arange(n_f) * npl], [parent * npl], [np.ones(n_f)]
-    for l in range(dim):
-        rows += [np.arange(n_f) * npl, np.arange(n_f) * npl + 1 + l]
-        cols += [parent * npl + 1 + l, parent * npl + 1 + l]
-        vals += [(c[:, l] - C[:, l]) / S[:, l], s[:, l] / S[:, l]]
+    for ax in range(dim):
+        rows += [np.arange(n_f) * npl, np.arange(n_f) * npl + 1 + ax]
+        cols += [parent * npl + 1 + ax, parent * npl + 1 + ax]
+        vals += [(c[:, ax] - C[:, ax]) / S[:, ax], s[:, ax] / S[:, ax]]
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(fine.n_dofs, coarse.n_dofs))
 

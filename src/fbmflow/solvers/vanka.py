@@ -63,15 +63,16 @@ class VankaSmoother:
         axis = ordering.slab_axis(mesh.shape)
         period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
         reach = ordering.system_reach(system, ordering.dof_planes(space, axis), period)
-        phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells), reach)
+        phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells),
+                                      reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
         self._kernel = _kernels.vanka_full if variant == "vanka-full" else _kernels.vanka_diagonal
 
     def update(self, cells: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
         """Add ``omega`` times the local correction of each of ``cells`` to ``x``, one after the
         other."""
-        self._kernel(np.array([0, cells.size]), cells, b, x, self.omega if omega is None else omega, *self._common,
-                     *self._extra)
+        self._kernel(np.array([0, cells.size]), cells, b, x, self.omega if omega is None else omega,
+                     *self._common, *self._extra)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b`` in slab order (:mod:`fbmflow.solvers.ordering`),
@@ -100,7 +101,8 @@ def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None
         blocks += [M.indptr, M.indices, M.data]
     lengths = np.diff(blocks[0]) + np.diff(blocks[3])
     nnz = int(lengths[keep_u].sum()) + blocks[8].size + blocks[11].size
-    ptr, idx, val = np.empty(n_u + n_p + 1, dtype=np.int64), np.empty(nnz, dtype=np.int32), np.empty(nnz, dtype=dtype)
+    ptr, idx, val = (np.empty(n_u + n_p + 1, dtype=np.int64), np.empty(nnz, dtype=np.int32),
+                     np.empty(nnz, dtype=dtype))
     _kernels.merge_blocks(*blocks, keep_u, ptr, idx, val)
     return ptr, idx, val
 
@@ -208,12 +210,14 @@ class FactoredVankaSmoother:
         regular_u = np.tile(regular, d)
         self.op = (regular, *_rows_of(A, regular, dtype), *_rows_of(system.gradient, regular_u, dtype),
                    *saddle_point_csr(system, dtype, ~regular_u))
-        sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]), [m.size for m in merged]]).astype(np.int64)
+        sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
+                                [m.size for m in merged]]).astype(np.int64)
         self.schur = np.concatenate([regular[cd[cells]].all(axis=1), np.zeros(len(merged), dtype=bool)])
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int64)
         schur_size = nl * nl + 2 * d * nl * npl + npl * npl
-        self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.schur, schur_size, sizes**2))]).astype(np.int64)
+        self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.schur, schur_size,
+                                                              sizes**2))]).astype(np.int64)
         self.width = int(sizes.max())
         self.shape = (nl, d, self.width, n_v, n_u)
         self.omega = omega
@@ -256,8 +260,8 @@ class FactoredVankaSmoother:
         """Add ``omega`` times the correction of each of ``patches`` to ``x``, one after the
         other (patches may share DOFs; without a pressure extension, patch ``c`` is cell ``c``)."""
         if patches.size:
-            _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega, *self._patches,
-                                            *self.op)
+            _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega,
+                                            *self._patches, *self.op)
 
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
