@@ -262,7 +262,8 @@ class SolverParams(Section):
         return MultigridSolver(MultigridSettings(
             cycle=self.mg_cycle, smoother=self.mg_smoother, pre_smooth=self.mg_smoothing_steps,
             post_smooth=self.mg_smoothing_steps, rtol=self.linear_rtol, krylov=self.mg_krylov,
-            coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation, sweeps=self.mg_sweeps))
+            coarse_obstacle=self.mg_coarse_obstacle, linearisation=self.mg_linearisation,
+            sweeps=self.mg_sweeps))
 
     def newton_settings(self) -> NewtonSettings:
         """The Newton stopping rule and Jacobian reuse of these settings."""

@@ -44,6 +44,7 @@ from .params import (
 )
 from .particles import Particles, accelerations, integrate, velocity_gain
 from .solvers import ConvergenceError
+from .solvers.choice import cheapest_solver
 from .solvers.linear import LinearWork, auto_backend, pardiso_available
 
 log = logging.getLogger(__name__)
@@ -89,8 +90,8 @@ class Simulation:
         The time scheme; ``dt`` and ``t_end`` are what :meth:`run` and :meth:`step` without a
         time step use.
     solver : SolverParams
-        Newton and linear solver settings. ``linear = "auto"`` takes the direct solver, in 3D
-        multigrid above :data:`DIRECT_UP_TO_3D` unknowns.
+        Newton and linear solver settings. ``linear = "auto"`` takes the cheaper of the direct
+        solver and multigrid by measured cost (:func:`choose_linear_solver`).
     coupling : CouplingParams
         The coupling scheme (:data:`~fbmflow.coupling.COUPLINGS`: ``explicit`` or ``implicit``)
         and the particle integrator (``trapezoidal`` with ``crank-nicolson`` is second order in
@@ -562,21 +563,21 @@ def _walls(mesh, particles: Particles, symmetry: tuple):
     return walls
 
 
-#: unknowns up to which ``solver.linear = "auto"`` keeps the direct solver in 3D, with PARDISO and
-#: with SuperLU (whose 3D fill grows much faster); multigrid above (2D: always direct)
-DIRECT_UP_TO_3D = {"pardiso": 150_000, "superlu": 50_000}
-
-
 def choose_linear_solver(solver: SolverParams, mesh):
-    """The linear solver of a particulate flow: ``solver.linear_solver()``, with ``"auto"``
-    resolved to ``"direct"``, or to multigrid for 3D meshes above :data:`DIRECT_UP_TO_3D`
-    unknowns (ten-cate level 1 and finer: benchmarks/results/tencate_solvers.md)."""
+    """The linear solver of a run: ``solver.linear_solver()``, with ``"auto"`` resolved to the
+    cheaper of the direct solver and multigrid by measured cost, among those whose memory
+    estimate fits the machine (:func:`fbmflow.solvers.choice.cheapest_solver`,
+    :func:`estimate_memory`): ``"direct"`` or the configured multigrid solver."""
     if solver.linear != "auto":
         return solver.linear_solver()
-    limit = DIRECT_UP_TO_3D["pardiso" if pardiso_available() else "superlu"]
-    if mesh.dim == 3 and FlowSpace.estimate_dofs(mesh) > limit:
-        return dataclasses.replace(solver, linear="multigrid").linear_solver()
-    return "direct"
+    n, have = FlowSpace.estimate_dofs(mesh), available_memory()
+
+    def fits(name: str) -> bool:
+        return have is None or estimate_memory(n, mesh.dim, name)[0] <= have
+
+    if cheapest_solver(mesh.dim, n, solver.linear_rtol, pardiso_available(), fits) == "direct":
+        return "direct"
+    return dataclasses.replace(solver, linear="multigrid").linear_solver()
 
 
 class InsufficientMemory(ParamError):

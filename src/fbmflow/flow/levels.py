@@ -9,8 +9,17 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..fem import (FlowSpace, apply_reaction, assemble_convection, assemble_divergence, assemble_laplace,
-                   assemble_mass, expand_to_coupled, pressure_mean_weights, reaction_coefficients)
+from ..fem import (
+    FlowSpace,
+    apply_reaction,
+    assemble_convection,
+    assemble_divergence,
+    assemble_laplace,
+    assemble_mass,
+    expand_to_coupled,
+    pressure_mean_weights,
+    reaction_coefficients,
+)
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
@@ -118,7 +127,8 @@ class FlowLevel:
         # entries is cheaper than slicing a matrix by rows and columns)
         keep = np.repeat(free, np.diff(s.indptr)) & free[s.indices]
         indptr = np.concatenate([[0], np.cumsum(np.add.reduceat(keep, s.indptr[:-1], dtype=np.int64))])
-        graph = sp.csr_matrix((np.ones(int(indptr[-1]), dtype=np.int8), s.indices[keep], indptr), shape=(s.n_v, s.n_v))
+        graph = sp.csr_matrix((np.ones(int(indptr[-1]), dtype=np.int8), s.indices[keep], indptr),
+                              shape=(s.n_v, s.n_v))
         _, labels = connected_components(graph, directed=False)
         labels = labels[free]
         if len(np.unique(labels)) <= 1:
@@ -172,14 +182,16 @@ class FlowLevel:
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
                                  extension=con.extension, transient=m != 0.0)
 
-    def newton_system(self, picard: SaddlePointSystem, u: np.ndarray, a: float, rho: float) -> SaddlePointSystem:
+    def newton_system(self, picard: SaddlePointSystem, u: np.ndarray, a: float,
+                      rho: float) -> SaddlePointSystem:
         """The Newton system of the Picard system ``picard`` (this level's, linearised at ``u``
         with weight ``a``): the same blocks and constraints, the velocity block a
         :class:`NewtonBlock` (no hierarchy of its own; ``picard`` is its preconditioner)."""
         constrained = np.concatenate([d for d in (picard.fixed, picard.rows) if d is not None] or
                                      [np.zeros(0, dtype=np.int64)])
         system = copy.copy(picard)  # shares the blocks and the derived ones already computed
-        system.A = NewtonBlock(picard.A, self.space, reaction_coefficients(self.space, u), a * rho, constrained)
+        react = reaction_coefficients(self.space, u)
+        system.A = NewtonBlock(picard.A, self.space, react, a * rho, constrained)
         system.preconditioner, system.coarser, system.prolongation = picard, None, None
         return system
 

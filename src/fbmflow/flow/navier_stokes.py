@@ -24,25 +24,26 @@ from ..fem import FlowSpace, apply_convection, apply_scalar_pair, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
+from ..solvers.choice import cheapest_solver
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
-from ..solvers.linear import BACKEND_NAMES, LinearWork, auto_backend, balance_volume, orphan_pressure_modes, pardiso_available
+from ..solvers.linear import (
+    BACKEND_NAMES,
+    LinearWork,
+    auto_backend,
+    balance_volume,
+    orphan_pressure_modes,
+    pardiso_available,
+)
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
 log = logging.getLogger(__name__)
 
-#: unknowns above which ``linear_solver="auto"`` picks multigrid (measured crossover against
-#: SuperLU, see benchmarks/bench_solvers.py)
-AUTO_MULTIGRID_DOFS = {2: 20_000, 3: 15_000}
 #: Newton's residual reduction for the Stokes flow that starts a steady solve from rest
 STOKES_START_RTOL = 1e-3
 #: unknowns above which a coarsest multigrid level is kept coarsened further, whatever the cell
 #: Reynolds number of the coarser levels (:meth:`NavierStokesProblem._resolving_levels`)
 COARSEST_UNKNOWNS = {2: 50_000, 3: 20_000}
-#: the same in 3D when the PARDISO backend is installed: limited by memory (252 000 unknowns
-#: took a 12.5 GB peak), not by speed; with fictitious boundaries multigrid is far slower (ten-cate
-#: level 0, 99 000 unknowns: 11 s per time step direct, over 20 minutes with multigrid)
-AUTO_MULTIGRID_DOFS_PARDISO = 300_000
 
 
 class NavierStokesProblem:
@@ -62,10 +63,9 @@ class NavierStokesProblem:
     convection : bool, default True
         False solves the (time-dependent) Stokes equations.
     linear_solver : str or solver object, default "auto"
-        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`, ``"auto"`` (multigrid above
-        :data:`AUTO_MULTIGRID_DOFS` unknowns, :data:`AUTO_MULTIGRID_DOFS_PARDISO` in 3D with PARDISO,
-        else direct) or an instance (e.g. a configured
-        :class:`~fbmflow.solvers.MultigridSolver`).
+        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`, ``"auto"`` (the cheaper by measured cost
+        for this size and ``newton.linear_rtol``: :func:`fbmflow.solvers.choice.cheapest_solver`)
+        or an instance (e.g. a configured :class:`~fbmflow.solvers.MultigridSolver`).
     newton : NewtonSettings
     coarse_cells : int, optional
         Multigrid only: the coarsest level keeps at least this many cells (default 16 in 2D,
@@ -97,10 +97,8 @@ class NavierStokesProblem:
         self.convection = convection
         self.newton = newton
         if linear_solver == "auto":
-            n_unknowns = FlowSpace.estimate_dofs(mesh)
-            limit = (AUTO_MULTIGRID_DOFS_PARDISO if mesh.dim == 3 and pardiso_available()
-                     else AUTO_MULTIGRID_DOFS[mesh.dim])
-            linear_solver = "multigrid" if n_unknowns > limit else "direct"
+            linear_solver = cheapest_solver(mesh.dim, FlowSpace.estimate_dofs(mesh), newton.linear_rtol,
+                                            pardiso_available())
         self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
                               else linear_solver)
         pressure_fixed = not pressure_is_determined(boundary)
@@ -202,12 +200,14 @@ class NavierStokesProblem:
         Fu[con.dofs] = 0.0
         Fp = self._continuity(u[:, None], con, orphans)[:, 0]
         if con.rows is not None:  # row constraints, scaled as in the linear system
-            Fu[con.rows.dofs] = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu) * con.rows.residual(u)
+            scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
+            Fu[con.rows.dofs] = scale * con.rows.residual(u)
         if con.extension is not None:
             Fp[con.extension.dofs] = con.extension.residual(p)
         return np.concatenate([Fu, Fp])
 
-    def _continuity(self, U: np.ndarray, con: DirichletConstraints, orphans: sp.csr_matrix | None) -> np.ndarray:
+    def _continuity(self, U: np.ndarray, con: DirichletConstraints,
+                    orphans: sp.csr_matrix | None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
         dropped and, in a closed box, the volume defect of the prescribed velocities taken out
         as the linear solvers do (:func:`~fbmflow.solvers.linear.balance_volume`), (n_p, k)."""
@@ -245,7 +245,8 @@ class NavierStokesProblem:
         args = (m, a, self.rho, self.mu, self.convection)
         settings = getattr(self.linear_solver, "settings", None)
         picard = getattr(settings, "picard_hierarchy", None)
-        newton = not (self.coarse and self.convection and a != 0.0 and picard is not None and picard(m != 0.0))
+        newton = not (self.coarse and self.convection and a != 0.0 and picard is not None
+                      and picard(m != 0.0))
         if newton:
             system = finer_system = self.fine.system(u, *args, con=con)
         else:  # the hierarchy of the Picard linearisation preconditions the Newton system, whose
@@ -253,7 +254,8 @@ class NavierStokesProblem:
             finer_system = self.fine.system(u, *args, con=con, newton=False)
             system = self.fine.newton_system(finer_system, u, a, self.rho)
         finer_level = self.fine
-        galerkin = getattr(settings, "coarse_obstacle", "nodes") == "galerkin" and self.extra_constraints is not None
+        galerkin = (getattr(settings, "coarse_obstacle", "nodes") == "galerkin"
+                    and self.extra_constraints is not None)
         irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:
             u = inject_velocity(u, level, finer_level.space.n_v)
@@ -320,7 +322,8 @@ class NavierStokesProblem:
 
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
-              guess: np.ndarray | None = None, rtol: float | None = None, newton: NewtonSettings | None = None):
+              guess: np.ndarray | None = None, rtol: float | None = None,
+              newton: NewtonSettings | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);

@@ -32,7 +32,7 @@ from ..params import (
     param,
     tree,
 )
-from ..simulation import Simulation, check_memory
+from ..simulation import Simulation, check_memory, choose_linear_solver
 from .base import SceneResult, Setup, SimulationScene
 
 log = logging.getLogger(__name__)
@@ -138,11 +138,12 @@ class ParticleScene(SimulationScene):
 def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,
                  linear=None, **kwargs) -> NavierStokesProblem:
     """The flow problem of a scene without particles, with the Newton and linear solver settings
-    of ``solver`` (``linear``: a solver chosen by the scene instead of ``solver.linear_solver()``)
+    of ``solver`` (``linear``: a solver chosen by the scene instead of
+    :func:`~fbmflow.simulation.choose_linear_solver`'s)
     and its memory checked before the first solve (:func:`~fbmflow.simulation.check_memory`);
     ``kwargs`` go to :class:`~fbmflow.flow.NavierStokesProblem`."""
-    problem = NavierStokesProblem(mesh, viscosity, boundary, density=density,
-                                  linear_solver=solver.linear_solver() if linear is None else linear,
+    linear = choose_linear_solver(solver, mesh) if linear is None else linear
+    problem = NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,
                                   newton=solver.newton_settings(), **kwargs)
     check_memory(problem.n_dofs, mesh.dim, problem.linear_solver)
     return problem

@@ -69,7 +69,8 @@ class Cavity2D(Scene):
         for k, re in enumerate(re_path):
             problem.mu = 1.0 / re
             last = k == len(re_path) - 1
-            problem.newton = final if last else dataclasses.replace(final, rtol=params.solver.continuation_rtol)
+            loose = dataclasses.replace(final, rtol=params.solver.continuation_rtol)
+            problem.newton = final if last else loose
             x, report = problem.solve_steady(x)
             newton_its += report.iterations
             if progress and len(re_path) > 1:

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
-from ..fem import FlowSpace
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
@@ -34,7 +33,6 @@ REFERENCE = {"drag_coefficient": 5.57953523384, "lift_coefficient": 0.0106189481
              "pressure_difference": 0.11752016697}
 REFERENCE_3D = {"drag_coefficient": 6.18533, "lift_coefficient": 0.009401}
 H, D = 0.41, 0.1
-DIRECT_LIMIT = {2: 400_000, 3: 300_000}  # unknowns up to which solver.linear = "auto" is direct here
 
 
 @dataclass(frozen=True)
@@ -88,15 +86,10 @@ class _DFGScene(Scene):
         sharp = params.fbm.boundary == "sharp"
         bcs = {"xmin": Dirichlet(self.inflow(f.max_inflow)), "xmax": DoNothing(),
                **{tag: NoSlip() for tag in mesh.tags if tag not in ("xmin", "xmax")}}
-        linear = params.solver.linear_solver()
-        if linear == "auto":
-            # multigrid does not yet handle fictitious boundaries efficiently (65 s against 10 s
-            # for the direct solver at 2D level 3): direct while it fits, multigrid beyond
-            linear = "direct" if sharp or FlowSpace.estimate_dofs(mesh) <= DIRECT_LIMIT[dim] else "multigrid"
         # multigrid: the coarsest level still resolves the cylinder (4 cells across the diameter);
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
         coarse_cells = mesh.n_cells // 2**(dim * max(level - 2, 0))
-        problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density, linear=linear,
+        problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density,
                                extra_constraints=obstacle, coarse_cells=coarse_cells)
         x, report = problem.solve_steady()
         space = problem.space
