@@ -19,7 +19,7 @@ quick = pytest.mark.quick
 CASES = [
     pytest.param(1, 0.004, "sharp", 0.0379, 0.0588, marks=quick, id="sharp-level1-dt0.004"),
     pytest.param(2, 0.004, "sharp", 0.0110, 0.0081, marks=quick, id="sharp-level2-dt0.004"),
-    pytest.param(2, 0.002, "sharp", 0.0038, None, id="sharp-level2-dt0.002"),
+    pytest.param(2, 0.002, "sharp", 0.0038, 0.0086, id="sharp-level2-dt0.002"),
     pytest.param(2, 0.001, "sharp", -0.0018, None, id="sharp-level2-dt0.001"),
     pytest.param(2, 0.002, "nodes", 0.0880, 0.0846, id="nodes-level2-dt0.002"),
     pytest.param(3, 0.002, "nodes", 0.0360, 0.0362, id="nodes-level3-dt0.002"),
