@@ -53,13 +53,13 @@ def run_case(case: str, solver: str) -> dict:
     import numpy as np
 
     import fbmflow.flow.navier_stokes as ns
-    import fbmflow.solvers.linear as linear
+    import fbmflow.solvers.direct as direct
     from fbmflow.scenes.registry import load_scene
 
     scene_name, level, overrides, steps = CASES[case]
     if solver != "multigrid":
         backend = solver
-        linear.auto_backend = ns.auto_backend = lambda dim, n: backend  # the direct backend of this row
+        direct.auto_backend = ns.auto_backend = lambda dim, n: backend  # the direct backend of this row
     reports, newton, problems = [], [], []
     linear_solve, solve_newton = ns.NavierStokesProblem._linear_solve, ns.solve_newton
 
@@ -146,7 +146,7 @@ def main():
     if args.one:
         print(json.dumps(run_case(*args.one)))
         return
-    from fbmflow.solvers.linear import pardiso_available
+    from fbmflow.solvers.direct import pardiso_available
     path = RESULTS / "solver_table.json"
     old = json.loads(path.read_text()) if path.exists() else []
     rows = {(r["case"], r["solver"], r.get("busy", 0)): r for r in old}

@@ -33,7 +33,7 @@ from fbmflow.flow import Dirichlet, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.scenes.cavity import recirculating_state
 from fbmflow.solvers import MultigridSettings, MultigridSolver, fgmres
-from fbmflow.solvers.linear import factorize
+from fbmflow.solvers.direct import factorize
 
 RESULTS = Path(__file__).parent / "results"
 

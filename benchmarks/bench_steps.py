@@ -31,7 +31,7 @@ from fbmflow.params import from_dict, parse_value, set_dotted
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.base import RunFiles
 from fbmflow.solvers import DirectSolver
-from fbmflow.solvers.linear import PardisoAnalysis
+from fbmflow.solvers.direct import PardisoAnalysis
 
 
 def main() -> None:

@@ -45,7 +45,8 @@ from .params import (
 from .particles import Particles, accelerations, integrate, velocity_gain
 from .solvers import ConvergenceError
 from .solvers.choice import cheapest_solver
-from .solvers.linear import LinearWork, auto_backend, pardiso_available
+from .solvers.direct import auto_backend, pardiso_available
+from .solvers.reports import LinearWork
 
 log = logging.getLogger(__name__)
 

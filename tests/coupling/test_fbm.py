@@ -210,7 +210,7 @@ def test_orphaned_pressure_modes_span_the_null_space(centre, radius):
     reference), so the saddle-point matrix with C = P is regular; some modes couple cells."""
     from fbmflow.flow import DoNothing, NavierStokesProblem, NoSlip
     from fbmflow.particles import Cylinder
-    from fbmflow.solvers.linear import orphan_pressure_modes
+    from fbmflow.solvers.system import orphan_pressure_modes
 
     mesh = StructuredMesh.box((6, 6, 2))
     centres = np.array([[*centre, 0.5]])

@@ -6,8 +6,8 @@ from fbmflow.coupling import node_owner, rigid_body_constraints
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
-from fbmflow.solvers import DirectSolver, linear
-from fbmflow.solvers.linear import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
+from fbmflow.solvers import DirectSolver, direct
+from fbmflow.solvers.direct import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
 
 
 def sphere_at_rest(centre, radius):
@@ -37,7 +37,7 @@ def fbm_system(x_centre=0.45, radius=0.3):
 def test_auto_backend(monkeypatch, installed):
     """``auto``: PARDISO, when installed, for every 3D system and for 2D ones from
     PARDISO_MIN_UNKNOWNS_2D unknowns; SuperLU otherwise."""
-    monkeypatch.setattr(linear, "pardiso_available", lambda: installed)
+    monkeypatch.setattr(direct, "pardiso_available", lambda: installed)
     large = "pardiso" if installed else "superlu"
     assert auto_backend(2, PARDISO_MIN_UNKNOWNS_2D - 1) == "superlu"
     assert auto_backend(2, PARDISO_MIN_UNKNOWNS_2D) == large
@@ -47,11 +47,11 @@ def test_auto_backend(monkeypatch, installed):
 @pytest.mark.parametrize("installed", [True, False])
 def test_linear_solver_description(monkeypatch, installed):
     """Reports name the backend that ``auto`` picks for the problem."""
-    monkeypatch.setattr(linear, "pardiso_available", lambda: installed)
+    monkeypatch.setattr(direct, "pardiso_available", lambda: installed)
     mesh = StructuredMesh.box((2, 2, 2))
     bcs = {t: NoSlip() for t in mesh.tags}
-    direct = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct")
-    assert direct.linear_solver_description == ("direct (PARDISO)" if installed else "direct (SuperLU)")
+    chosen = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct")
+    assert chosen.linear_solver_description == ("direct (PARDISO)" if installed else "direct (SuperLU)")
     forced = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver("superlu"))
     assert forced.linear_solver_description == "direct (SuperLU)"
     assert (NavierStokesProblem(mesh, 1.0, bcs, linear_solver="multigrid").linear_solver_description
@@ -83,12 +83,12 @@ def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
     from fbmflow.solvers.krylov import fgmres
 
     calls = []
-    monkeypatch.setattr(linear, "fgmres", lambda *a, **k: calls.append(1) or fgmres(*a, **k))
+    monkeypatch.setattr(direct, "fgmres", lambda *a, **k: calls.append(1) or fgmres(*a, **k))
     rng = np.random.default_rng(0)
     Q = np.linalg.qr(rng.normal(size=(200, 200)))[0]
     K = Q @ np.diag(np.logspace(0, -9, 200)) @ Q.T
     b = rng.normal(size=200)
-    x = linear._pardiso(sp.csr_matrix(K))(b)
+    x = direct._pardiso(sp.csr_matrix(K))(b)
     exact = np.linalg.solve(K, b)
     assert np.abs(x - exact).max() < 1e-7 * np.abs(exact).max()
     assert not calls and "SuperLU" not in caplog.text
@@ -105,10 +105,10 @@ def test_pardiso_finds_mkl_once(monkeypatch):
 
     K = sp.csr_matrix(np.diag(np.arange(1.0, 6.0)))
     b = np.ones(5)
-    np.testing.assert_allclose(linear._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
+    np.testing.assert_allclose(direct._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
     searches = []
     monkeypatch.setattr(glob, "glob", lambda *a, **k: searches.append(a) or [])
-    np.testing.assert_allclose(linear._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
+    np.testing.assert_allclose(direct._pardiso(K)(b), 1.0 / np.arange(1.0, 6.0))
     assert not searches
 
 
@@ -196,7 +196,7 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     sign, it fails and analyses afresh at once. Both are accurate, without the SuperLU
     fallback."""
 
-    factorise = linear.PardisoAnalysis._factorise
+    factorise = direct.PardisoAnalysis._factorise
 
     def perturbed(self, phase, M):  # the solves with M then use the factors of another matrix
         if phase == 22:
@@ -204,8 +204,8 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
             M.data *= 1.0 + spread * np.random.default_rng(2).uniform(-1.0, 1.0, M.nnz)
         factorise(self, phase, M)
 
-    monkeypatch.setattr(linear.PardisoAnalysis, "_factorise", perturbed)
-    monkeypatch.setattr(linear, "_superlu", lambda K: pytest.fail("fell back to SuperLU"))
+    monkeypatch.setattr(direct.PardisoAnalysis, "_factorise", perturbed)
+    monkeypatch.setattr(direct, "_superlu", lambda K: pytest.fail("fell back to SuperLU"))
     first, second = fbm_system(0.45, 0.4), fbm_system(0.48, 0.4)
     solver = DirectSolver("pardiso")
     solver.factor(first)
@@ -228,8 +228,8 @@ def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
     rng = np.random.default_rng(3)
     f, g = rng.normal(size=system.n_u), rng.normal(size=system.n_p)
     calls = []
-    original = linear.PardisoAnalysis.solve
-    monkeypatch.setattr(linear.PardisoAnalysis, "solve",
+    original = direct.PardisoAnalysis.solve
+    monkeypatch.setattr(direct.PardisoAnalysis, "solve",
                         lambda self, M, B: calls.append(1) or original(self, M, B))
     lu_solves = {}
     for rtol in (1e-12, 1e-4):
@@ -256,8 +256,8 @@ def test_newton_asks_its_linear_rtol_of_pardiso(monkeypatch):
                         axis=1)
 
     calls = []
-    original = linear.PardisoAnalysis.solve
-    monkeypatch.setattr(linear.PardisoAnalysis, "solve",
+    original = direct.PardisoAnalysis.solve
+    monkeypatch.setattr(direct.PardisoAnalysis, "solve",
                         lambda self, M, B: calls.append(1) or original(self, M, B))
     solutions, lu_solves = {}, {}
     for rtol in (None, 1e-6):
@@ -289,7 +289,7 @@ def test_incompatible_continuity_data_get_the_bordered_systems_solution():
     that of the system bordered by the mean-pressure row and its multiplier, ``K x + lambda w = b``,
     ``mean . p = 0``, solved densely here (the same up to the pressure's null space: a constant and
     the orphaned modes): the pinned cell carries no special defect."""
-    from fbmflow.solvers.linear import balance_volume
+    from fbmflow.solvers.system import balance_volume
 
     mesh = StructuredMesh.box((8, 8))
     centre = np.array([[0.5, 0.25]])  # gap 0.05: 0.4 cells

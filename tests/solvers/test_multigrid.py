@@ -12,7 +12,7 @@ from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.scenes.cavity import recirculating_state
 from fbmflow.solvers import MultigridSettings, MultigridSolver
-from fbmflow.solvers.linear import factorize
+from fbmflow.solvers.direct import factorize
 from fbmflow.solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 
 

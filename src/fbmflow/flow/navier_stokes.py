@@ -25,15 +25,10 @@ from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
 from ..solvers.choice import cheapest_solver
+from ..solvers.direct import BACKEND_NAMES, auto_backend, pardiso_available
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
-from ..solvers.linear import (
-    BACKEND_NAMES,
-    LinearWork,
-    auto_backend,
-    balance_volume,
-    orphan_pressure_modes,
-    pardiso_available,
-)
+from ..solvers.reports import LinearWork
+from ..solvers.system import balance_volume, orphan_pressure_modes
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, coarse_levels, inject_velocity
 
@@ -190,7 +185,7 @@ class NavierStokesProblem:
         constraints their scaled residual ``s (C u - g)``).
 
         ``orphans (n_p, n_p)``: projector onto the pressure modes that no free velocity sees
-        (see :func:`~fbmflow.solvers.linear.orphan_pressure_modes`); their continuity equations
+        (see :func:`~fbmflow.solvers.system.orphan_pressure_modes`); their continuity equations
         are removed from ``F_p``: a cell covered by a particle and a wall has prescribed
         velocities whose divergence no unknown can change.
         """
@@ -210,7 +205,7 @@ class NavierStokesProblem:
                     orphans: sp.csr_matrix | None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
         dropped and, in a closed box, the volume defect of the prescribed velocities taken out
-        as the linear solvers do (:func:`~fbmflow.solvers.linear.balance_volume`), (n_p, k)."""
+        as the linear solvers do (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k)."""
         BT = self.BT if con.continuity is None else con.continuity.apply(self.BT)
         Fp = BT @ U
         if con.extension is not None:

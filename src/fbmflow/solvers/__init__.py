@@ -1,8 +1,10 @@
 """Linear solvers (sparse direct, geometric multigrid with Vanka smoothing, FGMRES) and Newton."""
+from .direct import DirectSolver, factorize
 from .krylov import fgmres
-from .linear import DirectSolver, LinearReport, SaddlePointSystem, factorize
 from .multigrid import MultigridSettings, MultigridSolver
 from .newton import ConvergenceError, NewtonReport, NewtonSettings, solve_newton
+from .reports import LinearReport
+from .system import SaddlePointSystem
 from .vanka import VANKA_VARIANTS, VankaSmoother
 
 LINEAR_SOLVERS = {"direct": DirectSolver, "multigrid": MultigridSolver}

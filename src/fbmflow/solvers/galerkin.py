@@ -15,7 +15,7 @@ coarse basis functions are cut off where the fine level prescribes. The zone is 
 coarse cells that contain an irregular fine cell, and of their neighbours (so rows outside the
 zone never couple to a truncated column). A coarse DOF whose truncated prolongation is empty (it
 lies inside a particle) becomes a fixed DOF; the pressure modes no coarse velocity sees are found
-as orphans (:func:`~fbmflow.solvers.linear.orphan_pressure_modes`). Everything is local: rows of
+as orphans (:func:`~fbmflow.solvers.system.orphan_pressure_modes`). Everything is local: rows of
 the fine matrices, the prolongation, and cell neighbours, which a halo exchange could supply.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 from ..fem.constraints import zero_columns
 from . import _kernels
-from .linear import SaddlePointSystem
+from .system import SaddlePointSystem
 
 
 def _cell_incidence(cell_dofs: np.ndarray, n_v: int) -> sp.csr_matrix:
@@ -150,7 +150,7 @@ def _zero_rows(M: sp.csr_matrix, mask: np.ndarray) -> sp.csr_matrix:
 
 def _standard_pattern(GT: sp.csr_matrix, coarse: SaddlePointSystem) -> sp.csr_matrix:
     """``GT`` (n_p, n_u) written into the cell-local pattern of the discrete divergence (what
-    :func:`~fbmflow.solvers.linear.orphan_pressure_modes` reads); the Galerkin rows of nested
+    :func:`~fbmflow.solvers.system.orphan_pressure_modes` reads); the Galerkin rows of nested
     meshes stay within a coarse cell."""
     ref = (coarse.gradient_BT if coarse.gradient_BT is not None else coarse.BT).copy()
     ref.sort_indices()

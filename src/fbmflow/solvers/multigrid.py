@@ -26,9 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
-from .linear import LinearReport, SaddlePointSystem, expansion, factorize
+from .reports import LinearReport
+from .system import SaddlePointSystem, expansion
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
 log = logging.getLogger(__name__)
@@ -230,7 +232,7 @@ class MultigridSolver:
     def _border(system: SaddlePointSystem) -> np.ndarray | None:
         """The direction ``e`` of the mean-pressure border's multiplier in a closed domain (None
         where the pressure is determined): a uniform expansion rate of the fluid
-        (:func:`~fbmflow.solvers.linear.expansion`). ``balance`` makes the continuity data
+        (:func:`~fbmflow.solvers.system.expansion`). ``balance`` makes the continuity data
         compatible with the constant pressure, the left null vector of the nodal boundary's
         system; the sharp boundary's ghost rows give the left null vector velocity components
         as well, so the right-hand side can miss the range along ``e`` and FGMRES solves for

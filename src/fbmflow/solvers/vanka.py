@@ -21,7 +21,7 @@ import scipy.sparse.csgraph as csgraph
 
 from .._jit import numba_threads
 from . import _kernels, ordering
-from .linear import SaddlePointSystem, cell_blocks
+from .system import SaddlePointSystem, cell_blocks
 
 
 class VankaSmoother:

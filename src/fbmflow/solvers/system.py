@@ -1,0 +1,303 @@
+"""The saddle-point system of a Newton/Oseen linearisation and what every solver needs of it.
+
+A :class:`SaddlePointSystem` holds the blocks of
+
+    [ A   B ] [du]   [f]
+    [ B^T 0 ] [dp] = [g]      (+ the border  w . dp = 0  when the pressure is fixed by its mean)
+
+and a linear solver is any object with ``solve(system, f, g) -> (du, dp, LinearReport)`` (and
+``factor(system)``, returning such a solve for one system); one that keeps state between
+factorisations offers ``forget()`` to drop it. Solvers are registered by name in
+:data:`fbmflow.solvers.LINEAR_SOLVERS`: the direct one (:mod:`fbmflow.solvers.direct`) and
+multigrid (:mod:`fbmflow.solvers.multigrid`). This module also finds the pressure modes that no
+velocity sees (orphans) and makes continuity data solvable in closed domains.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
+
+from ..fem.constraints import zero_columns
+
+log = logging.getLogger(__name__)
+
+MAX_CLUSTER_MODES = 1000  # pressure modes up to which a cluster of cut cells gets a dense SVD
+
+
+@dataclass
+class SaddlePointSystem:
+    """Blocks of one linearised system.
+
+    A : (n_u, n_u) CSR, constrained rows already unit rows
+    BT : (n_p, n_u) CSR, constrained columns zeroed; ``B = BT.T``
+    mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
+    fixed : (n_c,) int64 or None, the constrained velocity DOFs (unit rows of ``A``); solvers
+        may eliminate them (their solution is the right-hand side there)
+    fixed_always : (n_a,) int64 or None, the constrained DOFs that stay constrained in every
+        system of the problem (the domain's walls; the particles' DOFs come and go). A
+        factorisation that reuses its analysis (:class:`PardisoAnalysis`) eliminates only the
+        ones of them in ``fixed`` and keeps the other constrained DOFs as unit rows, so that the
+        matrix keeps its sparsity pattern while particles move.
+    space : FlowSpace or None, the discretisation (cell structure for cell-wise smoothers)
+    coarser : SaddlePointSystem or None, the same operator re-discretised on the next coarser mesh
+    prolongation : (P_v, P_p) or None, scalar Q2 (n_v x n_v_coarse) and P1disc (n_p x n_p_coarse)
+        prolongations from ``coarser`` to this level
+    orphans : (n_p, n_p) CSR or None, the pressure-pressure block ``C``: the orthogonal projector
+        onto the pressure modes that no free velocity DOF sees any more (cells inside or almost
+        inside a fictitious boundary, alone or in clusters). Those modes would make the system
+        singular; ``C`` sets them to ``g`` (zero for Newton updates) and leaves every other
+        unknown unchanged. Computed from ``B^T`` (the columns of ``rows`` zeroed) when ``space``
+        is given (:func:`orphan_pressure_modes`).
+    rows : (n_r,) int64 or None, velocity DOFs whose rows of ``A`` are linear constraints
+        (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
+        are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
+        carry no pressure gradient, and no pressure mode counts as seen through them.
+    preconditioner : SaddlePointSystem or None, an approximation of this system with its own
+        ``coarser`` chain (the Picard linearisation of a Newton system) that an iterative solver
+        builds its preconditioner from, applying this system's matrix in the Krylov iteration;
+        None: the system itself.
+    transient : bool, a time step's system (the mass term is part of ``A``)
+    """
+
+    A: sp.csr_matrix
+    BT: sp.csr_matrix
+    mean_weights: np.ndarray | None = None
+    fixed: np.ndarray | None = None
+    space: object = None
+    fixed_always: np.ndarray | None = None
+    coarser: "SaddlePointSystem | None" = None
+    prolongation: tuple | None = None
+    orphans: sp.csr_matrix | None = None
+    rows: np.ndarray | None = None
+    gradient_BT: sp.csr_matrix | None = None
+    extension: object = None
+    preconditioner: "SaddlePointSystem | None" = None
+    transient: bool = False
+
+    def __post_init__(self):
+        if self.orphans is None and self.space is not None:
+            seen = self.BT if self.gradient_BT is None else self.gradient_BT
+            self.orphans = orphan_pressure_modes(zero_columns(seen, self.rows), self.space.dim + 1,
+                                                 closed=self.mean_weights is not None)
+            if self.extension is not None:  # continued cells' pressures are constrained instead
+                self.orphans = self.extension.exclude(self.orphans)
+        if self.rows is not None and self.orphans is not None:
+            # the orphaned modes' continuity equations drop out (as in the residual): they see the
+            # row-constrained columns only, and would otherwise tie those to the modes' g
+            self.BT = (self.BT - self.orphans @ self.BT).tocsr()
+
+    @cached_property
+    def gradient(self) -> sp.csr_matrix:
+        """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` transposed, the rows of
+        ``rows`` zeroed."""
+        return zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self.rows).T.tocsr()
+
+    @property
+    def n_u(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def n_p(self) -> int:
+        return self.BT.shape[0]
+
+    @cached_property
+    def pressure_block(self) -> sp.csr_matrix | None:
+        """The pressure-pressure block: ``orphans`` plus the extension's constraint rows."""
+        if self.extension is None:
+            return self.orphans
+        D = self.extension.block(self.n_p)
+        return D if self.orphans is None else (self.orphans + D).tocsr()
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
+        u, p = x[:self.n_u], x[self.n_u:]
+        q = self.BT @ u
+        if self.pressure_block is not None:
+            q += self.pressure_block @ p
+        return np.concatenate([self.A @ u + self.gradient @ p, q])
+
+    def balance(self, g: np.ndarray) -> np.ndarray:
+        """Continuity right-hand side(s) made solvable (:func:`balance_volume`); ``g`` itself when
+        the pressure is determined."""
+        if self.mean_weights is None:
+            return g
+        return balance_volume(g, self.mean_weights, self.orphans, self.space.dim + 1, self.extension)
+
+    def remove_pressure_mean(self, x: np.ndarray) -> None:
+        """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
+        the pressure is determined)."""
+        if self.mean_weights is None:
+            return
+        p = x[self.n_u:]
+        const = np.zeros(self.n_p)
+        const[::self.space.dim + 1] = 1.0  # the constant pressure: mean DOFs of P1disc
+        p -= np.multiply.outer(const, self.mean_weights @ p) / (self.mean_weights @ const)
+
+    def matrix(self, bordered: bool = True) -> sp.spmatrix:
+        """The assembled system matrix, bordered by ``mean_weights`` (CSC) unless ``bordered`` is
+        False (CSR, explicit zeros of the blocks kept, sorted indices). The unbordered one is
+        stacked row-wise from CSR blocks without a COO round trip (scipy's ``bmat`` took 3.6 s
+        per factorisation at ten-cate level 1)."""
+        C = self.pressure_block
+        if bordered and self.mean_weights is not None:
+            w = sp.csr_matrix(self.mean_weights[None, :])
+            blocks = [[self.A, self.gradient, None], [self.BT, C, w.T], [None, w, None]]
+            return sp.bmat(blocks, format="csc")
+        C = sp.csr_matrix((self.n_p, self.n_p)) if C is None else sp.csr_matrix(C)
+        top = sp.hstack([sp.csr_matrix(self.A), self.gradient], format="csr")
+        K = sp.vstack([top, sp.hstack([sp.csr_matrix(self.BT), C], format="csr")], format="csr")
+        K.sort_indices()
+        return K
+
+
+def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
+                          closed: bool = False) -> sp.csr_matrix | None:
+    """Projector onto the pressure modes that ``B^T`` (constrained columns zeroed) no longer
+    couples to any velocity: (n_p, n_p) CSR, or None when there are none. ``closed``: the
+    pressure is fixed by its mean (velocities prescribed on the whole boundary), so the constant
+    pressure is not one of them even when it lies in their span (:func:`_without_constant`).
+
+    A mode ``q`` is orphaned when ``B q = 0``. It lives on cells that lost velocity columns
+    (candidates; a cell with all its velocities free keeps its pressure in every mode). The
+    candidates are pruned: a velocity row of a candidate cell that no other candidate shares
+    constrains that cell's pressure alone, and a cell whose such rows have full rank carries no
+    orphaned mode. The remaining cells, grouped into clusters that share velocity rows, get the
+    null space of their part of ``B`` from a dense SVD (singular values below ``tol max|B|``):
+    batched for single cells (a cell inside a particle), one SVD per larger cluster (several
+    cut cells whose few free velocities only balance each other, e.g. inside a particle next to
+    a wall). The rows of ``B^T`` are cell-local with ``dim nl`` entries each, so the local blocks
+    are a reshape.
+    """
+    n_p, n_u = BT.shape
+    n_cells = n_p // npl
+    width = BT.indptr[1] - BT.indptr[0]
+    Bc = BT.data.reshape(n_cells, npl, width)
+    cols = BT.indices.reshape(n_cells, npl, width)[:, 0, :]
+    live = ~(Bc == 0.0).all(axis=1)                      # (n_cells, width) columns that see the cell
+    active = np.flatnonzero((~live).any(axis=1))
+    scale = np.abs(Bc).max()
+    while active.size:
+        count = np.bincount(cols[active][live[active]], minlength=n_u)
+        private = live[active] & (count[cols[active]] == 1)
+        sv = np.linalg.svd(Bc[active] * private[:, None, :], compute_uv=False)
+        keep = (sv <= tol * scale).any(axis=1)
+        if keep.all():
+            break
+        active = active[keep]
+    if active.size == 0:
+        return None
+    incidence = sp.csr_matrix((np.ones(int(live[active].sum())), (np.nonzero(live[active])[0],
+                                                                   cols[active][live[active]])),
+                              shape=(active.size, n_u))
+    n_comp, label = csgraph.connected_components(incidence @ incidence.T, directed=False)
+    rows, colidx, vals = [], [], []
+    size = np.bincount(label, minlength=n_comp)
+    single = active[size[label] == 1]
+    for comp in np.flatnonzero(size > 1):  # clusters: few per mesh
+        cells = active[label == comp]
+        if cells.size * npl > MAX_CLUSTER_MODES:  # a thin mesh where every cell touches a wall
+            log.warning("%d cells share their free velocities; looking for orphaned pressure modes "
+                        "cell by cell only", cells.size)
+            single = np.union1d(single, cells)
+            continue
+        dofs = (cells[:, None] * npl + np.arange(npl)).ravel()
+        M = BT[dofs].T.tocsr()
+        M = M[np.flatnonzero(abs(M).max(axis=1).toarray().ravel())].toarray()  # (velocity rows, modes)
+        if M.shape[0] < M.shape[1]:
+            M = np.vstack([M, np.zeros((M.shape[1] - M.shape[0], M.shape[1]))])
+        _, sv, Vt = np.linalg.svd(M, full_matrices=False)
+        null = Vt[sv <= tol * scale]
+        if len(null):
+            block = null.T @ null
+            rows.append(np.repeat(dofs, dofs.size))
+            colidx.append(np.tile(dofs, dofs.size))
+            vals.append(block.ravel())
+    if single.size:  # cells alone: batched SVD of their blocks, null left vectors
+        U, sv, _ = np.linalg.svd(Bc[single], full_matrices=False)
+        blocks = np.einsum("cmk,ck,cnk->cmn", U, (sv <= tol * scale).astype(float), U)
+        dofs = single[:, None] * npl + np.arange(npl)
+        rows.append(np.repeat(dofs, npl, axis=1).ravel())
+        colidx.append(np.tile(dofs, (1, npl)).ravel())
+        vals.append(blocks.ravel())
+    if not rows:
+        return None
+    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(colidx))),
+                      shape=(n_p, n_p))
+    P.data[np.abs(P.data) < 1e-14] = 0.0
+    P.eliminate_zeros()
+    if closed and P.nnz:
+        P = _without_constant(P, npl)
+    return P if P is not None and P.nnz else None
+
+
+def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matrix | None,
+                   npl: int, extension=None) -> np.ndarray:
+    """Continuity right-hand side(s) ``g`` ((n_p,) or (n_p, k)) made solvable in a closed domain:
+    ``g - lambda w`` with ``lambda = (q . g) / (q . w)``, a copy.
+
+    In a box with velocities prescribed on every face the continuity equations can only be
+    satisfied together if the prescribed fluxes into the fluid add up to zero: ``q . g = 0`` for
+    the saddle-point matrix's left null vector ``q``, the constant pressure ``1`` less its orphaned
+    part (``q = 1 - C 1``). A rigid motion is divergence-free, but once a particle is within a
+    node layer of a wall (or of another particle) the cells in between have only prescribed
+    velocities, their continuity drops out (orphaned modes), and the particle's motion into them
+    is a net flux that no free velocity can carry: Newton then stalls with the whole defect in the
+    one cell whose pressure is pinned (measured: glowinski level 2, t = 0.728 s, gap 0.4 cells,
+    ``|F_p| = 0.087`` for ever). ``lambda w``, with ``w = (1 - C) int psi`` the mean weights less
+    their orphaned part, spreads the defect as a uniform expansion rate ``lambda`` [1/s] over the
+    fluid: the Lagrange multiplier that the mean-pressure border row ``w . p = 0`` would carry.
+    For compatible data ``lambda`` is round-off and nothing changes.
+    """
+    q = np.zeros(len(mean_weights))
+    q[::npl] = 1.0
+    if orphans is not None:
+        q = q - orphans @ q
+    if extension is not None:  # continued cells: no continuity rows of their own
+        q[extension.dofs] = 0.0
+    w = expansion(mean_weights, orphans, extension)
+    lam = (q @ g) / (q @ w)
+    return g - np.multiply.outer(w, lam)
+
+
+def expansion(mean_weights: np.ndarray, orphans: sp.csr_matrix | None, extension=None) -> np.ndarray:
+    """The continuity rows' response to a uniform expansion rate of the fluid, (n_p,): the mean
+    weights less their orphaned part, moved to the continuing cells by a pressure extension. The
+    column of the mean-pressure border (:func:`balance_volume`)."""
+    w = np.asarray(mean_weights, dtype=float)
+    if orphans is not None:
+        w = w - orphans @ w
+    return w if extension is None else extension.transfer(w)
+
+
+def _without_constant(P: sp.csr_matrix, npl: int) -> sp.csr_matrix | None:
+    """``P`` less the constant pressure when that lies in its range: in a closed domain the mean
+    fixes the constant (a small closed box where every cell touches a wall finds it orphaned)."""
+    const = np.zeros(P.shape[0])
+    const[::npl] = 1.0 / np.sqrt(P.shape[0] // npl)
+    if np.linalg.norm(P @ const - const) > 1e-8:
+        return P
+    idx = np.flatnonzero(const)
+    n = idx.size
+    Q = (P - sp.csr_matrix((np.full(n * n, const[idx[0]] ** 2), (np.repeat(idx, n), np.tile(idx, n))),
+                           shape=P.shape)).tocsr()
+    Q.data[np.abs(Q.data) < 1e-14] = 0.0
+    Q.eliminate_zeros()
+    return Q if Q.nnz else None
+
+
+def cell_blocks(P: sp.spmatrix | None, n_cells: int, npl: int) -> np.ndarray:
+    """The diagonal ``npl x npl`` blocks of a pressure-pressure matrix, (n_cells, npl, npl)
+    (zeros for ``P = None``): what cell-wise smoothers see of it."""
+    blocks = np.zeros((n_cells, npl, npl))
+    if P is not None:
+        C = P.tocoo()
+        own = C.row // npl == C.col // npl
+        blocks[C.row[own] // npl, C.row[own] % npl, C.col[own] % npl] = C.data[own]
+    return blocks
+
+
