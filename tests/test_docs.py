@@ -47,6 +47,12 @@ def test_tutorial_ball_example_runs_as_written_and_settles(capsys):
     assert "settling at" in capsys.readouterr().out
 
 
+def test_readme_example_is_the_tutorials_first():
+    """The README's Python example is the tested one, character for character."""
+    readme = (DOCS.parent / "README.md").read_text()
+    assert re.findall(r"```python\n(.*?)```", readme, re.S)[0] == _tutorial_examples()[0]
+
+
 @pytest.mark.parametrize("index, shorten", [(1, ("range(100)", "range(3)")),
                                             (2, ('"t_end": 0.1', '"t_end": 0.01'))])
 def test_tutorial_other_examples_run_shortened(index, shorten):
