@@ -297,9 +297,8 @@ class NavierStokesProblem:
         within the cell Reynolds number limit (:meth:`_coarse_spacing_limit`; the flow got faster
         or the viscosity smaller: fewer levels), and coarser ones as long as the coarsest level
         would otherwise be larger than :data:`COARSEST_UNKNOWNS` (a weak coarse correction
-        costs cycles; a direct solve of the fine system, hours or more memory than there is:
-        dfg-3d-1z level 3 on its graded mesh exceeds the limit on its one coarse level, and
-        converges with it). All levels are built at the first call (:func:`coarse_levels`)."""
+        costs cycles; a direct solve of a large system, hours or more memory than there is).
+        All levels are built at the first call (:func:`coarse_levels`)."""
         if not getattr(self.linear_solver, "needs_hierarchy", False):
             return []
         if self._levels is None:
@@ -436,9 +435,8 @@ class NavierStokesProblem:
         With an iterative linear solver (multigrid) every Newton step takes a fresh Jacobian and
         Eisenstat–Walker forcing terms (:class:`~fbmflow.solvers.NewtonSettings`): its set-up is
         cheap next to its cycles, and Newton then converges quadratically where chord steps with
-        the linear solves at ``linear_rtol`` converge linearly (the cavity at Re 1000: 17 Newton
-        steps instead of 23, docs/validation.md). A direct solver keeps its factorisation
-        (``newton.reuse_jacobian``), which costs more than its solves.
+        the linear solves at ``linear_rtol`` converge linearly. A direct solver keeps its
+        factorisation (``newton.reuse_jacobian``), which costs more than its solves.
         """
         newton = self.newton
         if getattr(self.linear_solver, "needs_hierarchy", False):

@@ -400,8 +400,7 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, s
       ``(C - D Y)^-1`` (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
       ``schur_tol``: a pressure mode that the cell's free velocities barely see (a cell with one
       free node among constrained ones) is left uncorrected, as an orphaned one, rather than
-      amplifying the rounding of stored factors (measured: with float32 storage and 1e-13, a
-      coarse level's such cell stalled FGMRES).
+      amplifying the rounding of stored single-precision factors.
     """
     m = ptr.shape[0] - 1
     npl = d + 1
@@ -500,8 +499,7 @@ def _lu_solve_stored(LU, piv, r, w, out):
 def _schur_solve(store, base, nl, d, r, w, out):
     """The correction of a Schur patch (see :func:`vanka_factor`) from its residual ``r``
     (d nl + d + 1,) float64 into ``out``; ``w`` float64 work, (d nl + d + 1,). Accumulated in
-    float64 whatever the storage: the continuity rows ``r_p - D z`` cancel (in float32 the cycles
-    grew by half, measured)."""
+    float64 whatever the storage: the continuity rows ``r_p - D z`` cancel."""
     npl = d + 1
     nu = d * nl
     y0 = base + nl * nl

@@ -92,9 +92,9 @@ class MultigridSettings:
     def symmetric_sweeps(self, time_step: bool) -> bool:
         """Whether the smoothers sweep forwards and backwards in turn: ``"symmetric"``, or
         ``"auto"`` outside time steps, where convection dominates and a sweep against the flow
-        is needed as much as one with it (the cavity at Re 1000 takes 25 % fewer cycles); in
-        time steps the mass term dominates, and the cheaper forward sweeps take as many cycles
-        (docs/validation.md)."""
+        is needed as much as one with it; in time steps the mass term dominates, and the cheaper
+        forward sweeps take as many cycles (docs/validation.md, "Multigrid with fictitious
+        boundaries")."""
         if self.sweeps == "auto":
             return not time_step
         return self.sweeps == "symmetric"
@@ -156,8 +156,8 @@ class MultigridSolver:
     def smoother_for(self, system: SaddlePointSystem) -> str:
         """The smoother used for ``system``: the configured one; ``"auto"`` is ``vanka-factored``,
         whose stored local factors make a sweep several times cheaper than ``vanka-full``'s,
-        which factorises every cell's block in every sweep (channel-3d level 4: 51 s against
-        104 s, docs/validation.md), and which alone handles row constraints and Galerkin rows.
+        which factorises every cell's block in every sweep, and which alone handles row
+        constraints and Galerkin rows.
         ``vanka-full`` stores nothing per cell, for a machine short of memory."""
         return "vanka-factored" if self.settings.smoother == "auto" else self.settings.smoother
 
