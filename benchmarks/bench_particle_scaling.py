@@ -94,20 +94,24 @@ def one(count: int, coupling: str, level: int, diameter: float, steps: int) -> d
                      "contact_s": 0.0 if contact is None else contact.detect_s + contact.solve_s,
                      "profiled": profile is not None})
     stats = pstats.Stats(profile, stream=io.StringIO())
-    named, top = {}, []
+    named, top, own = {}, [], []
     for (path, _, func), (cc, nc, tt, ct, _) in stats.stats.items():
         path = path.replace(os.sep, "/")
         for suffix, name, label in NAMED:
             if path.endswith("fbmflow/" + suffix) and func == name:
                 named[label] = {"cum_s": ct, "calls": nc}
+        where = path.split("/fbmflow/")[-1] if "/fbmflow/" in path else path.split("/")[-1]
+        entry = {"function": f"{where}:{func}" if where != "~" else func, "cum_s": ct, "self_s": tt,
+                 "calls": nc}
+        own.append(entry)
         if "/fbmflow/" in path:
-            top.append({"function": f"{path.split('/fbmflow/')[-1]}:{func}", "cum_s": ct, "self_s": tt,
-                        "calls": nc})
+            top.append(entry)
     top.sort(key=lambda r: -r["cum_s"])
+    own.sort(key=lambda r: -r["self_s"])
     p = sim.particles
     return {"coupling": coupling, "count": count, "level": level, "diameter": diameter,
             "unknowns": int(sim.x.size), "setup_s": setup, "steps": rows,
-            "profile": {"named": named, "top": top[:25],
+            "profile": {"named": named, "top": top[:25], "own": own[:12],
                         "calls": int(sum(v[1] for v in stats.stats.values()))},
             "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
             "checksum": {"mean_velocity": float(p.velocity[:, -1].mean()),
@@ -169,9 +173,9 @@ def write(rows: list[dict]) -> None:
         for label, v in prof["named"].items():
             lines.append(f"| {label} | {v['cum_s']:.3f} | {v['calls']} |")
         lines.append("")
-        own = sorted(prof["top"], key=lambda t: -t["self_s"])[:6]
-        lines.append("Top fbmflow functions by own time: "
-                     + ", ".join(f"`{t['function']}` {t['self_s']:.2f} s" for t in own))
+        own = prof.get("own") or sorted(prof["top"], key=lambda t: -t["self_s"])
+        lines.append("Largest own times: " + ", ".join(f"`{t['function']}` {t['self_s']:.2f} s ({t['calls']})"
+                                                     for t in own[:8]))
         lines.append("")
     skipped = sorted({(r["label"], s) for r in rows for s in r.get("skipped", [])})
     if skipped:
