@@ -204,3 +204,24 @@ def test_lifting_response_forces_are_the_forces_of_each_response(scheme, force):
         np.testing.assert_allclose(dF[k], f, rtol=1e-10, atol=1e-12 * np.abs(dF).max())
         np.testing.assert_allclose(dT[k], t, rtol=1e-10, atol=1e-12 * np.abs(dT).max())
     assert np.abs(dF).max() > 0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_test_function_linearisation_evaluates_many_responses_as_one_at_a_time(dim):
+    from fbmflow.coupling import TestFunctionForces
+    space = FlowSpace(StructuredMesh.box((6,) * dim))
+    centres = np.array([[0.55] * dim, [0.2] * dim])
+    shapes = [Ball(0.2, dim), Ball(0.12, dim)]
+    owner = node_owner(space.V, centres, shapes)
+    walls = np.flatnonzero(np.isclose(space.V.coordinates, 0.0).any(axis=1))
+    tested = TestFunctionForces(space, owner, centres, shapes, walls=walls)
+    rng = np.random.default_rng(8)
+    about = rng.standard_normal(space.n_u)
+    X = rng.standard_normal((3, space.n_dofs))
+    mu, rho = 0.4, 1.7
+    for dt in (0.05, None):
+        F, T = tested.linearised(about, mu, rho, dt).many(X[:, :space.n_u], X[:, space.n_u:], 1.0)
+        for k in range(3):
+            f, t = tested(X[k, :space.n_u], X[k, space.n_u:], mu, rho, dt=dt, about=about)
+            np.testing.assert_allclose(F[k], f, rtol=1e-10, atol=1e-12 * np.abs(F).max())
+            np.testing.assert_allclose(T[k], t, rtol=1e-10, atol=1e-12 * np.abs(T).max())

@@ -79,7 +79,9 @@ class VolumeForce(ForceEstimator):
 class TestFunctionForce(ForceEstimator):
     """The momentum balance tested with a function that is one on the particle
     (:class:`~fbmflow.coupling.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
-    ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is."""
+    ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is.
+    Responses about a flow are evaluated together through the linearisation there
+    (:meth:`~fbmflow.coupling.TestFunctionForces.linearised`)."""
 
     __test__ = False  # not a pytest class
     name = "test-function"
@@ -92,6 +94,11 @@ class TestFunctionForce(ForceEstimator):
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu, rho, u_old=u_old, dt=dt, about=about)
+
+    def evaluate_many(self, rule, U, P, mu, rho, dt=None, about=None):
+        if about is None or U is None or P is None:
+            return super().evaluate_many(rule, U, P, mu, rho, dt=dt, about=about)
+        return rule.linearised(about, mu, rho, dt).many(U, P, 1.0)
 
 
 class SurfaceForce(ForceEstimator):

@@ -227,7 +227,7 @@ class TestFunctionForces:
         self.grad_phi = dphi[None, :, :, :] * (2.0 / h)[:, None, None, :]       # (m, nq, nl, d)
         Q = space.Q
         self.pressure_basis = Q.element.tabulate(x, Q.centre[cells][:, None, :], Q.scale[cells][:, None, :])
-        self.n_particles, self.dim, self.n_v = len(shapes), d, V.n_dofs
+        self.n_particles, self.dim, self.n_v, self.space = len(shapes), d, V.n_dofs, space
 
     def _velocity(self, u: np.ndarray):
         """Values (m, nq, d) and gradients (m, nq, d, d) (``d u_j / d x_k``) of ``u (dim n_v,)``."""
@@ -270,6 +270,45 @@ class TestFunctionForces:
         torque = np.zeros((self.n_particles, 3))
         np.add.at(torque, self.body, t)
         return force, torque
+
+    def linearised(self, about: np.ndarray, mu: float, rho: float,
+                   dt: float | None = None) -> ForceFunctional:
+        """The change of the force with the flow about the velocity ``about (dim n_v,)`` (what
+        :meth:`__call__` gives with ``about``), as a :class:`ForceFunctional` whose coefficients
+        hold ``mu`` and ``rho`` (evaluate it with ``mu = 1``): one pass evaluates any number of
+        responses. Built from the rule's quadrature by contractions over its Gauss points."""
+        d = self.dim
+        aq, ga = self._velocity(about)                               # (m, nq, d), (m, nq, d, d)
+        W = self.weight
+        A = W * rho * self.psi_q                                     # (m, nq)
+        # per Gauss point, the coefficient of u_n at node a in f_j is
+        # -(delta_jn S_a + A ga_jn phi_a + W mu dphi_aj dpsi_n), S_a = A (dphi_a . about + phi_a / dt)
+        # + W mu dphi_a . dpsi
+        S = A[..., None] * np.einsum("cqak,cqk->cqa", self.grad_phi, aq)
+        if dt is not None:
+            S += A[..., None] * self.phi[None] / dt
+        S += (W * mu)[..., None] * np.einsum("cqak,cqk->cqa", self.grad_phi, self.grad_psi)
+        Wmu_gpsi = (W * mu)[..., None] * self.grad_psi              # (m, nq, d)
+        if d == 2:  # the moment arm as a matrix: torque_i = sum_j M_ij f_j (z only in 2D)
+            M = np.stack([-self.rel[..., 1], self.rel[..., 0]], axis=-1)[:, :, None, :]
+        else:
+            eps = np.zeros((3, 3, 3))
+            eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
+            eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
+            M = np.einsum("ilj,cql->cqij", eps, self.rel)
+        force_u = -np.einsum("jn,ca->cjna", np.eye(d), S.sum(axis=1))
+        force_u -= np.einsum("cq,cqjn,qa->cjna", A, ga, self.phi, optimize=True)
+        force_u -= np.einsum("cqaj,cqn->cjna", self.grad_phi, Wmu_gpsi, optimize=True)
+        torque_u = -np.einsum("cqin,cqa->cina", M, S, optimize=True)
+        torque_u -= np.einsum("cqin,qa->cina", np.einsum("cqij,cq,cqjn->cqin", M, A, ga), self.phi,
+                              optimize=True)
+        torque_u -= np.einsum("cqij,cqaj,cqn->cina", M, self.grad_phi, Wmu_gpsi, optimize=True)
+        # pressure: +W pq dpsi_j
+        force_p = np.einsum("cq,cqm,cqj->cjm", W, self.pressure_basis, self.grad_psi, optimize=True)
+        torque_p = np.einsum("cqij,cq,cqm,cqj->cim", M, W, self.pressure_basis, self.grad_psi, optimize=True)
+        wu = np.concatenate([force_u, torque_u], axis=1)
+        wp = np.concatenate([force_p, torque_p], axis=1)
+        return ForceFunctional(self.space, self.n_particles, self.cells, self.body, wu, wp)
 
 
 def supports_surface_force(shapes) -> bool:
