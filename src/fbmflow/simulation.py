@@ -304,15 +304,42 @@ class Simulation:
         u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
         est, mu, rho = self.estimator, self.flow.mu, self.flow.rho
         here = self._rule_here(owner)
-        if not est.lags_pressure or self._pressure_lag == 0.0 or not np.any(self.particles.velocity):
+        behind = self._rule_lagged(dt)
+        if behind is None:
             force, torque = est.evaluate(here, u, p, mu, rho, u_old=u_old, dt=dt, about=linear)
         else:
-            force, torque = est.evaluate(here, u, np.zeros_like(p), mu, rho, u_old=u_old, dt=dt, about=linear)
-            behind = self.particles.position - self._pressure_lag * dt * self.particles.velocity
-            force_p, torque_p = est.evaluate(self._rule_behind(behind), np.zeros_like(u), p, mu, rho,
-                                             u_old=u_old, dt=dt, about=linear)
+            force, torque = est.evaluate(here, u, None, mu, rho, u_old=u_old, dt=dt, about=linear)
+            force_p, torque_p = est.evaluate(behind, None, p, mu, rho, u_old=u_old, dt=dt, about=linear)
             force, torque = force + force_p, torque + torque_p
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
+    def _response_forces(self, owner: np.ndarray, dX: np.ndarray, dt: float, about: np.ndarray):
+        """:meth:`_forces` of the ``k`` flow responses ``dX (k, n_dofs)`` about the flow ``about``:
+        force (k, n, dim) and torque (k, n, 3), all responses and particles in one evaluation
+        (``evaluate_many`` of the estimator)."""
+        n_u, pt = self.flow.space.n_u, self.particles
+        if len(dX) == 0:
+            return np.zeros((0, pt.n, pt.dim)), np.zeros((0, pt.n, 3))
+        U, P = dX[:, :n_u], dX[:, n_u:]
+        est, mu, rho = self.estimator, self.flow.mu, self.flow.rho
+        here = self._rule_here(owner)
+        behind = self._rule_lagged(dt)
+        if behind is None:
+            force, torque = est.evaluate_many(here, U, P, mu, rho, dt=dt, about=about[:n_u])
+        else:
+            force, torque = est.evaluate_many(here, U, None, mu, rho, dt=dt, about=about[:n_u])
+            force_p, torque_p = est.evaluate_many(behind, None, P, mu, rho, dt=dt, about=about[:n_u])
+            force, torque = force + force_p, torque + torque_p
+        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
+    def _rule_lagged(self, dt: float):
+        """The estimator's rule where the pressure of a step of length ``dt`` belongs; None where
+        that is where the particles are (an estimator that does not lag the pressure, a time
+        scheme without lag, particles at rest). See :meth:`_forces`."""
+        p = self.particles
+        if not self.estimator.lags_pressure or self._pressure_lag == 0.0 or not np.any(p.velocity):
+            return None
+        return self._rule_behind(p.position - self._pressure_lag * dt * p.velocity)
 
     def _rule_here(self, owner: np.ndarray):
         """The estimator's rule for the current particle state (computed once per state)."""
@@ -389,10 +416,7 @@ class Simulation:
         sharp = self._sharp(space.V)
         row_liftings = None if sharp is None else sharp.ghosts.liftings(free)
         dX = self.flow.lifting_response(x, rigid_liftings(space.V, owner, p.position, free), row_liftings)
-        dF = np.zeros((len(dX), p.n, p.dim))
-        dT = np.zeros((len(dX), p.n, 3))
-        for k, dx in enumerate(dX):
-            dF[k], dT[k] = self._forces(owner, dx, dt, about=x)
+        dF, dT = self._response_forces(owner, dX, dt, about=x)
         return dX, dF, dT
 
     def state(self) -> dict:

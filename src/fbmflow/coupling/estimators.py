@@ -14,16 +14,21 @@ An estimator has
 * ``evaluate(rule, u, p, mu, rho, u_old, dt, about)``: force ``(n, dim)`` and torque ``(n, 3)``
   of the flow ``u (dim * n_v,)``, ``p (n_p,)``; ``u_old`` is the velocity at the step's start
   and ``about`` the flow a response ``u`` is a change of (the estimators linear in the flow ignore
-  both).
+  both). An estimator that lags the pressure gets None for ``u`` or ``p`` when the simulation
+  takes the other part only;
+* ``evaluate_many(rule, U, P, mu, rho, dt, about)``: force ``(k, n, dim)`` and torque
+  ``(k, n, 3)`` of ``k`` responses ``U (k, dim * n_v)``, ``P (k, n_p)`` about the flow ``about``
+  (the implicit coupling's lifting responses; None for ``U`` or ``P``: that part left out). The
+  estimators linear in the flow evaluate all of them in one pass over their
+  :class:`~fbmflow.coupling.forces.ForceFunctional`; the base class's default evaluates them one
+  by one.
 """
 from __future__ import annotations
-
-from functools import partial
 
 import numpy as np
 
 from ..fem.space import FlowSpace
-from .forces import SurfaceForces, TestFunctionForces, hydrodynamic_forces, supports_surface_force
+from .forces import SurfaceForces, TestFunctionForces, supports_surface_force, volume_force_functional
 from .indicator import node_owner
 
 
@@ -37,6 +42,15 @@ class ForceEstimator:
     def check(self, shapes: list, sharp: bool) -> None:
         return None
 
+    def evaluate_many(self, rule, U, P, mu, rho, dt=None, about=None):
+        """Force (k, n, dim) and torque (k, n, 3) of the responses ``U (k, n_u)``, ``P (k, n_p)``
+        about the flow ``about``, one response at a time (the estimators linear in the flow
+        override this with one pass over all of them)."""
+        k = (U if U is not None else P).shape[0]
+        out = [self.evaluate(rule, None if U is None else U[i], None if P is None else P[i], mu, rho, dt=dt,
+                             about=about) for i in range(k)]
+        return np.stack([f for f, _ in out]), np.stack([t for _, t in out])
+
     @staticmethod
     def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                owner: np.ndarray | None) -> np.ndarray:
@@ -45,23 +59,29 @@ class ForceEstimator:
 
 class VolumeForce(ForceEstimator):
     """``F_i = -int sigma . grad alpha_i`` over the cells the particle cuts
-    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary."""
+    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary. The rule is a
+    :class:`~fbmflow.coupling.forces.ForceFunctional` of all particles."""
 
     name = "volume"
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None):
         owner = self._owner(space, centres, shapes, rotations, owner)
-        return partial(hydrodynamic_forces, space, owner, centres)
+        return volume_force_functional(space, owner, centres)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu)
+
+    def evaluate_many(self, rule, U, P, mu, rho, dt=None, about=None):
+        return rule.many(U, P, mu)
 
 
 class TestFunctionForce(ForceEstimator):
     """The momentum balance tested with a function that is one on the particle
     (:class:`~fbmflow.coupling.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
-    ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is."""
+    ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is.
+    Responses about a flow are evaluated together through the linearisation there
+    (:meth:`~fbmflow.coupling.TestFunctionForces.linearised`)."""
 
     __test__ = False  # not a pytest class
     name = "test-function"
@@ -74,6 +94,11 @@ class TestFunctionForce(ForceEstimator):
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu, rho, u_old=u_old, dt=dt, about=about)
+
+    def evaluate_many(self, rule, U, P, mu, rho, dt=None, about=None):
+        if about is None or U is None or P is None:
+            return super().evaluate_many(rule, U, P, mu, rho, dt=dt, about=about)
+        return rule.linearised(about, mu, rho, dt).many(U, P, 1.0)
 
 
 class SurfaceForce(ForceEstimator):
@@ -95,6 +120,9 @@ class SurfaceForce(ForceEstimator):
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu)
+
+    def evaluate_many(self, rule, U, P, mu, rho, dt=None, about=None):
+        return rule.many(U, P, mu)
 
 
 #: force estimators by name (the parameter ``fbm.force``)

@@ -1,7 +1,11 @@
 """Hydrodynamic forces and torques on fictitious-boundary particles: the volume integral over the
 cells cut by each particle, the momentum balance tested with a function that is one on the
 particle and falls to zero within the next layer of cells, and the traction integrated over the
-true surface of balls (with the sharp boundary)."""
+true surface of balls (with the sharp boundary).
+
+The volume and surface forces are linear in the flow: they are built once per particle state, for
+all particles at once, as a :class:`ForceFunctional` (sparse rows over the flow's unknowns), which
+evaluates one flow or many (the implicit coupling's lifting responses) in one pass."""
 from __future__ import annotations
 
 import numpy as np
@@ -22,17 +26,104 @@ def cut_cells(space: FlowSpace, owner: np.ndarray) -> np.ndarray:
     return np.flatnonzero((o.max(axis=1) >= 0) & (o.min(axis=1) != o.max(axis=1)))
 
 
+class ForceFunctional:
+    """Hydrodynamic force and torque on every particle as linear functionals of the flow:
+    ``mu G_u u + G_p p``, ``G_u (n r, n_u)`` and ``G_p (n r, n_p)`` CSR, ``r`` rows per particle
+    (force ``0..dim-1``, then torque: the z component in 2D, three in 3D).
+
+    Built once per particle state from the pieces of an estimator's integral (cells cut by a
+    particle, surface points), all particles at once; evaluating it costs one pass over its
+    entries, whatever the particle count, and :meth:`many` evaluates any number of flows (the
+    implicit coupling's lifting responses) in that one pass.
+
+    Parameters
+    ----------
+    space : FlowSpace
+    n_particles : int
+    cells : (m,) int64, the cell of every piece
+    particle : (m,) int64, the particle of every piece
+    wu : (m, r, dim, nl) float64, coefficients of ``mu`` times the velocity components at the
+        cell's Q2 nodes
+    wp : (m, r, dim + 1) float64, coefficients of the cell's P1disc pressure modes
+    """
+
+    def __init__(self, space: FlowSpace, n_particles: int, cells: np.ndarray, particle: np.ndarray,
+                 wu: np.ndarray, wp: np.ndarray):
+        d, n_v, nl = space.dim, space.n_v, space.V.cell_dofs.shape[1]
+        r, npl = wu.shape[1], d + 1
+        self.dim, self.n_particles, self.rows_per_particle = d, int(n_particles), r
+        rows = (particle[:, None] * r + np.arange(r)[None, :]).astype(np.int64)      # (m, r)
+        nodes = space.V.cell_dofs[cells]                                            # (m, nl)
+        cols_u = np.arange(d)[None, :, None] * n_v + nodes[:, None, :]              # (m, d, nl)
+        shape = (self.n_particles * r, space.n_u)
+        self.G_u = sp.csr_matrix((wu.ravel(), (np.repeat(rows.ravel(), d * nl),
+                                               np.broadcast_to(cols_u[:, None], wu.shape).ravel())),
+                                 shape=shape)
+        cols_p = cells[:, None] * npl + np.arange(npl)[None, :]                     # (m, npl)
+        self.G_p = sp.csr_matrix((wp.ravel(), (np.repeat(rows.ravel(), npl),
+                                               np.broadcast_to(cols_p[:, None], wp.shape).ravel())),
+                                 shape=(self.n_particles * r, space.n_p))
+        for G in (self.G_u, self.G_p):
+            G.sum_duplicates()
+
+    def _split(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Force (..., n, dim) and torque (..., n, 3) from the rows (..., n r)."""
+        rows = rows.reshape(rows.shape[:-1] + (self.n_particles, self.rows_per_particle))
+        force = rows[..., :self.dim].copy()
+        if self.dim == 3:
+            return force, rows[..., 3:].copy()
+        torque = np.zeros(rows.shape[:-1] + (3,))
+        torque[..., 2] = rows[..., 2]
+        return force, torque
+
+    def __call__(self, u: np.ndarray | None, p: np.ndarray | None,
+                 mu: float) -> tuple[np.ndarray, np.ndarray]:
+        """Force (n, dim) [N] and torque (n, 3) [N m] of the flow ``u (dim * n_v,)``, ``p (n_p,)``
+        with dynamic viscosity ``mu`` (None: that part left out)."""
+        rows = np.zeros(self.G_u.shape[0])
+        if u is not None:
+            rows += mu * (self.G_u @ u)
+        if p is not None:
+            rows += self.G_p @ p
+        return self._split(rows)
+
+    def many(self, U: np.ndarray | None, P: np.ndarray | None, mu: float) -> tuple[np.ndarray, np.ndarray]:
+        """Force (k, n, dim) and torque (k, n, 3) of the ``k`` flows ``U (k, dim * n_v)``,
+        ``P (k, n_p)`` (row views of a larger array are fine; None: that part left out), in one
+        pass over the functionals (:func:`~fbmflow.coupling._kernels.csr_apply_rows`)."""
+        k = (U if U is not None else P).shape[0]
+        rows = np.zeros((k, self.G_u.shape[0]))
+        for G, X, scale in ((self.G_u, U, mu), (self.G_p, P, 1.0)):
+            if X is not None:
+                _kernels.csr_apply_rows(G.indptr, G.indices, G.data, X, float(scale), rows)
+        return self._split(rows)
+
+
+def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray) -> ForceFunctional:
+    """The cut-cell volume force and torque of every particle (see :func:`hydrodynamic_forces`) as a
+    :class:`ForceFunctional`: the (cut cell, particle) pairs of all particles found at once, their
+    coefficients in one kernel pass (:func:`~fbmflow.coupling._kernels.volume_force_rows`)."""
+    centres = np.atleast_2d(np.asarray(centres, dtype=float))
+    n = len(centres)
+    cut = cut_cells(space, owner)
+    o = owner[space.V.cell_dofs[cut]]                                   # (n_cut, nl)
+    row, col = np.nonzero(o >= 0)
+    pairs = np.unique(cut[row] * max(n, 1) + o[row, col])               # (cell, particle), sorted
+    cells, particle = pairs // max(n, 1), pairs % max(n, 1)
+    wu, wp = _kernels.volume_force_rows(cells, particle, owner, centres, space.V.cell_dofs, space.dphi,
+                                        space.detJw, space.Jinv, space.psi, space.xq)
+    return ForceFunctional(space, n, cells, particle, wu, wp)
+
+
 def hydrodynamic_forces(space: FlowSpace, owner: np.ndarray, centres: np.ndarray, u: np.ndarray,
                         p: np.ndarray, mu: float):
     """Force (n_particles, dim) [N] and torque (n_particles, 3) [N m] from the flow ``u (dim * n_v,)``,
-    ``p (n_p,)`` with dynamic viscosity ``mu``; periodic minimum images are not applied to the
-    torque arm (particles must not straddle a periodic side)."""
-    cells = cut_cells(space, owner)
-    d = space.dim
-    return _kernels.fbm_force_torque(cells, owner, len(centres), np.asarray(centres, dtype=float),
-                                     np.ascontiguousarray(u.reshape(d, space.n_v)), p, mu,
-                                     space.V.cell_dofs, space.phi, space.dphi, space.detJw,
-                                     space.Jinv, space.psi, space.xq)
+    ``p (n_p,)`` with dynamic viscosity ``mu``: ``F_i = -int sigma . grad alpha_i``,
+    ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` over the cells cut by particle ``i``
+    (``alpha_i`` the Q2 interpolant of its indicator). Periodic minimum images are not applied to
+    the torque arm (particles must not straddle a periodic side). For many flows of one particle
+    state build :func:`volume_force_functional` once."""
+    return volume_force_functional(space, owner, centres)(u, p, mu)
 
 
 def mirror_images(force: np.ndarray, torque: np.ndarray, axes) -> tuple[np.ndarray, np.ndarray]:
@@ -41,12 +132,12 @@ def mirror_images(force: np.ndarray, torque: np.ndarray, axes) -> tuple[np.ndarr
     ``axes``: the normal axis of every mirror plane (e.g. ``(0, 1)`` for a quarter domain cut by
     the planes x = X and y = Y). The mirror image across the plane with normal ``a`` flips the
     ``a`` component of the force and, the torque being a pseudo-vector, every other component of
-    the torque; the whole particle gets the sum of all images. ``force (n, dim)``,
-    ``torque (n, 3)``; returns new arrays.
+    the torque; the whole particle gets the sum of all images. ``force (..., n, dim)``,
+    ``torque (..., n, 3)`` (leading axes: several flows); returns new arrays.
     """
     F, T = np.array(force, dtype=float), np.array(torque, dtype=float)
     for a in axes:
-        flip_f = np.ones(F.shape[1])
+        flip_f = np.ones(F.shape[-1])
         flip_f[a] = -1.0
         flip_t = -np.ones(3)
         flip_t[a] = 1.0
@@ -136,7 +227,7 @@ class TestFunctionForces:
         self.grad_phi = dphi[None, :, :, :] * (2.0 / h)[:, None, None, :]       # (m, nq, nl, d)
         Q = space.Q
         self.pressure_basis = Q.element.tabulate(x, Q.centre[cells][:, None, :], Q.scale[cells][:, None, :])
-        self.n_particles, self.dim, self.n_v = len(shapes), d, V.n_dofs
+        self.n_particles, self.dim, self.n_v, self.space = len(shapes), d, V.n_dofs, space
 
     def _velocity(self, u: np.ndarray):
         """Values (m, nq, d) and gradients (m, nq, d, d) (``d u_j / d x_k``) of ``u (dim n_v,)``."""
@@ -180,6 +271,45 @@ class TestFunctionForces:
         np.add.at(torque, self.body, t)
         return force, torque
 
+    def linearised(self, about: np.ndarray, mu: float, rho: float,
+                   dt: float | None = None) -> ForceFunctional:
+        """The change of the force with the flow about the velocity ``about (dim n_v,)`` (what
+        :meth:`__call__` gives with ``about``), as a :class:`ForceFunctional` whose coefficients
+        hold ``mu`` and ``rho`` (evaluate it with ``mu = 1``): one pass evaluates any number of
+        responses. Built from the rule's quadrature by contractions over its Gauss points."""
+        d = self.dim
+        aq, ga = self._velocity(about)                               # (m, nq, d), (m, nq, d, d)
+        W = self.weight
+        A = W * rho * self.psi_q                                     # (m, nq)
+        # per Gauss point, the coefficient of u_n at node a in f_j is
+        # -(delta_jn S_a + A ga_jn phi_a + W mu dphi_aj dpsi_n), S_a = A (dphi_a . about + phi_a / dt)
+        # + W mu dphi_a . dpsi
+        S = A[..., None] * np.einsum("cqak,cqk->cqa", self.grad_phi, aq)
+        if dt is not None:
+            S += A[..., None] * self.phi[None] / dt
+        S += (W * mu)[..., None] * np.einsum("cqak,cqk->cqa", self.grad_phi, self.grad_psi)
+        Wmu_gpsi = (W * mu)[..., None] * self.grad_psi              # (m, nq, d)
+        if d == 2:  # the moment arm as a matrix: torque_i = sum_j M_ij f_j (z only in 2D)
+            M = np.stack([-self.rel[..., 1], self.rel[..., 0]], axis=-1)[:, :, None, :]
+        else:
+            eps = np.zeros((3, 3, 3))
+            eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
+            eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
+            M = np.einsum("ilj,cql->cqij", eps, self.rel)
+        force_u = -np.einsum("jn,ca->cjna", np.eye(d), S.sum(axis=1))
+        force_u -= np.einsum("cq,cqjn,qa->cjna", A, ga, self.phi, optimize=True)
+        force_u -= np.einsum("cqaj,cqn->cjna", self.grad_phi, Wmu_gpsi, optimize=True)
+        torque_u = -np.einsum("cqin,cqa->cina", M, S, optimize=True)
+        torque_u -= np.einsum("cqin,qa->cina", np.einsum("cqij,cq,cqjn->cqin", M, A, ga), self.phi,
+                              optimize=True)
+        torque_u -= np.einsum("cqij,cqaj,cqn->cina", M, self.grad_phi, Wmu_gpsi, optimize=True)
+        # pressure: +W pq dpsi_j
+        force_p = np.einsum("cq,cqm,cqj->cjm", W, self.pressure_basis, self.grad_psi, optimize=True)
+        torque_p = np.einsum("cqij,cq,cqm,cqj->cim", M, W, self.pressure_basis, self.grad_psi, optimize=True)
+        wu = np.concatenate([force_u, torque_u], axis=1)
+        wp = np.concatenate([force_p, torque_p], axis=1)
+        return ForceFunctional(self.space, self.n_particles, self.cells, self.body, wu, wp)
+
 
 def supports_surface_force(shapes) -> bool:
     """True when every shape is a ball (disk or sphere), whose surface :class:`SurfaceForces`
@@ -187,7 +317,7 @@ def supports_surface_force(shapes) -> bool:
     return all(isinstance(s, Ball) for s in shapes)
 
 
-class SurfaceForces:
+class SurfaceForces(ForceFunctional):
     """Force and torque on balls as the traction integrated over their true surfaces:
 
         F_i = int_{S_i} sigma n dS,     T_i = int_{S_i} (x - X_i) x sigma n dS,
@@ -201,8 +331,8 @@ class SurfaceForces:
     circle (the same unit rule for every ball, scaled by its radius; ``phi`` offset by half a
     step so that no point lies on a mirror plane through the centre). Surface points outside the
     mesh box are left out: the parts beyond mirror planes through the centre come back with
-    :func:`mirror_images`; periodic axes wrap. Built once per particle state; linear in ``(u, p)``
-    (tensor-product meshes).
+    :func:`mirror_images`; periodic axes wrap. Built once per particle state, all balls at once,
+    as a :class:`ForceFunctional` (linear in ``(u, p)``; tensor-product meshes).
 
     Measured (Stokes flow through a cubic array of spheres with exact drag,
     ``benchmarks/bench_sphere_array.py``): error +2.5 / -0.6 / +0.5 / +0.3 / -0.2 % at 4 / 6 / 8 /
@@ -246,30 +376,24 @@ class SurfaceForces:
         for d in np.flatnonzero(mesh.periodic):
             x[:, d] = lower[d] + np.mod(x[:, d] - lower[d], upper[d] - lower[d])
         keep = np.all((x >= lower) & (x <= upper), axis=1)
-        x, self.particle, self.normal = x[keep], particle[keep], normal[keep]
-        self.arm, self.weight = arm[keep], weight[keep]
-        self.n_particles, self.space = len(shapes), space
-        self.cells, xi = locate(mesh, x)
+        x, particle, normal, arm, weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
+        cells, xi = locate(mesh, x)
         _, dphi = space.V.element.tabulate(xi)
-        half = space.Q.scale[self.cells]  # the cells' half extents (tensor-product cells)
-        self.dphi = dphi / half[:, None, :]  # physical gradients (n, n_local, dim)
-        self.psi = space.Q.element.tabulate(x, space.Q.centre[self.cells], space.Q.scale[self.cells])
-
-    def __call__(self, u: np.ndarray, p: np.ndarray, mu: float) -> tuple[np.ndarray, np.ndarray]:
-        """Force (n, dim) [N] and torque (n, 3) [N m] of the flow ``u (dim n_v,)``, ``p (n_p,)``."""
-        space, dim = self.space, self.space.dim
-        local = u.reshape(dim, space.n_v)[:, space.V.cell_dofs[self.cells]]  # (dim, n, n_local)
-        grad = np.einsum("ina,nad->nid", local, self.dphi)  # du_i / dx_d
-        pressure = np.einsum("nm,nm->n", p.reshape(-1, dim + 1)[self.cells], self.psi)
-        strain = grad + grad.transpose(0, 2, 1)
-        traction = -pressure[:, None] * self.normal + mu * np.einsum("nij,nj->ni", strain, self.normal)
-        traction *= self.weight[:, None]
-        if dim == 2:
-            moment = np.zeros((len(traction), 3))
-            moment[:, 2] = self.arm[:, 0] * traction[:, 1] - self.arm[:, 1] * traction[:, 0]
-        else:
-            moment = np.cross(self.arm, traction)
-        force = np.stack([np.bincount(self.particle, traction[:, d], self.n_particles) for d in range(dim)],
-                         -1)
-        torque = np.stack([np.bincount(self.particle, moment[:, d], self.n_particles) for d in range(3)], -1)
-        return force, torque
+        dphi = dphi / space.Q.scale[cells][:, None, :]  # physical gradients (tensor-product cells)
+        psi = space.Q.element.tabulate(x, space.Q.centre[cells], space.Q.scale[cells])
+        # traction_j = -p n_j + mu sum_k (d_k u_j + d_j u_k) n_k, times the point's weight
+        eye = np.eye(dim)
+        cu = np.einsum("jm,pak,pk->pjma", eye, dphi, normal) + np.einsum("paj,pm->pjma", dphi, normal)
+        cu *= weight[:, None, None, None]
+        cp = -weight[:, None, None] * normal[:, :, None] * psi[:, None, :]        # (n_pts, dim, npl)
+        r = 3 if dim == 2 else 6
+        wu = np.zeros((len(x), r) + cu.shape[2:])
+        wp = np.zeros((len(x), r, dim + 1))
+        wu[:, :dim], wp[:, :dim] = cu, cp
+        for w, c in ((wu, cu), (wp, cp)):  # the moment arm x traction
+            arm_b = arm.reshape(arm.shape + (1,) * (c.ndim - 2))
+            if dim == 2:
+                w[:, 2] = arm_b[:, 0] * c[:, 1] - arm_b[:, 1] * c[:, 0]
+            else:
+                w[:, 3:] = np.cross(arm_b, c, axis=1)
+        super().__init__(space, len(shapes), cells, particle, wu, wp)

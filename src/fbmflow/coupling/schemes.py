@@ -120,9 +120,8 @@ class ImplicitCoupling:
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
         free[~p.fixed] = symmetric_motion(p.dim, sim.symmetry)
         dX, dF, dT = sim.rigid_responses(x, free, dt)
-        sens = np.zeros((p.n, r, len(dX)))  # d f_i / d v_k for every iterated component k
-        for k in range(len(dX)):
-            sens[:, :, k] = np.column_stack([dF[k], dT[k][:, 2:] if p.dim == 2 else dT[k]])
+        # d f_i / d v_k for every iterated component k: (n, r, k)
+        sens = np.concatenate([dF, dT[:, :, 2:] if p.dim == 2 else dT], axis=2).transpose(1, 2, 0)
         J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
         guess = p.copy()
         v_guess = pack_velocities(p)

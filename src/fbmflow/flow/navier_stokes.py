@@ -203,11 +203,14 @@ class NavierStokesProblem:
 
     def _continuity(self, U: np.ndarray, con: DirichletConstraints,
                     orphans: sp.csr_matrix | None) -> np.ndarray:
-        """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` with the orphaned modes
-        dropped and, in a closed box, the volume defect of the prescribed velocities taken out
-        as the linear solvers do (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k)."""
+        """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` (dense, or sparse: liftings
+        are non-zero on a particle's nodes only) with the orphaned modes dropped and, in a closed
+        box, the volume defect of the prescribed velocities taken out as the linear solvers do
+        (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense."""
         BT = self.BT if con.continuity is None else con.continuity.apply(self.BT)
         Fp = BT @ U
+        if sp.issparse(Fp):
+            Fp = Fp.toarray()
         if con.extension is not None:
             Fp = con.extension.transfer(Fp)
         if orphans is not None:
@@ -415,7 +418,7 @@ class NavierStokesProblem:
             dg = sp.csr_matrix(row_liftings)[con.rows.dofs].toarray() if row_liftings is not None else 0.0
             scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
             Ju[con.rows.dofs] = scale[:, None] * (con.rows.matrix @ Wd - dg)
-        Jp = self._continuity(Wd, con, self.orphans(con))
+        Jp = self._continuity(W, con, self.orphans(con))
         if getattr(solve, "multiple_rhs", False):
             du, dp, _ = self._linear_solve(solve, -Ju, -Jp)
         else:
