@@ -15,7 +15,7 @@ Times on the 2-core machine (the level-1 runs are hours; run one with ``-k``):
 | E4 level 0, dt 0.02, to t = 0.2 s (quick) | about 1-2 min |
 | E4 level 0, dt 0.02, to the bottom | 693 s (PARDISO, Newton 1e-10) |
 | E1 level 0, dt 0.02, to the bottom | 813 s |
-| E4 level 1, dt 0.01 | 2435 s on multigrid (the default at level 1), 9951 s on PARDISO |
+| E4 level 1, dt 0.01 | 1310 s on multigrid (the default at level 1), 9951 s on PARDISO |
 | E3 level 1, dt 0.02 | 6739 s on PARDISO (multigrid not yet measured) |
 | E2 level 1, dt 0.02 | 10021 s on PARDISO (multigrid not yet measured) |
 | E1 level 1, dt 0.02, to t = 2.3 s | 5747 s on PARDISO (multigrid not yet measured) |

@@ -137,3 +137,15 @@ def test_plot_of_a_damaged_summary_exits_2(tmp_path, capsys):
     (tmp_path / "summary.json").write_text(json.dumps({"scene": "glowinski-free-fall"}))
     assert main(["plot", str(tmp_path)]) == 2
     assert "does not hold what" in capsys.readouterr().err
+
+
+def test_progress_eta_of_a_resumed_run_counts_only_the_steps_it_made(capsys, monkeypatch):
+    """A run resumed at step 25 of 130 that took 10 s per step since: the ETA is 10 s per
+    remaining step, not the elapsed time spread over all 27 steps."""
+    from fbmflow import cli
+    clock = iter([0.0, 10.0, 20.0])
+    monkeypatch.setattr(cli.time, "perf_counter", lambda: next(clock))
+    report = cli._progress(quiet=False)
+    report(26, 130, 0.26)
+    report(27, 130, 0.27)
+    assert capsys.readouterr().err.rstrip().endswith("eta 1030.0 s")

@@ -69,10 +69,13 @@ def _progress(quiet: bool):
         return None
     start = time.perf_counter()
     width = 20
+    before = []  # the steps done before the first report (a resumed run starts past 0)
 
     def report(step: int, n: int, t: float | None, info: dict | None = None) -> None:
         elapsed = time.perf_counter() - start
-        eta = elapsed / step * (n - step)
+        if not before:
+            before.append(step - 1)
+        eta = elapsed / max(step - before[0], 1) * (n - step)
         done = int(width * step / n)
         where = f"t = {t:.4g}" if t is not None else "steady stage"
         extra = "".join(f"  {k} {v:.3g}" if isinstance(v, float) else f"  {k} {v}"
