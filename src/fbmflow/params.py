@@ -405,6 +405,19 @@ class ContactParams(Section):
                           skin=self.skin_cells * h, lubrication=lubrication)
 
 
+@dataclasses.dataclass(frozen=True)
+class WallContactParams(ContactParams):
+    """Hard contact with the walls, off by default in single-particle scenes, where the repulsion
+    keeps the particle off the walls. A heavy particle that reaches the wall faster than the
+    repulsion can stop it (at most about ``sqrt(2 strength g' h)``, ``g'`` the reduced gravity,
+    ``h`` its range) needs it;
+    it advances the particle by semi-implicit Euler."""
+
+    enabled: bool = param(False, "hard contact on: the particle stops skin_cells from the walls (for a "
+                          "heavy particle the repulsion cannot stop; set coupling.integrator = "
+                          "semi-implicit-euler with it)")
+
+
 #: the time schemes a ``scheme`` parameter may name (:data:`fbmflow.flow.time_schemes.TIME_SCHEMES`)
 SCHEMES = tuple(TIME_SCHEMES)
 

@@ -27,7 +27,7 @@ def test_every_particle_scene_is_built_by_the_builder_from_its_sections(name, mo
     assert (sim.coupling.name, sim.estimator.name) == ("explicit", "test-function")
     assert (sim.integrator, sim.scheme) == (params.coupling.integrator, time.scheme)
     assert setup.n_steps == time.n_steps and setup.dt * setup.n_steps == pytest.approx(time.t_end)
-    assert (sim.contact is not None) == ("contact" in scene.Params.__dataclass_fields__)
+    assert (sim.contact is not None) == (params.contact.enabled if hasattr(params, "contact") else False)
 
 
 def test_a_contact_skin_of_a_diameter_warns_and_names_the_level(caplog):

@@ -49,3 +49,16 @@ def test_sedimentation_3d_runs_with_contact():
 def test_too_many_particles_are_refused_before_the_first_step():
     with pytest.raises(ParamError, match="do not fit"):
         _run("sedimentation-2d", 0, particles={"count": 10000})
+
+
+def test_a_heavy_disk_lands_on_wall_contact_without_penetration():
+    """Glowinski's disk at density ratio 100 hits the floor at about 80 cm/s: more than the
+    repulsion can stop within its range (Newton then fails with the disk 45 % of its radius in
+    the floor). With wall contact on it lands at the contact distance and stays there."""
+    q = _run("glowinski-free-fall", 1, particle={"density": 100.0}, time={"t_end": 0.16},
+             contact={"enabled": True}, coupling={"integrator": "semi-implicit-euler"})
+    v, y = np.array(q["v"]), np.array(q["y"])
+    r, cell = 0.125, 0.125
+    assert np.all(np.isfinite(v)) and v.min() < -60.0  # a hard impact
+    assert y.min() >= r + cell - 0.01 * r  # the skin of one cell, no penetration
+    assert abs(v[-1]) < 1e-6 and abs(y[-1] - (r + cell)) < 0.01 * r  # at rest on the contact

@@ -26,7 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh import StructuredMesh, graded_axis
-from ..params import SCHEMES, ParamError, SecondOrderCouplingParams, Section, TimeParams, derive, param
+from ..params import (
+    SCHEMES,
+    ParamError,
+    SecondOrderCouplingParams,
+    Section,
+    TimeParams,
+    WallContactParams,
+    derive,
+    param,
+)
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CgsFluid, DomainParams, Layout, ParticleScene, particle_params
@@ -59,7 +68,8 @@ def _inside_the_box(params) -> None:
 
 GlowinskiParams = particle_params("GlowinskiParams", "Parameters of ``glowinski-free-fall``.",
                                   _inside_the_box, fluid=CgsFluid, particle=GlowinskiParticle,
-                                  domain=DomainParams, time=GlowinskiTime, coupling=SecondOrderCouplingParams)
+                                  domain=DomainParams, time=GlowinskiTime, coupling=SecondOrderCouplingParams,
+                                  contact=WallContactParams)
 
 
 class GlowinskiFreeFall(ParticleScene):
