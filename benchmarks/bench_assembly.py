@@ -27,8 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fbmflow.fem import (FlowSpace, assemble_convection, assemble_divergence, assemble_laplace,
-                         assemble_mass, expand_to_coupled)
+from fbmflow.fem import (
+    FlowSpace,
+    assemble_convection,
+    assemble_divergence,
+    assemble_laplace,
+    assemble_mass,
+    expand_to_coupled,
+)
 from fbmflow.mesh import StructuredMesh
 
 RESULTS = Path(__file__).parent / "results"
@@ -143,11 +149,14 @@ def main():
     print(f"{args.cells}^3 = {big['n_cells']} cells, {big['n_velocity_dofs']} velocity dofs, "
           f"{big['nnz_velocity_block'] / 1e6:.1f} M non-zeros in the velocity block")
     print(f"  set-up (geometry, patterns, slots): {big['setup_s']:.2f} s")
-    print(f"  full assembly (M, L, B, Jacobian):  {big['full_assembly_s']:.2f} s = {big['cells_per_s_full']:.0f} cells/s"
+    print(f"  full assembly (M, L, B, Jacobian):  {big['full_assembly_s']:.2f} s = "
+          f"{big['cells_per_s_full']:.0f} cells/s"
           f"  [M {big['mass_s']:.2f}, L {big['laplace_s']:.2f}, B {big['divergence_s']:.2f}, "
-          f"first Jacobian incl. page faults of the new {big['nnz_velocity_block'] * 8 / 1e9:.1f} GB buffer "
+          "first Jacobian incl. page faults of the new "
+          f"{big['nnz_velocity_block'] * 8 / 1e9:.1f} GB buffer "
           f"{big['first_jacobian_s']:.2f} s]")
-    print(f"  Newton Jacobian (best of 3):        {big['jacobian_s_best']:.2f} s = {big['cells_per_s_jacobian']:.0f} cells/s")
+    print(f"  Newton Jacobian (best of 3):        {big['jacobian_s_best']:.2f} s = "
+          f"{big['cells_per_s_jacobian']:.0f} cells/s")
     print(f"  peak RSS: {big['peak_rss_gb']:.2f} GB")
     result = {"machine": platform.processor() or platform.machine(), "jit_s": jit_s, "large": big,
               "skfem_comparison": comparisons}
@@ -155,16 +164,20 @@ def main():
     (RESULTS / "assembly.json").write_text(json.dumps(result, indent=1))
     lines = ["# 3D Navier–Stokes Jacobian assembly (Q2/P1disc)", "",
              f"JIT/cache load: {jit_s:.2f} s (excluded below)", "",
-             "| mesh | cells | velocity nnz | set-up s | full (M,L,B,J) cells/s | Jacobian cells/s | peak RSS GB |",
+             "| mesh | cells | velocity nnz | set-up s | full (M,L,B,J) cells/s | Jacobian cells/s "
+             "| peak RSS GB |",
              "|---|---|---|---|---|---|---|",
-             f"| {args.cells}^3 | {big['n_cells']} | {big['nnz_velocity_block'] / 1e6:.1f} M | {big['setup_s']:.2f} | "
-             f"{big['cells_per_s_full']:.0f} | {big['cells_per_s_jacobian']:.0f} | {big['peak_rss_gb']:.2f} |", "",
+             f"| {args.cells}^3 | {big['n_cells']} | {big['nnz_velocity_block'] / 1e6:.1f} M | "
+             f"{big['setup_s']:.2f} | "
+             f"{big['cells_per_s_full']:.0f} | {big['cells_per_s_jacobian']:.0f} | "
+             f"{big['peak_rss_gb']:.2f} |", "",
              "| mesh | fbmflow Jacobian cells/s | scikit-fem cells/s | ratio | Frobenius rel. diff |",
              "|---|---|---|---|---|"]
     for row in comparisons:
         if "ratio" in row:
             lines.append(f"| {row['cells_per_axis']}^3 | {row['fbmflow_cells_per_s_jacobian']:.0f} | "
-                         f"{row['skfem_cells_per_s']:.0f} | {row['ratio']:.1f}x | {row['frobenius_rel_diff']:.1e} |")
+                         f"{row['skfem_cells_per_s']:.0f} | {row['ratio']:.1f}x | "
+                         f"{row['frobenius_rel_diff']:.1e} |")
     (RESULTS / "assembly.md").write_text("\n".join(lines) + "\n")
 
 

@@ -35,7 +35,8 @@ def lattice(n: int):
     side = int(np.ceil(np.sqrt(n / 10.0)))
     k = np.arange(n)
     s = 2.002 * R
-    X = np.column_stack([(k % side + 0.5) * s, ((k // side) % side + 0.5) * s, (k // side**2) * s + 1.001 * R])
+    X = np.column_stack([(k % side + 0.5) * s, ((k // side) % side + 0.5) * s,
+                         (k // side**2) * s + 1.001 * R])
     return X, side * s
 
 
@@ -124,7 +125,8 @@ def main(argv=None):
     for r in rows:
         pyb = f"{1e3 * r['pybullet_step_s']:.1f}" if "pybullet_step_s" in r else \
             ("not run (N > --pybullet-max)" if have_bullet else "not installed")
-        lines.append(f"| {r['n']} | {r['contacts']:.0f} | {1e3 * r['step_s']:.1f} | {1e3 * r['detect_s']:.1f} | "
+        lines.append(f"| {r['n']} | {r['contacts']:.0f} | {1e3 * r['step_s']:.1f} | "
+                     f"{1e3 * r['detect_s']:.1f} | "
                      f"{1e3 * r['solve_s']:.1f} | {1e6 * r['step_s'] / r['n']:.1f} | "
                      f"{r['max_overlap_over_R']:.1e} | {pyb} |")
     if len(rows) > 1:

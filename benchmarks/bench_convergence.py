@@ -72,7 +72,8 @@ def main():
             lines += [f"## {name} (manufactured solution, unit box)", "",
                       "| cells/axis | unknowns | Newton its | wall s | u L2 | u H1 | p L2 |",
                       "|---|---|---|---|---|---|---|"]
-            lines += [f"| {r['cells']} | {r['n_dofs']} | {r['newton']} | {r['wall_s']:.2f} | {r['u_l2']:.3e} | "
+            lines += [f"| {r['cells']} | {r['n_dofs']} | {r['newton']} | {r['wall_s']:.2f} | "
+                      f"{r['u_l2']:.3e} | "
                       f"{r['u_h1']:.3e} | {r['p_l2']:.3e} |" for r in rows]
             lines += ["", f"Fitted orders: u L2 {orders['u_l2']:.2f}, u H1 {orders['u_h1']:.2f}, "
                       f"p L2 {orders['p_l2']:.2f}", ""]
@@ -84,7 +85,8 @@ def main():
         out["time"][scheme] = r
         for i, n in enumerate(r["steps"][:-1]):
             order = f"{r['orders'][i - 1]:.2f}" if i >= 1 else ""
-            lines.append(f"| {scheme} | {n} | {r['wall_s'][i]:.2f} | {r['successive_differences'][i]:.3e} | {order} |")
+            lines.append(f"| {scheme} | {n} | {r['wall_s'][i]:.2f} | "
+                         f"{r['successive_differences'][i]:.3e} | {order} |")
         print(scheme, [round(o, 2) for o in r["orders"]], flush=True)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "convergence.json").write_text(json.dumps(out, indent=1))

@@ -151,24 +151,33 @@ def pct(force: float, weight: float) -> str:
 def write(row: dict) -> None:
     path = RESULTS / "force_estimators.json"
     rows = json.loads(path.read_text()) if path.exists() else []
-    rows = [r for r in rows if (r["case"], r["level"], round(r["t"], 6)) != (row["case"], row["level"], round(row["t"], 6))]
+    rows = [r for r in rows
+            if (r["case"], r["level"], round(r["t"], 6)) != (row["case"], row["level"], round(row["t"], 6))]
     rows.append(row)
     path.write_text(json.dumps(rows, indent=1))
     lines = ["# Force estimators on one flow field (benchmarks/bench_force_estimators.py)", "",
-             "Vertical hydrodynamic force [N] on the ten-cate sphere from one checkpointed flow, against the net "
-             "weight (rho_s - rho_f) V g that it balances near terminal velocity. 'moving': the momentum balance "
-             "tested with psi(x - X(t)), one up to a cells from the surface, zero from b cells; 'lab': the same psi "
-             "at the step's mid position with the mesh's (u - u_old)/dt. The time terms need one more step (--step).",
-             "", "| case | level | cells/d | t s | U m/s | net weight | dynamics | volume force | band a-b cells | moving, no dI/dt "
-             "| moving | lab | -int rho psi du/dt moving / lab |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "Vertical hydrodynamic force [N] on the ten-cate sphere from one checkpointed flow, "
+             "against the net "
+             "weight (rho_s - rho_f) V g that it balances near terminal velocity. "
+             "'moving': the momentum balance "
+             "tested with psi(x - X(t)), one up to a cells from the surface, zero from b cells; "
+             "'lab': the same psi "
+             "at the step's mid position with the mesh's (u - u_old)/dt. "
+             "The time terms need one more step (--step).",
+             "", "| case | level | cells/d | t s | U m/s | net weight | dynamics | volume force "
+             "| band a-b cells | moving, no dI/dt "
+             "| moving | lab | -int rho psi du/dt moving / lab |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         w = r["net_weight"]
         for b in r["bands"]:
             lines.append(f"| {r['case']} | {r['level']} | {r['cells_per_diameter']:.0f} | {r['t']:.2f} | "
-                         f"{r['velocity']:.5f} | {w:.4e} | {pct(r['dynamics'], w)} | {pct(r['volume'], w)} | {b['a_cells']:.2f}-{b['b_cells']:.2f} | "
+                         f"{r['velocity']:.5f} | {w:.4e} | {pct(r['dynamics'], w)} | {pct(r['volume'], w)} | "
+                         f"{b['a_cells']:.2f}-{b['b_cells']:.2f} | "
                          f"{pct(b['moving_without_dIdt'], w)} | "
                          + (f"{pct(b['moving_force'], w)} | {pct(b['lab_force'], w)} | "
-                            f"{b['dudt_moving']:.3e} / {b['dudt_lab']:.3e} |" if "lab_force" in b else "- | - | - |"))
+                            f"{b['dudt_moving']:.3e} / {b['dudt_lab']:.3e} |"
+                            if "lab_force" in b else "- | - | - |"))
     (RESULTS / "force_estimators.md").write_text("\n".join(lines) + "\n")
 
 

@@ -26,7 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from fbmflow.coupling import hydrodynamic_forces, mirror_images, node_owner, rigid_body_constraints, sharp_boundary
+from fbmflow.coupling import (
+    hydrodynamic_forces,
+    mirror_images,
+    node_owner,
+    rigid_body_constraints,
+    sharp_boundary,
+)
 from fbmflow.flow import NavierStokesProblem, NoSlip, Slip
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.particles import Ball
@@ -110,26 +116,32 @@ def main():
         for c in args.cells:
             drag, n_dofs, wall, solver = drag_samples(dim, c, args.shifts, args.graded, args.boundary)
             mean = float(drag.mean())
-            row = dict(dim=dim, cells_per_diameter=c, n_dofs=n_dofs, shifts=args.shifts, wall_s=wall, linear_solver=solver,
-                       mean_drag=mean, rms_over_mean=float(drag.std() / mean),
+            row = dict(dim=dim, cells_per_diameter=c, n_dofs=n_dofs, shifts=args.shifts, wall_s=wall,
+                       linear_solver=solver, mean_drag=mean, rms_over_mean=float(drag.std() / mean),
                        range_over_mean=float(np.ptp(drag) / mean), drag=drag.tolist())
             rows.append(row)
             print(f"{dim}D {c} cells/d: {n_dofs} unknowns, {wall:.1f} s, drag {mean:.4f}, "
-                  f"rms/mean {100 * row['rms_over_mean']:.3f} %, range/mean {100 * row['range_over_mean']:.3f} %",
+                  f"rms/mean {100 * row['rms_over_mean']:.3f} %, "
+                  f"range/mean {100 * row['range_over_mean']:.3f} %",
                   flush=True)
     RESULTS.mkdir(exist_ok=True)
-    tag = "".join(str(d) for d in args.dims) + ("d_graded" if args.graded else "d") + ("_sharp" if args.boundary == "sharp" else "")
+    tag = ("".join(str(d) for d in args.dims) + ("d_graded" if args.graded else "d")
+           + ("_sharp" if args.boundary == "sharp" else ""))
     (RESULTS / f"force_noise_{tag}.json").write_text(json.dumps(rows, indent=1))
     lines = ["# Force noise of a dragged particle (benchmarks/bench_force_noise.py)", "",
              f"Stokes flow, d = 1, U = 1, mu = 1, box {2 * HALF[2]:g} d (2D) / {2 * HALF[3]:g} d (3D) wide, "
              f"{args.shifts} positions across one cell"
-             + (", mesh uniform within two cells of the particle and graded (1.3 per cell) beyond. " if args.graded
-                else ", uniform mesh. ")
-             + f"{args.boundary.capitalize()} fictitious boundary. Linear solver: " + " / ".join(sorted({r["linear_solver"] for r in rows})) + ". "
-             "Target: rms/mean below 1 % at 12 cells/d (the established FEM-FBM code reports 3.8 % at 11).", "",
-             "| dim | cells/d | unknowns | wall s (all positions) | mean drag | rms / mean | (max - min) / mean |",
+             + (", mesh uniform within two cells of the particle and graded (1.3 per cell) beyond. "
+                if args.graded else ", uniform mesh. ")
+             + f"{args.boundary.capitalize()} fictitious boundary. Linear solver: "
+             + " / ".join(sorted({r["linear_solver"] for r in rows})) + ". "
+             "Target: rms/mean below 1 % at 12 cells/d "
+             "(the established FEM-FBM code reports 3.8 % at 11).", "",
+             "| dim | cells/d | unknowns | wall s (all positions) | mean drag | rms / mean "
+             "| (max - min) / mean |",
              "|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['dim']}D | {r['cells_per_diameter']} | {r['n_dofs']} | {r['wall_s']:.1f} | {r['mean_drag']:.4f} | "
+    lines += [f"| {r['dim']}D | {r['cells_per_diameter']} | {r['n_dofs']} | {r['wall_s']:.1f} | "
+              f"{r['mean_drag']:.4f} | "
               f"{100 * r['rms_over_mean']:.3f} % | {100 * r['range_over_mean']:.3f} % |" for r in rows]
     (RESULTS / f"force_noise_{tag}.md").write_text("\n".join(lines) + "\n")
 

@@ -83,7 +83,8 @@ def measure(dim: int, n: int, fbm: str, coarse: str, smoother: str, dt: float = 
     t1 = time.perf_counter()
     _, _, report = solve(-F[:prob.space.n_u], -F[prob.space.n_u:])
     t2 = time.perf_counter()
-    return dict(dim=dim, box="closed" if closed else "open", cells=n, unknowns=prob.n_dofs, levels=1 + len(prob.coarse), fbm=fbm, coarse=coarse,
+    return dict(dim=dim, box="closed" if closed else "open", cells=n, unknowns=prob.n_dofs,
+                levels=1 + len(prob.coarse), fbm=fbm, coarse=coarse,
                 smoother=smoother, iterations=report.iterations,
                 reduction=report.residuals[-1] / report.residuals[0], setup_s=t1 - t0, solve_s=t2 - t1)
 
@@ -106,15 +107,16 @@ def main():
             rows.append(row)
     stem = RESULTS / (f"multigrid_fbm_{args.dim}d" + ("_closed" if closed else ""))
     stem.with_suffix(".json").write_text(json.dumps(rows, indent=1))
-    lines = [f"# Multigrid with a moving ball, {args.dim}D, {args.box} box (benchmarks/bench_multigrid_fbm.py)", "",
+    lines = [f"# Multigrid with a moving ball, {args.dim}D, {args.box} box "
+             "(benchmarks/bench_multigrid_fbm.py)", "",
              "FGMRES iterations (one V(2,2) cycle each) to 1e-8; 100 = not converged. Times in seconds, "
              "measured one after the other in one process (JIT compilation excluded).", "",
              "| cells | unknowns | levels | boundary | coarse levels | smoother | iterations | reduction "
              "| set-up s | solve s |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['cells']}^{r['dim']} | {r['unknowns']} | {r['levels']} | {r['fbm']} | {r['coarse']} | "
-                     f"{r['smoother']} | {r['iterations']} | {r['reduction']:.1e} | {r['setup_s']:.2f} | "
-                     f"{r['solve_s']:.2f} |")
+        lines.append(f"| {r['cells']}^{r['dim']} | {r['unknowns']} | {r['levels']} | {r['fbm']} | "
+                     f"{r['coarse']} | {r['smoother']} | {r['iterations']} | {r['reduction']:.1e} | "
+                     f"{r['setup_s']:.2f} | {r['solve_s']:.2f} |")
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
 
 

@@ -105,9 +105,10 @@ def run_case(case: str, solver: str) -> dict:
     cycles = sum(r.iterations for r in reports)
     return dict(case=case, scene=scene_name, level=level, overrides=overrides, solver=solver,
                 description=problem.linear_solver_description, unknowns=problem.n_dofs,
-                newton=sum(newton), solves=len(reports), cycles_per_solve=cycles / len(reports) if solver ==
-                "multigrid" else None, matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s /
-                len(reports), total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
+                newton=sum(newton), solves=len(reports),
+                cycles_per_solve=cycles / len(reports) if solver == "multigrid" else None,
+                matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s / len(reports),
+                total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
                 first_step_s=step_times[0] if step_times else None,
                 peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
 
@@ -119,18 +120,21 @@ def table(rows: list[dict]) -> str:
              "the first, which includes the set-up). Cycles: FGMRES iterations, one multigrid cycle each. "
              "Matvec-equivalents: linear time per solve over one product with the fine system.", "",
              "Busy: other processes running a pure-Python loop beside the case.", "",
-             "| case | scene | level | unknowns | solver | busy | Newton | solves | cycles / solve | matvec-eq / solve "
+             "| case | scene | level | unknowns | solver | busy | Newton | solves | cycles / solve "
+             "| matvec-eq / solve "
              "| s / solve | s / step | total s | peak GB |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "skipped" in r:
-            lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | {r.get('busy', 0)} | "
+            lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | "
+                         f"{r.get('busy', 0)} | "
                          f"not run: {r['skipped']} | | | | | | | |")
             continue
         cyc = f"{r['cycles_per_solve']:.1f}" if r["cycles_per_solve"] is not None else ""
         step = f"{r['s_per_step']:.1f}" if r["s_per_step"] else ""
         lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | {r['unknowns']} | {r['description']} | "
-                     f"{r.get('busy', 0)} | {r['newton']} | {r['solves']} | {cyc} | {r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
+                     f"{r.get('busy', 0)} | {r['newton']} | {r['solves']} | {cyc} | "
+                     f"{r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
                      f"{step} | {r['total_s']:.1f} | {r['peak_gb']:.1f} |")
     return "\n".join(lines) + "\n"
 
@@ -157,7 +161,8 @@ def main():
                                                    else "PARDISO not installed")
             key = case, solver, args.busy
             if reason:
-                rows[key] = dict(case=case, scene=scene, level=level, solver=solver, busy=args.busy, skipped=reason)
+                rows[key] = dict(case=case, scene=scene, level=level, solver=solver, busy=args.busy,
+                                 skipped=reason)
                 continue
             busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
             try:
@@ -172,7 +177,8 @@ def main():
             else:
                 rows[key] = dict(json.loads(proc.stdout.strip().splitlines()[-1]), busy=args.busy)
             print(rows[key], flush=True)
-    ordered = [rows[k] for k in sorted(rows, key=lambda k: (list(CASES).index(k[0]), k[2], SOLVERS.index(k[1])))]
+    ordered = [rows[k] for k in sorted(rows, key=lambda k: (list(CASES).index(k[0]), k[2],
+                                                           SOLVERS.index(k[1])))]
     path.write_text(json.dumps(ordered, indent=1))
     (RESULTS / "solver_table.md").write_text(table(ordered))
 

@@ -129,7 +129,8 @@ def run_case(dim, oseen, n, methods, results, profile=False):
             wall = time.perf_counter() - t
         r = b - system.apply(x)
         rel = float(np.linalg.norm(r) / np.linalg.norm(b))
-        row[name] = dict(time_s=wall, iterations=its, matvecs=wall / matvec, memory_gb=mem.gb, rel_residual=rel)
+        row[name] = dict(time_s=wall, iterations=its, matvecs=wall / matvec, memory_gb=mem.gb,
+                         rel_residual=rel)
         print(f"  {label:<26} {row['cells']:>6} {row['n_dofs']:>8} {name:<9} {wall:8.2f} s {its:4d} its "
               f"{wall / matvec:7.0f} matvecs {mem.gb:6.2f} GB  rel.res {rel:.1e}", flush=True)
 
@@ -168,7 +169,8 @@ def main():
     cavity_system(4, 2, True, MultigridSolver())  # JIT warm-up of assembly + Vanka kernels
     for dim in (2, 3):
         for oseen in (False, True):
-            mg = MultigridSolver(MultigridSettings(smoother="vanka-diagonal" if dim == 3 and not oseen else "vanka-full"))
+            mg = MultigridSolver(MultigridSettings(
+                smoother="vanka-diagonal" if dim == 3 and not oseen else "vanka-full"))
             _, system, f, g = cavity_system(4, dim, oseen, mg)
             mg.solve(system, f, g)
     plan = {  # (dim, oseen): [(n, methods)]
@@ -187,7 +189,8 @@ def main():
     lines = ["# Saddle-point solvers to 1e-8 relative residual (benchmarks/bench_solvers.py)", "",
              "Times in seconds and in units of one matvec with the same system matrix; memory is the "
              "growth of the resident set during the solve.", "",
-             "| case | cells | unknowns | levels | matvec s | multigrid s (its, matvecs, GB) | direct s (GB) | pyamg s (its, matvecs, GB) |",
+             "| case | cells | unknowns | levels | matvec s | multigrid s (its, matvecs, GB) | direct s (GB) "
+             "| pyamg s (its, matvecs, GB) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in results:
         def cell(name, full=True):

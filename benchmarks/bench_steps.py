@@ -63,7 +63,8 @@ def main() -> None:
 
     DirectSolver.factor = lambda self, system: factorisations.append(1) or factor(self, system)
     PardisoAnalysis.solve = lambda self, M, B: lu_solves.append(1) or lu_solve(self, M, B)
-    PardisoAnalysis._factorise = lambda self, phase, M: analyses.append(phase == 12) or factorise(self, phase, M)
+    PardisoAnalysis._factorise = (lambda self, phase, M:
+                                  analyses.append(phase == 12) or factorise(self, phase, M))
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("checkpoint.h5", "run.h5"):
             shutil.copy(args.run_dir / name, Path(tmp) / name)

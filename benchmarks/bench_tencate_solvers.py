@@ -36,8 +36,9 @@ def one(level: int, solver: str, steps: int) -> dict:
     for _ in range(steps):
         t0 = time.perf_counter()
         rep = sim.step(setup.dt)
-        rows.append(dict(wall_s=time.perf_counter() - t0, newton=rep.newton_iterations, coupling=rep.flow_solves,
-                         solves=rep.linear.solves, iterations=rep.linear.iterations, sweeps=rep.linear.sweeps,
+        rows.append(dict(wall_s=time.perf_counter() - t0, newton=rep.newton_iterations,
+                         coupling=rep.flow_solves, solves=rep.linear.solves,
+                         iterations=rep.linear.iterations, sweeps=rep.linear.sweeps,
                          linear_s=rep.linear.time_s))
     u = sim.flow.split(sim.x)[0]
     return dict(level=level, solver=sim.flow.linear_solver_description, unknowns=sim.flow.n_dofs, steps=rows,
@@ -57,8 +58,8 @@ def main():
     runs = []
     for level in args.level:
         for solver in ("direct", "multigrid"):
-            out = subprocess.run([sys.executable, __file__, "--steps", str(args.steps), "--one", str(level), solver],
-                                 check=True, capture_output=True, text=True).stdout
+            out = subprocess.run([sys.executable, __file__, "--steps", str(args.steps), "--one", str(level),
+                                  solver], check=True, capture_output=True, text=True).stdout
             runs.append(json.loads(out.strip().splitlines()[-1]))
             print(runs[-1], flush=True)
     (RESULTS / "tencate_solvers.json").write_text(json.dumps(runs, indent=1))
@@ -69,14 +70,17 @@ def main():
              "precision on the Picard hierarchy). Each solver in its own process, one after the other; step "
              "1 includes the set-up (and JIT compilation not yet cached). Iterations: FGMRES steps, one "
              "cycle each.", "",
-             "| level | unknowns | solver | step | s | Newton | coupling | solves | iterations | sweeps | linear s "
-             "| peak GB | u_max at the end | rel. to direct |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| level | unknowns | solver | step | s | Newton | coupling | solves | iterations | sweeps "
+             "| linear s "
+             "| peak GB | u_max at the end | rel. to direct |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
         ref = next(q for q in runs if q["level"] == r["level"])["u_max"]
         for k, s in enumerate(r["steps"]):
             last = k == len(r["steps"]) - 1
             lines.append(f"| {r['level']} | {r['unknowns']} | {r['solver']} | {k + 1} | {s['wall_s']:.1f} | "
-                         f"{s['newton']} | {s['coupling']} | {s['solves']} | {s['iterations']} | {s['sweeps']} | "
+                         f"{s['newton']} | {s['coupling']} | {s['solves']} | {s['iterations']} | "
+                         f"{s['sweeps']} | "
                          f"{s['linear_s']:.1f} | {r['peak_rss_gb']:.1f} | "
                          + (f"{r['u_max']:.8e} | {abs(r['u_max'] - ref) / ref:.1e} |" if last else " | |"))
     (RESULTS / "tencate_solvers.md").write_text("\n".join(lines) + "\n")

@@ -34,8 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fbmflow.coupling import (FixedObstacles, SurfaceForces, TestFunctionForces, hydrodynamic_forces, mirror_images,
-                              node_owner)
+from fbmflow.coupling import (
+    FixedObstacles,
+    SurfaceForces,
+    TestFunctionForces,
+    hydrodynamic_forces,
+    mirror_images,
+    node_owner,
+)
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, Slip
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.particles import Ball
@@ -51,7 +57,9 @@ def mesh(cells: int) -> StructuredMesh:
     """Quarter channel [0, 50 mm]^2 x [0, 18 d], sphere centre on the axis x = y = 0 at z = 8 d."""
     h = D / cells
     side = graded_axis(0.0, HALF_WIDTH, (0.0, D), h)
-    return StructuredMesh.rectilinear([side, side.copy(), graded_axis(0.0, UPSTREAM + WAKE, (UPSTREAM - D, UPSTREAM + 2 * D), h)])
+    return StructuredMesh.rectilinear([side, side.copy(),
+                                       graded_axis(0.0, UPSTREAM + WAKE,
+                                                   (UPSTREAM - D, UPSTREAM + 2 * D), h)])
 
 
 class SteadyDrag:
@@ -119,7 +127,8 @@ def _power(first, second, estimator: str) -> float:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", default="E4", choices=tuple(CASES))
-    ap.add_argument("--cells", type=int, nargs="+", default=[4, 6, 8], help="cells per diameter near the sphere")
+    ap.add_argument("--cells", type=int, nargs="+", default=[4, 6, 8],
+                    help="cells per diameter near the sphere")
     args = ap.parse_args()
     rho, mu = CASES[args.case]
     weight = (RHO_S - rho) * np.pi * D**3 / 6 * G
@@ -139,22 +148,30 @@ def main():
                          history=[dict(U=h[0], newton=h[2], **h[1]) for h in history]))
         r = rows[-1]
         print("  " + ", ".join(f"U* {k} {v:.5f} m/s ({100 * r['error'][k]:+.2f} %)" for k, v in U.items())
-              + f" vs u_max {u_exp}; {r['solves']} solves, {r['n_dofs']} unknowns, {r['wall_s']:.0f} s", flush=True)
+              + f" vs u_max {u_exp}; {r['solves']} solves, {r['n_dofs']} unknowns, {r['wall_s']:.0f} s",
+              flush=True)
     RESULTS.mkdir(exist_ok=True)
     stem = RESULTS / f"terminal_velocity_{args.case}"
     stem.with_suffix(".json").write_text(json.dumps(rows, indent=1))
-    lines = [f"# Steady terminal velocity, ten Cate {args.case}, sharp boundary (benchmarks/bench_terminal_velocity.py)", "",
+    lines = [f"# Steady terminal velocity, ten Cate {args.case}, sharp boundary "
+             "(benchmarks/bench_terminal_velocity.py)", "",
              f"Sphere d = {D} m, rho_s = {RHO_S}, fluid (rho, mu) = ({rho}, {mu}), in the box's 100 x 100 mm "
              "cross-section (quarter, two mirror planes), sphere frame: inflow and side walls at U, "
-             f"{UPSTREAM / D:.0f} d of inflow, {WAKE / D:.0f} d of wake. U*: the speed whose steady drag balances the "
-             f"net weight {weight:.5e} N, with the cut-cell volume force (secant to |F/W - 1| < 2e-4) and with the "
-             "test-function and surface forces (power law through the two solves nearest to each); against ten Cate's transient "
-             f"peak u_max = {u_exp} m/s (Table II), which lies a little below a steady terminal velocity. Direct "
+             f"{UPSTREAM / D:.0f} d of inflow, {WAKE / D:.0f} d of wake. "
+             "U*: the speed whose steady drag balances the "
+             f"net weight {weight:.5e} N, with the cut-cell volume force (secant to |F/W - 1| < 2e-4) "
+             "and with the "
+             "test-function and surface forces (power law through the two solves nearest to each); "
+             "against ten Cate's transient "
+             f"peak u_max = {u_exp} m/s (Table II), which lies a little below a steady terminal velocity. "
+             "Direct "
              "solver (PARDISO); wall time per level without the JIT warm-up, with other jobs beside it.", "",
-             "| cells/d | unknowns | U* volume force m/s | vs u_max | U* test function m/s | vs u_max | U* surface force m/s "
+             "| cells/d | unknowns | U* volume force m/s | vs u_max | U* test function m/s | vs u_max "
+             "| U* surface force m/s "
              "| vs u_max | steady solves | wall s |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['cells_per_diameter']} | {r['n_dofs']} | {r['U']['volume']:.5f} | {100 * r['error']['volume']:+.2f} % | "
+    lines += [f"| {r['cells_per_diameter']} | {r['n_dofs']} | {r['U']['volume']:.5f} | "
+              f"{100 * r['error']['volume']:+.2f} % | "
               f"{r['U']['test-function']:.5f} | {100 * r['error']['test-function']:+.2f} % | "
               f"{r['U']['surface']:.5f} | {100 * r['error']['surface']:+.2f} % | {r['solves']} | "
               f"{r['wall_s']:.0f} |" for r in rows]
