@@ -384,8 +384,17 @@ class ContactParams(Section):
                               "fluid nodes between surfaces", nonnegative=True)
     lubrication: bool = param(False, "lubrication correction for gaps below lubrication_range_cells")
     lubrication_range_cells: float = param(2.0, "gap in mesh cells below which the film force acts "
-                                           "(the flow resolves larger gaps); it saturates at 1 % of it",
-                                           positive=True)
+                                           "(the flow resolves larger gaps)", positive=True)
+    lubrication_min_gap_cells: float = param(0.02, "gap in mesh cells at which the film force stops "
+                                             "growing (surface roughness; below the range)", positive=True)
+    lubrication_resolved_cells: float = param(0.4, "gap in mesh cells down to which the flow carries the "
+                                              "film force (fitted to Brenner's exact drag)", nonnegative=True)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.lubrication_min_gap_cells < self.lubrication_range_cells:
+            raise ParamError(f"contact.lubrication_min_gap_cells = {self.lubrication_min_gap_cells} must be "
+                             f"below contact.lubrication_range_cells = {self.lubrication_range_cells}")
 
     def make(self, mesh, viscosity: float, walls=None):
         """The :class:`~fbmflow.contact.ContactSet` with the walls of ``mesh`` (all faces, or the
@@ -399,7 +408,7 @@ class ContactParams(Section):
         lubrication = None
         if self.lubrication:
             lubrication = Lubrication(viscosity, self.lubrication_range_cells * h,
-                                      0.01 * self.lubrication_range_cells * h)
+                                      self.lubrication_min_gap_cells * h, self.lubrication_resolved_cells * h)
         return ContactSet(Planes.box(mesh.lower, mesh.upper, walls), restitution=self.restitution,
                           friction=self.friction, iterations=self.iterations, broadphase=self.broadphase,
                           skin=self.skin_cells * h, lubrication=lubrication)

@@ -177,8 +177,14 @@ def test_lubrication_slows_an_approach_as_the_film_law_says(dim):
 
     expected = u0 - quad(c, gap, 0.4, limit=200)[0] / m_red
     assert expected > 0.0 and u == pytest.approx(expected, rel=0.01)
-    if dim == 3:  # closed form of the same integral
-        closed = u0 - 6 * np.pi * mu * Rs**2 * (np.log(0.4 / gap) - (0.4 - gap) / delta) / m_red
+    if dim == 3:  # closed form of the same integral: c = 6 pi mu [Rs^2 (1/g - 1/delta) + l ln(delta/g)]
+        arm = 9 * R / 40  # Jeffrey & Onishi's log term of equal spheres
+
+        def log_part(g):
+            return g * np.log(delta / g) + g
+
+        closed = u0 - 6 * np.pi * mu * (Rs**2 * (np.log(0.4 / gap) - (0.4 - gap) / delta)
+                                        + arm * (log_part(0.4) - log_part(gap))) / m_red
         assert u == pytest.approx(closed, rel=0.01)
 
 

@@ -48,7 +48,36 @@ def test_sedimentation_3d_runs_with_contact():
 
 def test_too_many_particles_are_refused_before_the_first_step():
     with pytest.raises(ParamError, match="do not fit"):
-        _run("sedimentation-2d", 0, particles={"count": 10000})
+        _run("sedimentation-2d", 0, particles={"count": 10000}, domain={"grow": False})
+
+
+@pytest.mark.parametrize("name, count, scale", [("sedimentation-2d", 100, 1.0), ("sedimentation-2d", 101, 1.5),
+                                                 ("sedimentation-2d", 2000, 4.5),
+                                                 ("sedimentation-3d", 1000, 3.5)])
+def test_the_box_grows_until_the_particles_fit(name, count, scale):
+    """The scene's box where its lattice holds the count; else the smallest box of its shape and
+    cell size, in steps of half its size, whose lattice does (the volume fraction stays)."""
+    scene = get_scene(name)
+    params = from_dict(scene.Params, {"particles": {"count": count}})
+    assert scene.scale(params) == scale
+    mesh = scene.mesh(1, scene.scale(params))
+    assert np.allclose(mesh.spacing, scene.mesh(1).spacing)
+    assert np.allclose(mesh.upper, scale * np.array(scene.box))
+    X = scene.initial_positions(params)
+    assert X.shape == (count, scene.dim) and np.all((X > 0) & (X < mesh.upper))
+
+
+def test_a_dense_lattice_keeps_its_gaps():
+    """spacing 1.2 diameters: neighbours at least 0.7 x 0.2 d apart, the lowest row half a
+    spacing above the floor."""
+    scene = get_scene("sedimentation-2d")
+    params = from_dict(scene.Params, {"particles": {"count": 100, "spacing": 1.2, "bottom": 0.0, "top": 0.2}})
+    X, d = scene.initial_positions(params), 0.1
+    dist = np.linalg.norm(X[:, None] - X[None], axis=-1) + np.eye(len(X)) * 1e9
+    assert dist.min() >= d * (1 + 0.7 * 0.2) - 1e-12
+    assert X[:, 1].min() >= 0.6 * d - 0.03 * d - 1e-12
+    with pytest.raises(ParamError, match="particles.bottom"):
+        from_dict(scene.Params, {"particles": {"bottom": 0.5, "top": 0.4}})
 
 
 def test_a_heavy_disk_lands_on_wall_contact_without_penetration():
@@ -62,3 +91,29 @@ def test_a_heavy_disk_lands_on_wall_contact_without_penetration():
     assert np.all(np.isfinite(v)) and v.min() < -60.0  # a hard impact
     assert y.min() >= r + cell - 0.01 * r  # the skin of one cell, no penetration
     assert abs(v[-1]) < 1e-6 and abs(y[-1] - (r + cell)) < 0.01 * r  # at rest on the contact
+
+
+@pytest.mark.parametrize("density", [1.01, 10.0])
+def test_extreme_density_ratios_settle_without_blow_up(density):
+    """Almost neutrally buoyant disks (added mass dominates) and disks ten times the fluid's
+    density: finite, downwards, no overlap; the heavy ones faster by far."""
+    q = _run("sedimentation-2d", 1, particles={"count": 20, "density": density}, time={"t_end": 0.05})
+    v = np.array(q["mean_velocity"])
+    assert np.all(np.isfinite(v)) and v[-1] < 0.0
+    assert q["max_overlap"] == 0.0
+    # the first steps of free fall, v = -(1 - 1/density) g t at most (added mass slows it)
+    assert abs(v[-1]) <= (1 - 1 / density) * 980.0 * 0.05
+    if density > 2:
+        assert abs(v[-1]) > 0.2 * (1 - 1 / density) * 980.0 * 0.05
+
+
+def test_a_dense_packing_rests_on_the_bottom():
+    """Disks on a lattice of 1.2 diameters from the floor settle onto it and stay: no overlap at
+    any step, no centre below a radius, and the packing comes to rest."""
+    q = _run("sedimentation-2d", 1, particles={"count": 30, "spacing": 1.2, "bottom": 0.0, "top": 0.2},
+             time={"t_end": 0.1})
+    r = 0.05
+    assert max(q["overlap"]) == 0.0
+    assert q["min_height"] >= r
+    v = np.abs(np.array(q["mean_velocity"]))
+    assert np.all(np.isfinite(v)) and v[-1] < 0.1 * v.max()

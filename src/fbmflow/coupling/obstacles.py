@@ -1,4 +1,4 @@
-"""Bodies held still in a flow (e.g. the DFG cylinder) as fictitious boundaries."""
+"""Bodies held in place in a flow (e.g. the DFG cylinder) as fictitious boundaries."""
 from __future__ import annotations
 
 import numpy as np
@@ -11,19 +11,22 @@ from .sharp import sharp_boundary, supports_sharp_boundary
 
 
 class FixedObstacles:
-    """The ``extra_constraints`` of a :class:`~fbmflow.flow.NavierStokesProblem` for bodies at
-    rest: zero velocity on their nodes, and with ``boundary = "sharp"`` the sharp boundary's
-    changes (:mod:`fbmflow.coupling.sharp`) on the finest mesh asked for (coarser multigrid
-    levels get the nodal constraints).
+    """The ``extra_constraints`` of a :class:`~fbmflow.flow.NavierStokesProblem` for bodies held
+    at their positions: the rigid velocity ``U_i`` (zero: at rest) on their nodes, and with
+    ``boundary = "sharp"`` the sharp boundary's changes (:mod:`fbmflow.coupling.sharp`) on the
+    finest mesh asked for (coarser multigrid levels get the nodal constraints). A non-zero
+    ``U_i`` gives the quasi-steady flow of bodies passing through these positions (e.g. the
+    Stokes drag of a sphere approaching a wall).
 
     Parameters
     ----------
     shapes : list of shapes, one per body
     centres : (n, dim) float64, the bodies' centres [m]
     boundary : ``"nodes"`` or ``"sharp"``
+    velocities : (n, dim) float64 or None, the bodies' translational velocities [m/s] (no rotation)
     """
 
-    def __init__(self, shapes: list, centres, boundary: str = "nodes"):
+    def __init__(self, shapes: list, centres, boundary: str = "nodes", velocities=None):
         if boundary not in ("nodes", "sharp"):
             raise ValueError(f"unknown fictitious boundary {boundary!r}; choose nodes or sharp")
         if boundary == "sharp" and not supports_sharp_boundary(shapes):
@@ -32,13 +35,17 @@ class FixedObstacles:
         self.shapes = list(shapes)
         self.centres = np.atleast_2d(np.asarray(centres, dtype=float))
         self.boundary = boundary
+        n, dim = self.centres.shape
+        self.velocities = np.zeros((n, dim)) if velocities is None else np.array(velocities, dtype=float)
+        if self.velocities.shape != (n, dim):
+            raise ValueError(f"velocities must have shape {(n, dim)}, got {self.velocities.shape}")
         self._finest: tuple | None = None  # (DOF map, its FlowSpace, the sharp boundary there)
 
     def __call__(self, V: DofMap, t: float) -> DirichletConstraints:
         n, dim = len(self.shapes), V.mesh.dim
-        rest = (np.zeros((n, dim)), np.zeros(n) if dim == 2 else np.zeros((n, 3)))  # velocities U, omega
+        motion = (self.velocities, np.zeros(n) if dim == 2 else np.zeros((n, 3)))  # U, omega
         owner = node_owner(V, self.centres, self.shapes)
-        rigid = rigid_body_constraints(V, owner, self.centres, *rest)
+        rigid = rigid_body_constraints(V, owner, self.centres, *motion)
         if self.boundary == "nodes":
             return rigid
         if self._finest is None or V.n_dofs > self._finest[0].n_dofs:
@@ -47,4 +54,4 @@ class FixedObstacles:
                                                      self.centres, self.shapes))
         if V.n_dofs < self._finest[0].n_dofs:
             return rigid
-        return self._finest[2].constraints(rigid, *rest)
+        return self._finest[2].constraints(rigid, *motion)

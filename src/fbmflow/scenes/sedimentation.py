@@ -1,9 +1,10 @@
 """Many particles: sedimentation in a closed box (2D, 3D) and a fluidised bed (2D), CGS units.
 
 * ``sedimentation-2d``: ``n`` disks (100 by default, diameter 0.1 cm, rho_s = 2) released from
-  rest on a jittered lattice in the upper part of a closed 2 x 4 cm box of fluid (rho_f = 1,
-  mu = 0.1 g/(cm s)), g = 980 cm/s^2. Level ``L``: ``20 2^L x 40 2^L`` cells, ``2^L`` across a
-  diameter.
+  rest on a jittered lattice in the upper half of a closed 2 x 4 cm box of fluid (rho_f = 1,
+  mu = 0.1 g/(cm s)), g = 980 cm/s^2. ``particles.spacing``, ``bottom`` and ``top`` place the
+  lattice (a dense packing resting on the bottom: ``spacing = 1.2``, ``bottom = 0``). Level
+  ``L``: ``20 2^L x 40 2^L`` cells, ``2^L`` across a diameter.
 * ``sedimentation-3d``: ``n`` spheres (20, d = 0.2 cm, rho_s = 2) released on a lattice filling a
   closed 1 x 1 x 2 cm box. Level ``L``: ``4 2^L x 4 2^L x 8 2^L`` cells, ``0.8 2^L`` across a
   diameter (a 3D direct solve per flow solve: level 1, 33 000 unknowns, is what a laptop carries).
@@ -12,14 +13,20 @@
   (uniform) and leaves through the top (do-nothing); no-slip side walls. The bottom and top act
   as walls for the particles (a distributor plate and a sieve).
 
+A count that the lattice region does not hold grows the box (``domain.grow``, on by default):
+its shape and cell size stay, its size goes up in steps of half the scene's box until the
+particles fit, so the lattice's volume fraction stays (``sedimentation-2d`` with 2 000 disks: a
+9 x 18 cm box, 90 x 180 cells at level 0).
+
 Hard contact (restitution 0, sub-stepped) keeps the particles apart and inside the box. The
 coupling is implicit: the explicit one is unstable here (measured: at 2 cells per diameter the
 disks' rotation rates grow by about 3x per step from the first steps, with alternating sign).
 Quantities:
 ``max_overlap`` (largest overlap of two particles or of a particle with a wall over all steps,
-over the radius; 0 when none), ``min_height`` / ``max_height`` of the centres, time series ``t``
-and ``mean_velocity`` (mean vertical particle velocity, cm/s), ``final_positions``, and for the
-bed ``bed_height`` (mean centre height of the top tenth of the particles plus a radius, cm).
+over the radius; 0 when none; per step in ``overlap``), ``min_height`` / ``max_height`` of the
+centres, time series ``t`` and ``mean_velocity`` (mean vertical particle velocity, cm/s),
+``final_positions``, ``box`` (its upper corner, cm), and for the bed ``bed_height`` (mean centre
+height of the top tenth of the particles plus a radius, cm).
 """
 from __future__ import annotations
 
@@ -46,6 +53,25 @@ class ManyParticles(Section):
     diameter: float = param(0.1, "particle diameter", "cm", positive=True)
     density: float = param(2.0, "particle density", "g/cm^3", positive=True)
     seed: int = param(0, "seed of the random jitter of the initial lattice", minimum=0)
+    spacing: float = param(2.0, "spacing of the initial lattice, in diameters (1.2: a dense packing)",
+                           minimum=1.1)
+    bottom: float = param(0.5, "lowest height of the initial lattice, as a fraction of the box height",
+                          minimum=0.0, maximum=1.0)
+    top: float = param(1.0, "highest height of the initial lattice, as a fraction of the box height",
+                       minimum=0.0, maximum=1.0)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.bottom < self.top:
+            raise ParamError(f"particles.bottom = {self.bottom} must lie below particles.top = {self.top}")
+
+
+@dataclass(frozen=True)
+class ManyDomain(Section):
+    """The box."""
+
+    grow: bool = param(True, "grow the box (its shape and cell size kept, in steps of half its size) "
+                       "until the initial lattice holds particles.count; false: refuse such counts")
 
 
 @dataclass(frozen=True)
@@ -55,38 +81,52 @@ class BedInflow(Section):
     velocity: float = param(1.0, "uniform inflow velocity", "cm/s", positive=True)
 
 
-SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", count=20, diameter=0.2)
-BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5)
+SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", count=20, diameter=0.2,
+                         bottom=0.0)
+BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5, bottom=0.0,
+                      top=0.5)
 Sedimentation2DParams = particle_params("Sedimentation2DParams", "Parameters of ``sedimentation-2d``.",
-                                        fluid=CgsFluid, particles=ManyParticles, time=ManyTime,
+                                        fluid=CgsFluid, particles=ManyParticles, domain=ManyDomain, time=ManyTime,
                                         **CONTACT_SECTIONS)
 Sedimentation3DParams = particle_params("Sedimentation3DParams", "Parameters of ``sedimentation-3d``.",
-                                        fluid=CgsFluid, particles=SphereParticles, time=ManyTime,
+                                        fluid=CgsFluid, particles=SphereParticles, domain=ManyDomain,
+                                        time=ManyTime,
                                         **CONTACT_SECTIONS)
 FluidizedBedParams = particle_params("FluidizedBedParams", "Parameters of ``fluidized-bed-2d``.",
-                                     fluid=CgsFluid, particles=BedParticles, inflow=BedInflow, time=ManyTime,
+                                     fluid=CgsFluid, particles=BedParticles, domain=ManyDomain, inflow=BedInflow,
+                                     time=ManyTime,
                                      **CONTACT_SECTIONS)
 
 
-def lattice(count: int, d: float, lower: np.ndarray, upper: np.ndarray, seed: int) -> np.ndarray:
-    """``count`` centres (count, dim) on a lattice of spacing ``2 d`` filling ``[lower, upper]``
-    row by row from ``lower`` along the first axes, at least a diameter from its sides (half a
-    diameter of fluid to the walls), each jittered by up to ``0.15 d``; ParamError when they do
-    not fit."""
+def lattice(count: int, d: float, lower: np.ndarray, upper: np.ndarray, seed: int,
+            spacing: float = 2.0) -> np.ndarray:
+    """``count`` centres (count, dim) on a lattice of spacing ``spacing d`` filling
+    ``[lower, upper]`` row by row from ``lower`` along the first axes, at least ``spacing d / 2``
+    from its sides, each jittered by up to ``0.15 (spacing - 1) d`` (the gaps between neighbours
+    stay above ``0.7 (spacing - 1) d``); ParamError when they do not fit."""
     dim = lower.size
-    spacing = 2.0 * d
-    per_axis = np.floor((upper - lower - 2.0 * d) / spacing).astype(int) + 1
-    if np.any(per_axis < 1) or np.prod(per_axis) < count:
+    per_axis, margin = _lattice_rows(d, lower, upper, spacing)
+    spacing = spacing * d
+    if np.prod(per_axis) < count:
         raise ParamError(f"{count} particles of diameter {d} cm do not fit the region {lower.tolist()} - "
-                         f"{upper.tolist()} (room for {max(int(np.prod(np.maximum(per_axis, 0))), 0)}); "
-                         "reduce particles.count or particles.diameter")
+                         f"{upper.tolist()} (room for {int(np.prod(per_axis))}); reduce particles.count or "
+                         "particles.diameter, or set domain.grow = true")
     k = np.arange(count)
     idx = np.empty((count, dim), dtype=int)
     for a in range(dim):  # first axis fastest
         idx[:, a] = k % per_axis[a]
         k = k // per_axis[a]
     rng = np.random.default_rng(seed)
-    return lower + d + idx * spacing + rng.uniform(-0.15 * d, 0.15 * d, (count, dim))
+    jitter = 0.15 * (spacing - d)
+    return lower + margin + idx * spacing + rng.uniform(-jitter, jitter, (count, dim))
+
+
+def _lattice_rows(d: float, lower: np.ndarray, upper: np.ndarray, spacing: float) -> tuple[np.ndarray, float]:
+    """Particles per axis (dim,) of :func:`lattice` in ``[lower, upper]``, and the margin from its
+    sides to the first centres."""
+    margin = max(spacing / 2, 1.0) * d  # half a diameter of fluid to the sides at spacing 2
+    rows = np.floor((upper - lower - 2.0 * margin) / (spacing * d)).astype(int) + 1
+    return np.maximum(rows, 0), margin
 
 
 def max_overlap(p: Particles, lower, upper) -> float:
@@ -110,13 +150,31 @@ class _ManyParticles(ParticleScene):
     dim = 2
     box = (2.0, 4.0)
     cells_level0 = (20, 40)
-    fill = (0.5, 1.0)  # vertical range of the initial lattice, as fractions of the height
     reports_bed_height = False
     default_level = 2
     max_level = 5
 
-    def mesh(self, level: int) -> StructuredMesh:
-        return StructuredMesh.box(tuple(n * 2**level for n in self.cells_level0), upper=self.box)
+    def scale(self, params) -> float:
+        """The box's size over the scene's ``box``: 1, or with ``domain.grow`` the smallest of
+        1.5, 2, 2.5, ... whose lattice region holds ``particles.count``."""
+        scale = 1.0
+        while params.domain.grow and np.prod(_lattice_rows(params.particles.diameter,
+                                                           *self._region(params, scale),
+                                                           params.particles.spacing)[0]) < params.particles.count:
+            scale += 0.5
+        return scale
+
+    def _region(self, params, scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """Corners of the initial lattice's region in the box of size ``scale`` [cm]."""
+        upper = scale * np.array(self.box, dtype=float)
+        lower = np.zeros(self.dim)
+        lower[-1], upper[-1] = params.particles.bottom * upper[-1], params.particles.top * upper[-1]
+        return lower, upper
+
+    def mesh(self, level: int, scale: float = 1.0) -> StructuredMesh:
+        """The box of size ``scale`` (a multiple of 1/2) with the level's cells."""
+        cells = tuple(int(round(n * scale)) * 2**level for n in self.cells_level0)
+        return StructuredMesh.box(cells, upper=tuple(scale * b for b in self.box))
 
     def boundary(self, mesh, params) -> dict | None:
         """The flow's boundary conditions (None: no-slip walls all round)."""
@@ -124,16 +182,13 @@ class _ManyParticles(ParticleScene):
 
     def initial_positions(self, params) -> np.ndarray:
         pp = params.particles
-        upper = np.array(self.box, dtype=float)
-        lower = np.zeros(self.dim)
-        lower[-1], upper[-1] = self.fill[0] * self.box[-1], self.fill[1] * self.box[-1]
-        return lattice(pp.count, pp.diameter, lower, upper, pp.seed)
+        return lattice(pp.count, pp.diameter, *self._region(params, self.scale(params)), pp.seed, pp.spacing)
 
     def layout(self, params, level: int) -> Layout:
         pp = params.particles
         particles = Particles.at_rest([Ball(pp.diameter / 2, self.dim)] * pp.count, pp.density,
                                       self.initial_positions(params))
-        mesh = self.mesh(level)
+        mesh = self.mesh(level, self.scale(params))
         return Layout(mesh, particles, params.fluid, self.boundary(mesh, params))
 
     def observe(self, params, sim) -> dict:
@@ -149,7 +204,8 @@ class _ManyParticles(ParticleScene):
         q = {"max_overlap": max(series["overlap"]), "min_height": min(series["min_height"]),
              "max_height": max(series["max_height"]),
              "cells_per_diameter": float(params.particles.diameter / sim.flow.mesh.spacing[0]),
-             "t": series["t"], "mean_velocity": series["mean_velocity"],
+             "box": [float(b) for b in sim.flow.mesh.upper],
+             "t": series["t"], "mean_velocity": series["mean_velocity"], "overlap": series["overlap"],
              "final_positions": sim.particles.position.tolist()}
         if self.reports_bed_height:
             q["bed_height"] = series["bed_height"]
@@ -179,8 +235,9 @@ class _ManyParticles(ParticleScene):
         d = summary["params"]["particles"]["diameter"]
         last = ax[-1]
         last.set_aspect("equal")
-        last.set_xlim(0, self.box[0])
-        last.set_ylim(0, self.box[-1])
+        box = q.get("box", self.box)
+        last.set_xlim(0, box[0])
+        last.set_ylim(0, box[-1])
         for x in X:
             last.add_patch(plt.Circle((x[0], x[-1]), d / 2, fc="C0", ec="k", lw=0.3))
         last.set_title(f"t = {q['t'][-1]:.3g} s" + (" (projected on x-z)" if X.shape[1] == 3 else ""))
@@ -203,14 +260,12 @@ class Sedimentation3D(_ManyParticles):
     cells_level0 = (4, 4, 8)
     default_level = 1
     max_level = 3
-    fill = (0.0, 1.0)
 
 
 class FluidizedBed2D(_ManyParticles):
     name = "fluidized-bed-2d"
     description = "60 disks fluidised by inflow through the bottom of a 2 x 4 cm channel"
     Params = FluidizedBedParams
-    fill = (0.0, 0.5)
     reports_bed_height = True
 
     def boundary(self, mesh, params) -> dict:

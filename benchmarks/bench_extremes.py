@@ -1,0 +1,94 @@
+"""Many particles at the extremes: density ratios near 1 and of 10, and a dense packing resting on
+the bottom (issue 29), in ``sedimentation-2d``.
+
+Run:  python benchmarks/bench_extremes.py [--cases ratio-1.01 ratio-10 packed] [--level 2]
+
+Cases (each the scene's defaults but for the keys named):
+
+* ``ratio-1.01``: ``particles.density = 1.01`` (the fluid's is 1): almost neutrally buoyant
+  disks, where an explicit coupling would be unstable (added mass); 0.2 s.
+* ``ratio-10``: ``particles.density = 10``: fast disks, hard landings; 0.2 s.
+* ``packed``: 100 disks on a lattice of spacing 1.2 diameters from the bottom
+  (``particles.spacing = 1.2``, ``bottom = 0``, ``top = 0.25``): a dense packing that settles onto
+  the floor and must rest there for 1 s.
+
+Per run: steps, wall time, whether it finished, the largest overlap (over the radius) in the
+first and in the second half of the run (overlap must not grow), the largest speed of the mean
+vertical velocity over the last tenth of the run, and the lowest and highest centre. A run that
+fails (NaN, Newton) is a row with its failure. Results: ``benchmarks/results/extremes.md`` and
+``.json``.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import h5py
+import numpy as np
+from fbmbench.common import RESULTS, RUNS, RunFailed, merge_row, provenance, run_scene, slug, warm_up, write_text
+
+SCENE = "sedimentation-2d"
+CASES = {
+    "ratio-1.01": {"particles.density": 1.01, "time.t_end": 0.2},
+    "ratio-10": {"particles.density": 10.0, "time.t_end": 0.2},
+    "packed": {"particles.spacing": 1.2, "particles.bottom": 0.0, "particles.top": 0.25, "time.t_end": 1.0},
+}
+
+
+def run(case: str, level: int) -> dict:
+    settings = CASES[case]
+    row = {"case": case, "level": level, "settings": settings, **provenance()}
+    try:
+        s = run_scene(SCENE, level, settings)
+    except RunFailed as error:  # what the run left on disk tells how far it came
+        with h5py.File(Path(RUNS / slug(SCENE, level, settings)) / "run.h5") as h:
+            t = h["t"][:]
+        return {**row, "failure": str(error), "t_reached": float(t[-1]), "steps": len(t) - 1}
+    q = s["quantities"]
+    t, overlap, v = (np.array(q[k]) for k in ("t", "overlap", "mean_velocity"))
+    half, tail = t >= t[-1] / 2, t >= 0.9 * t[-1]
+    return {**row, "failure": "", "t_reached": float(t[-1]), "steps": s["steps"], "wall_s": s["wall_s"],
+            "n_dofs": s["n_dofs"], "overlap_first_half": float(overlap[~half].max()),
+            "overlap_second_half": float(overlap[half].max()), "late_mean_speed": float(np.abs(v[tail]).max()),
+            "min_height": q["min_height"], "max_height": q["max_height"],
+            "cells_per_diameter": q["cells_per_diameter"]}
+
+
+def write(rows: list[dict]) -> None:
+    lines = ["# Many particles at the extremes (extremes)", "",
+             "`sedimentation-2d` (100 disks, d = 0.1 cm, fluid density 1, mu = 0.1 g/(cm s), implicit coupling, "
+             "hard contact with a skin of one cell), the keys in 'settings' changed. Overlap: the largest "
+             "overlap of two disks or a disk and a wall over the radius (0: none) in the first and the second "
+             "half of the run. 'late speed': the largest |mean vertical velocity| over the last tenth of the "
+             "run. Reproduce: `python benchmarks/bench_extremes.py --cases CASE --level L`.", "",
+             "| case | level | settings | unknowns | steps | t reached s | wall s | overlap 1st half | "
+             "overlap 2nd half | late speed cm/s | lowest / highest centre cm | failure | measured |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r["case"], r["level"])):
+        settings = ", ".join(f"{k}={v}" for k, v in r["settings"].items())
+        if r["failure"]:
+            lines.append(f"| {r['case']} | {r['level']} | {settings} | | {r['steps']} | {r['t_reached']:.3f} | | | "
+                         f"| | | {r['failure']} | {r['date']} {r['commit']} |")
+            continue
+        lines.append(
+            f"| {r['case']} | {r['level']} | {settings} | {r['n_dofs']} | {r['steps']} | {r['t_reached']:.3f} | "
+            f"{r['wall_s']:.0f} | {r['overlap_first_half']:.2g} | {r['overlap_second_half']:.2g} | "
+            f"{r['late_mean_speed']:.3g} | {r['min_height']:.3f} / {r['max_height']:.3f} | – | "
+            f"{r['date']} {r['commit']} |")
+    write_text(RESULTS / "extremes.md", "\n".join(lines) + "\n")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=tuple(CASES))
+    ap.add_argument("--level", type=int, default=2, help="mesh level (2: the scene's default, 4 cells/d)")
+    args = ap.parse_args(argv)
+    warm_up(SCENE, **{"particles.count": 4, "time.t_end": 0.01})
+    for case in args.cases:
+        row = run(case, args.level)
+        print({k: v for k, v in row.items() if k != "settings"}, flush=True)
+        write(merge_row("extremes", row, lambda a, b: (a["case"], a["level"]) == (b["case"], b["level"])))
+
+
+if __name__ == "__main__":
+    main()
