@@ -169,7 +169,8 @@ class Simulation:
         self.scheme = time.scheme
         self._pressure_lag = pressure_lag(time.scheme)
         linear = choose_linear_solver(solver, mesh)
-        check_memory(FlowSpace.estimate_dofs(mesh), mesh.dim, linear)
+        check_memory(FlowSpace.estimate_dofs(mesh), mesh.dim, linear,
+                     self.coupling.stored_responses(particles, self.symmetry))
         self._contact_report = None
         self._estimator_of = None  # the force rule for the current particle state
         self._constraint_state: Particles | None = None
@@ -624,6 +625,11 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (6_500, 1
                 (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (6_500, 280_000, 0.0)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
+#: peak memory per unknown of each response the implicit coupling keeps [bytes]: about ten float64
+#: fields (liftings, responses and their forces' work arrays); measured, sedimentation-2d level 2
+#: (141 762 unknowns), 100 disks: 5.17 GB implicit against 1.70 GB explicit
+#: (benchmarks/results/particle_scaling.md), 3.47 GB over 300 responses
+RESPONSE_BYTES = 80
 
 
 def estimate_memory(n_unknowns: int, dim: int, linear_solver) -> tuple[float, str]:
@@ -658,16 +664,26 @@ def available_memory(meminfo="/proc/meminfo") -> float | None:
     return None
 
 
-def check_memory(n_unknowns: int, dim: int, linear_solver) -> float:
-    """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` exceeds the
-    available memory, warn when it exceeds half of it; returns the estimate [bytes]. Called
-    before the first solve, so that a run too large for the machine stops with the figure and a
-    remedy instead of a MemoryError, or the kernel's out-of-memory killer, in the factorisation."""
+def check_memory(n_unknowns: int, dim: int, linear_solver, responses: int = 0) -> float:
+    """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` plus the
+    ``responses`` flow fields an implicit coupling keeps (:data:`RESPONSE_BYTES` per unknown
+    each) exceeds the available memory, warn when it exceeds half of it; returns the estimate
+    [bytes]. Called before the first solve, so that a run too large for the machine stops with
+    the figure and a remedy instead of a MemoryError, or the kernel's out-of-memory killer, in the
+    factorisation or the responses."""
     need, words = estimate_memory(n_unknowns, dim, linear_solver)
     have = available_memory()
     if have is None:
         return need
     figure = f"{words} needs about {need / 1e9:.1f} GB for {n_unknowns} unknowns ({dim}D)"
+    stored = RESPONSE_BYTES * n_unknowns * responses
+    if stored and need <= have < need + stored:
+        raise InsufficientMemory(
+            f"the implicit coupling's responses to {responses} rigid-body velocity components need about "
+            f"{stored / 1e9:.1f} GB for {n_unknowns} unknowns, and {words} {need / 1e9:.1f} GB: more than the "
+            f"{have / 1e9:.1f} GB available; use fewer particles, a coarser mesh (a lower --level) or "
+            "coupling.scheme = explicit (which may be unstable for light particles)")
+    need += stored
     if need > have:
         remedy = "a coarser mesh (a lower --level)"
         if words != "multigrid":

@@ -61,6 +61,11 @@ class ExplicitCoupling:
         x, reports, force, torque = sim.flow_and_forces(dt)
         return CoupledFlow(x, reports, force, torque)
 
+    @staticmethod
+    def stored_responses(particles, symmetry) -> int:
+        """Flow fields the scheme keeps per step besides the flow: none."""
+        return 0
+
 
 class ImplicitCoupling:
     """Newton iteration on the particles' new generalised velocities ``v`` (see :meth:`advance`).
@@ -82,6 +87,12 @@ class ImplicitCoupling:
         self.tol = float(params.tol)
         self.max_subiterations = int(params.max_subiterations)
         self.first_rtol = float(params.first_rtol) if params.first_rtol > newton_rtol else None
+
+    @staticmethod
+    def stored_responses(particles, symmetry) -> int:
+        """Flow fields the scheme keeps per step besides the flow: one response per iterated
+        rigid-body component (3 per disk, 6 per sphere, fewer on mirror planes)."""
+        return int((~particles.fixed).sum()) * int(np.sum(symmetric_motion(particles.dim, symmetry)))
 
     def advance(self, sim, dt: float) -> CoupledFlow:
         """The fixed point ``v = Phi(v)``: integrate the particles with the forces of the flow
