@@ -25,7 +25,17 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from fbmbench.common import RESULTS, RUNS, RunFailed, merge_row, provenance, run_scene, slug, warm_up, write_text
+from fbmbench.common import (
+    RESULTS,
+    RUNS,
+    RunFailed,
+    merge_row,
+    provenance,
+    run_scene,
+    slug,
+    warm_up,
+    write_text,
+)
 
 SCENE = "sedimentation-2d"
 CASES = {
@@ -49,29 +59,32 @@ def run(case: str, level: int) -> dict:
     half, tail = t >= t[-1] / 2, t >= 0.9 * t[-1]
     return {**row, "failure": "", "t_reached": float(t[-1]), "steps": s["steps"], "wall_s": s["wall_s"],
             "n_dofs": s["n_dofs"], "overlap_first_half": float(overlap[~half].max()),
-            "overlap_second_half": float(overlap[half].max()), "late_mean_speed": float(np.abs(v[tail]).max()),
+            "overlap_second_half": float(overlap[half].max()),
+            "late_mean_speed": float(np.abs(v[tail]).max()),
             "min_height": q["min_height"], "max_height": q["max_height"],
             "cells_per_diameter": q["cells_per_diameter"]}
 
 
 def write(rows: list[dict]) -> None:
     lines = ["# Many particles at the extremes (extremes)", "",
-             "`sedimentation-2d` (100 disks, d = 0.1 cm, fluid density 1, mu = 0.1 g/(cm s), implicit coupling, "
-             "hard contact with a skin of one cell), the keys in 'settings' changed. Overlap: the largest "
-             "overlap of two disks or a disk and a wall over the radius (0: none) in the first and the second "
-             "half of the run. 'late speed': the largest |mean vertical velocity| over the last tenth of the "
-             "run. Reproduce: `python benchmarks/bench_extremes.py --cases CASE --level L`.", "",
+             "`sedimentation-2d` (100 disks, d = 0.1 cm, fluid density 1, mu = 0.1 g/(cm s), implicit "
+             "coupling, hard contact with a skin of one cell), the keys in 'settings' changed. Overlap: the "
+             "largest overlap of two disks or a disk and a wall over the radius (0: none) in the first and "
+             "the second half of the run. 'late speed': the largest |mean vertical velocity| over the last "
+             "tenth of the run. Reproduce: `python benchmarks/bench_extremes.py --cases CASE --level L`.", "",
              "| case | level | settings | unknowns | steps | t reached s | wall s | overlap 1st half | "
              "overlap 2nd half | late speed cm/s | lowest / highest centre cm | failure | measured |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: (r["case"], r["level"])):
         settings = ", ".join(f"{k}={v}" for k, v in r["settings"].items())
         if r["failure"]:
-            lines.append(f"| {r['case']} | {r['level']} | {settings} | | {r['steps']} | {r['t_reached']:.3f} | | | "
+            lines.append(f"| {r['case']} | {r['level']} | {settings} | | {r['steps']} | "
+                         f"{r['t_reached']:.3f} | | | "
                          f"| | | {r['failure']} | {r['date']} {r['commit']} |")
             continue
         lines.append(
-            f"| {r['case']} | {r['level']} | {settings} | {r['n_dofs']} | {r['steps']} | {r['t_reached']:.3f} | "
+            f"| {r['case']} | {r['level']} | {settings} | {r['n_dofs']} | {r['steps']} | "
+            f"{r['t_reached']:.3f} | "
             f"{r['wall_s']:.0f} | {r['overlap_first_half']:.2g} | {r['overlap_second_half']:.2g} | "
             f"{r['late_mean_speed']:.3g} | {r['min_height']:.3f} / {r['max_height']:.3f} | – | "
             f"{r['date']} {r['commit']} |")

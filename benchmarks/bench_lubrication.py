@@ -38,7 +38,8 @@ def main(argv=None):
                     help="gap down to which the flow carries the film force [cells]")
     ap.add_argument("--solver", default="auto", help="linear solver (auto, multigrid, direct, pardiso)")
     ap.add_argument("--pair-offsets", type=float, nargs="*", default=[],
-                    help="also two fictitious spheres at 6 cells/d, midplane this many cells off a mesh plane")
+                    help="also two fictitious spheres at 6 cells/d, midplane this many cells off a mesh "
+                    "plane")
     ap.add_argument("--pair-gaps", type=float, nargs="+", default=[0.1, 0.02], help="gaps h / a of the pairs")
     ap.add_argument("--table-only", action="store_true", help="redraw the table and plot from the rows")
     args = ap.parse_args(argv)

@@ -86,7 +86,8 @@ def test_the_implicit_coupling_s_responses_count_and_are_refused_with_a_remedy(m
     from fbmflow.params import CouplingParams
 
     need, _ = estimate_memory(2242, 2, "direct")
-    monkeypatch.setattr(simulation, "available_memory", lambda: need + 1.5 * simulation.RESPONSE_BYTES * 2242 * 3)
+    three = simulation.RESPONSE_BYTES * 2242 * 3  # one disk's responses
+    monkeypatch.setattr(simulation, "available_memory", lambda: need + 1.5 * three)
     mesh = StructuredMesh.box((8, 24), upper=(2.0, 6.0))
     disks = Particles.at_rest([Ball(0.25, 2)] * 2, 1.25, [[0.5, 4.0], [1.5, 4.0]])
     with pytest.raises(InsufficientMemory, match=r"implicit coupling's responses to 6 rigid-body velocity "

@@ -29,10 +29,10 @@ import numpy as np
 from fbmflow.contact import Lubrication
 from fbmflow.coupling import FixedObstacles, hydrodynamic_forces, mirror_images, node_owner
 from fbmflow.flow import NavierStokesProblem, NoSlip, Slip
-from fbmflow.solvers import NewtonSettings
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.particles import Ball
 from fbmflow.scenes.data.brenner1961 import drag_factor
+from fbmflow.solvers import NewtonSettings
 
 from .common import RESULTS, load_rows, merge_row, provenance, write_text
 
@@ -131,7 +131,8 @@ def run(cells: int, wall: str, gaps=GAPS, linear_solver: str = "auto") -> list[d
                "lambda_exact": float(drag_factor(gap, wall)), **resolved(cells, gap, wall, linear_solver),
                **provenance()}
         print(f"{wall} wall, {cells} cells/d, h/a = {gap}: lambda_flow {row['lambda_flow']:.4f}, "
-              f"Brenner {row['lambda_exact']:.4f}, {row['n_dofs']} unknowns, {row['wall_s']:.1f} s", flush=True)
+              f"Brenner {row['lambda_exact']:.4f}, {row['n_dofs']} unknowns, {row['wall_s']:.1f} s",
+              flush=True)
         rows.append(row)
     return rows
 
@@ -149,7 +150,8 @@ def run_pairs(cells: int, gaps, offsets) -> list[dict]:
                    "lambda_exact": float(drag_factor(gap, "free")), "lambda_flow": lam, "n_dofs": 0,
                    "wall_s": time.perf_counter() - t0, **provenance()}
             print(f"two spheres, {cells} cells/d, h/a = {gap}, midplane {offset} cells off a mesh plane: "
-                  f"lambda_flow {lam:.4f}, Brenner {row['lambda_exact']:.4f}, {row['wall_s']:.1f} s", flush=True)
+                  f"lambda_flow {lam:.4f}, Brenner {row['lambda_exact']:.4f}, {row['wall_s']:.1f} s",
+                  flush=True)
             rows.append(row)
     return rows
 
@@ -219,7 +221,8 @@ def plot(rows: list[dict], model: dict) -> None:
         if pairs:
             g = np.array([r["gap"] for r in pairs])
             lam = np.array([r["lambda_flow"] for r in pairs])
-            total = lam + np.array([correction(r["gap"], r["cells_per_diameter"], "pair", model) for r in pairs])
+            total = lam + np.array([correction(r["gap"], r["cells_per_diameter"], "pair", model)
+                                    for r in pairs])
             ax.loglog(g, total, "k^", mfc="none", label="two fictitious spheres, with correction")
         ax.set_xlabel("gap h / a")
         ax.set_ylabel("F / (6 pi mu a U)")

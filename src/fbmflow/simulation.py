@@ -680,9 +680,9 @@ def check_memory(n_unknowns: int, dim: int, linear_solver, responses: int = 0) -
     if stored and need <= have < need + stored:
         raise InsufficientMemory(
             f"the implicit coupling's responses to {responses} rigid-body velocity components need about "
-            f"{stored / 1e9:.1f} GB for {n_unknowns} unknowns, and {words} {need / 1e9:.1f} GB: more than the "
-            f"{have / 1e9:.1f} GB available; use fewer particles, a coarser mesh (a lower --level) or "
-            "coupling.scheme = explicit (which may be unstable for light particles)")
+            f"{stored / 1e9:.1f} GB for {n_unknowns} unknowns, and {words} {need / 1e9:.1f} GB: more "
+            f"than the {have / 1e9:.1f} GB available; use fewer particles, a coarser mesh (a lower --level) "
+            "or coupling.scheme = explicit (which may be unstable for light particles)")
     need += stored
     if need > have:
         remedy = "a coarser mesh (a lower --level)"

@@ -51,7 +51,8 @@ def test_too_many_particles_are_refused_before_the_first_step():
         _run("sedimentation-2d", 0, particles={"count": 10000}, domain={"grow": False})
 
 
-@pytest.mark.parametrize("name, count, scale", [("sedimentation-2d", 100, 1.0), ("sedimentation-2d", 101, 1.5),
+@pytest.mark.parametrize("name, count, scale", [("sedimentation-2d", 100, 1.0),
+                                                 ("sedimentation-2d", 101, 1.5),
                                                  ("sedimentation-2d", 2000, 4.5),
                                                  ("sedimentation-3d", 1000, 3.5)])
 def test_the_box_grows_until_the_particles_fit(name, count, scale):

@@ -69,5 +69,6 @@ class Lubrication:
         R = np.where(wall, R_i, R_i * beta / (1.0 + beta))
         log_arm = np.where(wall, R_i / 5.0, R_i * beta * (1 + 7 * beta + beta**2) / (5 * (1 + beta)**3))
         g = np.maximum(gap, self.min_gap)
-        c = self._unresolved(g, R, log_arm, dim) - self._unresolved(np.full_like(g, self.range_), R, log_arm, dim)
+        at_range = self._unresolved(np.full_like(g, self.range_), R, log_arm, dim)
+        c = self._unresolved(g, R, log_arm, dim) - at_range
         return np.where(gap < self.range_, np.maximum(c, 0.0), 0.0)

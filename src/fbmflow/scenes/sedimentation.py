@@ -86,14 +86,16 @@ SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", cou
 BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5, bottom=0.0,
                       top=0.5)
 Sedimentation2DParams = particle_params("Sedimentation2DParams", "Parameters of ``sedimentation-2d``.",
-                                        fluid=CgsFluid, particles=ManyParticles, domain=ManyDomain, time=ManyTime,
+                                        fluid=CgsFluid, particles=ManyParticles, domain=ManyDomain,
+                                        time=ManyTime,
                                         **CONTACT_SECTIONS)
 Sedimentation3DParams = particle_params("Sedimentation3DParams", "Parameters of ``sedimentation-3d``.",
                                         fluid=CgsFluid, particles=SphereParticles, domain=ManyDomain,
                                         time=ManyTime,
                                         **CONTACT_SECTIONS)
 FluidizedBedParams = particle_params("FluidizedBedParams", "Parameters of ``fluidized-bed-2d``.",
-                                     fluid=CgsFluid, particles=BedParticles, domain=ManyDomain, inflow=BedInflow,
+                                     fluid=CgsFluid, particles=BedParticles, domain=ManyDomain,
+                                     inflow=BedInflow,
                                      time=ManyTime,
                                      **CONTACT_SECTIONS)
 
@@ -157,10 +159,12 @@ class _ManyParticles(ParticleScene):
     def scale(self, params) -> float:
         """The box's size over the scene's ``box``: 1, or with ``domain.grow`` the smallest of
         1.5, 2, 2.5, ... whose lattice region holds ``particles.count``."""
-        scale = 1.0
-        while params.domain.grow and np.prod(_lattice_rows(params.particles.diameter,
-                                                           *self._region(params, scale),
-                                                           params.particles.spacing)[0]) < params.particles.count:
+        pp, scale = params.particles, 1.0
+
+        def room(scale: float) -> int:
+            return int(np.prod(_lattice_rows(pp.diameter, *self._region(params, scale), pp.spacing)[0]))
+
+        while params.domain.grow and room(scale) < pp.count:
             scale += 0.5
         return scale
 
