@@ -1,16 +1,18 @@
 """Many particles at the extremes: density ratios near 1 and of 10, and a dense packing resting on
 the bottom (issue 29), in ``sedimentation-2d``.
 
-Run:  python benchmarks/bench_extremes.py [--cases ratio-1.01 ratio-10 packed] [--level 2]
+Run:  python benchmarks/bench_extremes.py [--cases ratio-1.01 ratio-10 packed] [--level 2] [--t-end T]
+      [--set KEY=VALUE ...]
 
 Cases (each the scene's defaults but for the keys named):
 
 * ``ratio-1.01``: ``particles.density = 1.01`` (the fluid's is 1): almost neutrally buoyant
   disks, where an explicit coupling would be unstable (added mass); 0.2 s.
 * ``ratio-10``: ``particles.density = 10``: fast disks, hard landings; 0.2 s.
-* ``packed``: 100 disks on a lattice of spacing 1.2 diameters from the bottom
-  (``particles.spacing = 1.2``, ``bottom = 0``, ``top = 0.25``): a dense packing that settles onto
-  the floor and must rest there for 1 s.
+* ``packed``: 100 disks on a lattice of spacing 1.4 diameters from the bottom
+  (``particles.spacing = 1.4``, ``bottom = 0``, ``top = 0.3``; the gaps just above the contact skin
+  at level 2): a dense packing that settles onto the floor and must rest there for 1 s. At
+  level 1 (skin 0.5 d) add ``--set contact.skin_cells=0.5``.
 
 Per run: steps, wall time, whether it finished, the largest overlap (over the radius) in the
 first and in the second half of the run (overlap must not grow), the largest speed of the mean
@@ -21,6 +23,7 @@ fails (NaN, Newton) is a row with its failure. Results: ``benchmarks/results/ext
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import h5py
@@ -41,7 +44,7 @@ SCENE = "sedimentation-2d"
 CASES = {
     "ratio-1.01": {"particles.density": 1.01, "time.t_end": 0.2},
     "ratio-10": {"particles.density": 10.0, "time.t_end": 0.2},
-    "packed": {"particles.spacing": 1.2, "particles.bottom": 0.0, "particles.top": 0.25, "time.t_end": 1.0},
+    "packed": {"particles.spacing": 1.4, "particles.bottom": 0.0, "particles.top": 0.3, "time.t_end": 1.0},
 }
 
 
@@ -95,12 +98,25 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=tuple(CASES))
     ap.add_argument("--level", type=int, default=2, help="mesh level (2: the scene's default, 4 cells/d)")
+    ap.add_argument("--t-end", type=float, help="final time instead of the case's")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
     args = ap.parse_args(argv)
+    extra = dict(item.split("=", 1) for item in args.set)
+    for key, value in extra.items():
+        try:
+            extra[key] = json.loads(value)
+        except json.JSONDecodeError:  # a word: keep the string
+            pass
+    for settings in CASES.values():
+        settings.update(extra)
+        if args.t_end is not None:
+            settings["time.t_end"] = args.t_end
     warm_up(SCENE, **{"particles.count": 4, "time.t_end": 0.01})
     for case in args.cases:
         row = run(case, args.level)
         print({k: v for k, v in row.items() if k != "settings"}, flush=True)
-        write(merge_row("extremes", row, lambda a, b: (a["case"], a["level"]) == (b["case"], b["level"])))
+        write(merge_row("extremes", row, lambda a, b: (a["case"], a["level"], a["settings"]) ==
+                        (b["case"], b["level"], b["settings"])))
 
 
 if __name__ == "__main__":

