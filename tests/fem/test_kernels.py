@@ -578,3 +578,31 @@ def test_apply_convection_is_n_of_u_times_u(case):
     apply_convection(space, u, -1.5, out)
     expected = 1.0 - 1.5 * (ref.convection(u) @ u.reshape(d, n).T).T.ravel()
     assert_rel(out, expected)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_free_node_components_equal_scipy_on_the_masked_cell_graph(dim):
+    """The union-find kernel against scipy.sparse.csgraph on the graph of free nodes that share a
+    cell: the nodes of two distant cells and one node between them free (several components)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from fbmflow.mesh import StructuredMesh
+
+    space = FlowSpace(StructuredMesh.box((4,) * dim))
+    free = np.zeros(space.n_v, dtype=bool)  # every node of two cells apart from each other, and one more
+    for cell in (0, space.mesh.n_cells - 1):
+        free[space.V.cell_dofs[cell]] = True
+    free[space.V.cell_dofs[space.mesh.n_cells // 2][0]] = True
+    labels = space.free_node_components(free)
+    assert np.all(labels[~free] == -1)
+    rows = np.repeat(np.arange(space.n_v), np.diff(space.indptr))
+    keep = free[rows] & free[space.indices]
+    graph = csr_matrix((np.ones(keep.sum()), (rows[keep], space.indices[keep])), shape=(space.n_v,) * 2)
+    n, reference = connected_components(graph, directed=False)
+    ours = labels[free]
+    assert np.unique(ours).size == np.unique(reference[free]).size > 1
+    # the same partition: each of our labels maps to one reference label and back
+    pairs = np.unique(np.column_stack([ours, reference[free]]), axis=0)
+    assert len(pairs) == np.unique(ours).size
+    assert np.all(labels[free] <= np.flatnonzero(free))  # the component's smallest node

@@ -426,3 +426,38 @@ def apply_scalar_pair(indptr, indices, X, alpha, Y, beta, u, out):
             for j in range(indptr[r], indptr[r + 1]):
                 s += (alpha * X[j] + beta * Y[j]) * u[i, indices[j]]
             out[i, r] = s
+
+
+@njit
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]  # path halving
+        i = parent[i]
+    return i
+
+
+@njit
+def free_components(indptr, indices, free):
+    """Connected components of the ``free`` nodes of a symmetric sparsity pattern
+    ``(indptr, indices)`` (two free nodes are joined where the pattern links them): a label per
+    node, the smallest node index of its component, -1 for nodes that are not free. Union-find
+    over the pattern's entries, O(nnz)."""
+    n = free.size
+    parent = np.arange(n)
+    for i in range(n):
+        if not free[i]:
+            continue
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            if j > i and free[j]:
+                a, b = _root(parent, i), _root(parent, j)
+                if a != b:
+                    if a < b:
+                        parent[b] = a
+                    else:
+                        parent[a] = b
+    labels = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        if free[i]:
+            labels[i] = _root(parent, i)
+    return labels

@@ -177,6 +177,12 @@ class FlowSpace:
         return t.reshape(t.shape[0] * t.shape[1] * t.shape[2], -1)
 
     # -- helpers ------------------------------------------------------------------------------
+    def free_node_components(self, free: np.ndarray) -> np.ndarray:
+        """Labels (n_v,) int64 of the connected components of the ``free`` (n_v,) bool velocity
+        nodes, two nodes joined where they share a cell (the smallest node index of the
+        component); -1 where not free."""
+        return _kernels.free_components(self.indptr, self.indices, np.asarray(free, dtype=np.bool_))
+
     def scalar_matrix(self, data: np.ndarray) -> sp.csr_matrix:
         """CSR matrix on the scalar Q2 pattern with the given data (no copy)."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(self.n_v, self.n_v))

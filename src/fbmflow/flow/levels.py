@@ -7,7 +7,6 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from ..fem import (
     FlowSpace,
@@ -123,17 +122,11 @@ class FlowLevel:
         velocity; the pressure modes of the cells they leave orphaned drop out."""
         s = self.space
         free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
-        # the graph of the nodes that share a cell, free ones only (masking the scalar pattern's
-        # entries is cheaper than slicing a matrix by rows and columns)
-        keep = np.repeat(free, np.diff(s.indptr)) & free[s.indices]
-        indptr = np.concatenate([[0], np.cumsum(np.add.reduceat(keep, s.indptr[:-1], dtype=np.int64))])
-        graph = sp.csr_matrix((np.ones(int(indptr[-1]), dtype=np.int8), s.indices[keep], indptr),
-                              shape=(s.n_v, s.n_v))
-        _, labels = connected_components(graph, directed=False)
-        labels = labels[free]
-        if len(np.unique(labels)) <= 1:
+        labels = s.free_node_components(free)[free]
+        roots, counts = np.unique(labels, return_counts=True)
+        if roots.size <= 1:
             return con
-        pocket = np.flatnonzero(free)[labels != np.argmax(np.bincount(labels))]
+        pocket = np.flatnonzero(free)[labels != roots[np.argmax(counts)]]
         log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
         dofs = np.concatenate([k * s.n_v + pocket for k in range(s.dim)])
         return con.merged(DirichletConstraints(np.sort(dofs), np.zeros(dofs.size)))
