@@ -50,26 +50,31 @@ def mesh(cells: int, gap: float, far: float) -> StructuredMesh:
     return StructuredMesh.rectilinear([side, side, graded_axis(0.0, fine[1] + far, fine, h, multiple=8)])
 
 
+def _drag_factor(m: StructuredMesh, centres: np.ndarray, velocities, bc: dict, linear_solver: str
+                 ) -> tuple[float, int]:
+    """Quasi-steady Stokes flow on the quarter mesh ``m`` (mirror planes x = y = 0, the rest as
+    ``bc`` says) of spheres of radius a at ``centres`` moving at ``velocities``: the drag factor
+    ``F_z / (6 pi mu a U)`` of the last sphere's volume force (whole sphere; it moves downwards, so
+    the drag points up), and the unknowns."""
+    balls = [Ball(A, 3)] * len(centres)
+    bc = {**{tag: NoSlip() for tag in m.tags}, "xmin": Slip(), "ymin": Slip(), **bc}
+    problem = NavierStokesProblem(m, MU, bc, convection=False, linear_solver=linear_solver,
+                                  newton=NewtonSettings(rtol=1e-6, linear_rtol=1e-3),
+                                  extra_constraints=FixedObstacles(balls, centres, "sharp",
+                                                                   velocities=velocities))
+    x, _ = problem.solve_steady()
+    space = problem.space
+    owner = node_owner(space.V, centres, balls)
+    force = mirror_images(*hydrodynamic_forces(space, owner, centres, x[:space.n_u], x[space.n_u:], MU),
+                          (0, 1))[0][-1, 2]
+    return float(force / (6 * np.pi * MU * A * U)), problem.n_dofs
+
+
 def drag(cells: int, gap: float, wall: str, far: float, linear_solver: str = "auto") -> tuple[float, int]:
     """Quasi-steady Stokes flow of the sphere at gap ``gap`` moving at U towards the plane, with
     the far walls ``far`` away: the drag factor of its volume force, and the unknowns."""
-    m = mesh(cells, gap, far)
-    centre = np.array([[0.0, 0.0, A + gap]])
-    ball = Ball(A, 3)
-    bc = {tag: NoSlip() for tag in m.tags}
-    bc["xmin"] = bc["ymin"] = Slip()
-    if wall == "free":
-        bc["zmin"] = Slip()
-    problem = NavierStokesProblem(m, MU, bc, convection=False, linear_solver=linear_solver,
-                                  newton=NewtonSettings(rtol=1e-6, linear_rtol=1e-3),
-                                  extra_constraints=FixedObstacles([ball], centre, "sharp",
-                                                                   velocities=[[0.0, 0.0, -U]]))
-    x, _ = problem.solve_steady()
-    space = problem.space
-    owner = node_owner(space.V, centre, [ball])
-    force = mirror_images(*hydrodynamic_forces(space, owner, centre, x[:space.n_u], x[space.n_u:], MU),
-                          (0, 1))[0][0, 2]
-    return float(force / (6 * np.pi * MU * A * U)), problem.n_dofs
+    return _drag_factor(mesh(cells, gap, far), np.array([[0.0, 0.0, A + gap]]), [[0.0, 0.0, -U]],
+                        {"zmin": Slip()} if wall == "free" else {}, linear_solver)
 
 
 def resolved(cells: int, gap: float, wall: str, linear_solver: str = "auto") -> dict:
@@ -93,20 +98,8 @@ def pair_drag(cells: int, gap: float, offset: float, far: float, linear_solver: 
     axis = graded_axis(-reach - far, reach + far, (-reach, reach), h, multiple=8)
     mid = axis[np.argmin(np.abs(axis))] + offset * h  # a vertex near z = 0, shifted
     centres = np.array([[0.0, 0.0, mid - A - gap], [0.0, 0.0, mid + A + gap]])
-    m = StructuredMesh.rectilinear([side, side, axis])
-    balls = [Ball(A, 3)] * 2
-    bc = {tag: NoSlip() for tag in m.tags}
-    bc["xmin"] = bc["ymin"] = Slip()
-    problem = NavierStokesProblem(m, MU, bc, convection=False, linear_solver=linear_solver,
-                                  newton=NewtonSettings(rtol=1e-6, linear_rtol=1e-3),
-                                  extra_constraints=FixedObstacles(balls, centres, "sharp",
-                                                                   velocities=[[0, 0, U], [0, 0, -U]]))
-    x, _ = problem.solve_steady()
-    space = problem.space
-    owner = node_owner(space.V, centres, balls)
-    force = mirror_images(*hydrodynamic_forces(space, owner, centres, x[:space.n_u], x[space.n_u:], MU),
-                          (0, 1))[0][1, 2]
-    return float(force / (6 * np.pi * MU * A * U))
+    return _drag_factor(StructuredMesh.rectilinear([side, side, axis]), centres,
+                        [[0.0, 0.0, U], [0.0, 0.0, -U]], {}, linear_solver)[0]
 
 
 def correction(gap, cells: int, wall: str, model: dict) -> np.ndarray:

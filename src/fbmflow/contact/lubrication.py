@@ -12,10 +12,10 @@ Brenner 1967; Jeffrey & Onishi 1984)
 film between two cylinders gives ``C(g) = 3 pi / (2 sqrt 2) mu (R* / g)^(3/2)``. A fictitious
 boundary on a mesh of spacing ``h`` resolves the film only down to gaps of about a cell: the
 flow's film force behaves as ``C`` at the effective gap ``g_e = sqrt(g^2 + s^2)``, with ``s``
-(``resolved_gap``) a fraction of a cell: 0.4 cells at 6 cells per diameter, both for a sphere
-approaching a wall and for two spheres approaching each other (fitted to Brenner's exact drag;
-for two spheres it varies by about 10 % with where their midplane falls between mesh planes;
-benchmarks/bench_lubrication.py). The correction adds what is missing,
+(``resolved_gap``) a fraction of a cell: fitted to Brenner's exact drag at 6 cells per diameter,
+0.40 cells for a sphere approaching a wall and 0.40-0.45 cells for two spheres approaching each
+other, whose resolved film moves by up to 20 % with where their midplane falls between mesh
+planes (benchmarks/bench_lubrication.py). The correction adds what is missing,
 
     c(g) = [C(g) - C(g_e(g))] - [C(delta) - C(g_e(delta))]   for g < delta (the range), else 0,
 

@@ -3,7 +3,7 @@
 * ``sedimentation-2d``: ``n`` disks (100 by default, diameter 0.1 cm, rho_s = 2) released from
   rest on a jittered lattice in the upper half of a closed 2 x 4 cm box of fluid (rho_f = 1,
   mu = 0.1 g/(cm s)), g = 980 cm/s^2. ``particles.spacing``, ``bottom`` and ``top`` place the
-  lattice (a dense packing resting on the bottom: ``spacing = 1.2``, ``bottom = 0``). Level
+  lattice (a dense packing resting on the bottom: ``spacing = 1.4``, ``bottom = 0``). Level
   ``L``: ``20 2^L x 40 2^L`` cells, ``2^L`` across a diameter.
 * ``sedimentation-3d``: ``n`` spheres (20, d = 0.2 cm, rho_s = 2) released on a lattice filling a
   closed 1 x 1 x 2 cm box. Level ``L``: ``4 2^L x 4 2^L x 8 2^L`` cells, ``0.8 2^L`` across a
@@ -56,7 +56,7 @@ class ManyParticles(Section):
     diameter: float = param(0.1, "particle diameter", "cm", positive=True)
     density: float = param(2.0, "particle density", "g/cm^3", positive=True)
     seed: int = param(0, "seed of the random jitter of the initial lattice", minimum=0)
-    spacing: float = param(2.0, "spacing of the initial lattice, in diameters (1.2: a dense packing)",
+    spacing: float = param(2.0, "spacing of the initial lattice, in diameters (1.4: a dense packing)",
                            minimum=1.1)
     bottom: float = param(0.5, "lowest height of the initial lattice, as a fraction of the box height",
                           minimum=0.0, maximum=1.0)
@@ -207,13 +207,13 @@ class _ManyParticles(ParticleScene):
         second step, the packing 0.4 cm higher)."""
         skin = params.contact.skin_cells * cell if params.contact.enabled else 0.0
         pp = params.particles
-        if 0.7 * (pp.spacing - 1.0) * pp.diameter < skin:
-            need = 1.0 + skin / (0.7 * pp.diameter)
+        gap = 0.7 * (pp.spacing - 1.0) * pp.diameter
+        if gap < skin:
+            need = np.ceil((1.0 + skin / (0.7 * pp.diameter)) * 100) / 100
             log.warning("particles.spacing = %g leaves gaps down to %.3g cm, below the contact skin of %.3g "
                         "cm (%g cells at level %d): contact pushes such particles apart in the first steps; "
                         "use particles.spacing >= %g, a finer level or a smaller contact.skin_cells",
-                        pp.spacing, 0.7 * (pp.spacing - 1.0) * pp.diameter, skin, params.contact.skin_cells,
-                        level, np.ceil(need * 100) / 100)
+                        pp.spacing, gap, skin, params.contact.skin_cells, level, need)
 
     def observe(self, params, sim) -> dict:
         p, mesh = sim.particles, sim.flow.mesh
