@@ -358,7 +358,8 @@ class RepulsionParams(Section):
         from .contact import Repulsion
 
         return Repulsion(self.range_cells * float(max(mesh.finest_spacing)), tuple(mesh.lower),
-                         tuple(mesh.upper), self.strength, None if walls is None else tuple(walls))
+                         tuple(mesh.upper), self.strength, None if walls is None else tuple(walls),
+                         tuple(float(L) for L in mesh.periods) if any(mesh.periodic) else None)
 
 
 @dataclasses.dataclass(frozen=True)

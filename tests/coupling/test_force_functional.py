@@ -69,7 +69,8 @@ def test_volume_force_rows_kernel_matches_numpy(dim):
     if dim == 2:
         assert len(set(cells)) < len(cells)  # a cell with nodes of both balls
     wu, wp = _kernels.volume_force_rows(cells, particles, owner, centres, space.V.cell_dofs, space.dphi,
-                                        space.detJw, space.Jinv, space.psi, space.xq)
+                                        space.detJw, space.Jinv, space.psi, space.xq,
+                                        space.mesh.periods)
     for e, (c, i) in enumerate(pairs):
         ref_u, ref_p = _numpy_rows(space, owner, centres, c, i)
         np.testing.assert_allclose(wu[e], ref_u, rtol=1e-12, atol=1e-14)
@@ -225,3 +226,29 @@ def test_test_function_linearisation_evaluates_many_responses_as_one_at_a_time(d
             f, t = tested(X[k, :space.n_u], X[k, space.n_u:], mu, rho, dt=dt, about=about)
             np.testing.assert_allclose(F[k], f, rtol=1e-10, atol=1e-12 * np.abs(F).max())
             np.testing.assert_allclose(T[k], t, rtol=1e-10, atol=1e-12 * np.abs(T).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_forces_of_a_ball_straddling_periodic_sides_equal_those_of_the_ball_inside(dim):
+    """A ball across the periodic sides feels what the same ball in the middle feels in the same
+    (shifted) flow: the owner, the cut cells and the torque arm take the nearest image."""
+    mesh = StructuredMesh.box((8,) * dim, periodic=(True,) * dim)
+    space = FlowSpace(mesh)
+    ball = Ball(0.2, dim)
+    results = []
+    for shift in (0.0, 0.5):  # half a period: the flow moves by whole cells
+        centre = np.full((1, dim), 0.513)
+        centre[0, 0] += shift  # 1.013: straddles x = 0 / 1 (and wraps beyond the box)
+        rel = space.V.coordinates - centre[0]
+        u = np.stack([np.sin(2 * np.pi * (rel[:, (k + 1) % dim] + 0.1 * k)) * np.cos(2 * np.pi * rel[:, k])
+                      for k in range(dim)])
+        rc = space.Q.centre - centre[0]
+        p = np.zeros((mesh.n_cells, dim + 1))
+        p[:, 0] = np.cos(2 * np.pi * rc[:, 0]) * np.sin(2 * np.pi * rc[:, -1] + 0.3)
+        owner = node_owner(space.V, centre, [ball])
+        results.append([hydrodynamic_forces(space, owner, centre, u.ravel(), p.ravel(), 1.0),
+                        SurfaceForces(space, centre, [ball])(u.ravel(), p.ravel(), 1.0)])
+    for (F0, T0), (F1, T1) in zip(*results):
+        assert np.abs(T0).max() > 1e-3  # a torque that a wrong arm would change
+        np.testing.assert_allclose(F1, F0, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(T1, T0, rtol=1e-9, atol=1e-12)

@@ -28,13 +28,15 @@ from ..particles import Particles
 class Repulsion:
     """Repulsive forces with range ``range_`` [m] between particles and from the walls of the box
     ``[lower, upper]`` (walls on every face; pass ``walls`` to keep only some axis-faces, as
-    ``(axis, side)`` pairs with side 0 = lower, 1 = upper)."""
+    ``(axis, side)`` pairs with side 0 = lower, 1 = upper). ``periods``: the period of every axis
+    (0: not periodic); pairs across a periodic axis act through the nearest image."""
 
     range_: float
     lower: tuple
     upper: tuple
     strength: float = 10.0
     walls: tuple | None = None
+    periods: tuple | None = None
 
     def __post_init__(self):
         if not self.range_ > 0 or not self.strength > 0:
@@ -56,6 +58,9 @@ class Repulsion:
             F[:, axis] += (1.0 if side == 0 else -1.0) * self.strength * weight * push**2
         if n > 1:
             diff = X[:, None, :] - X[None, :, :]
+            if self.periods is not None:
+                L = np.asarray(self.periods, dtype=float)
+                diff -= L * np.round(diff / np.where(L > 0, L, 1.0))
             dist = np.linalg.norm(diff, axis=2)
             np.fill_diagonal(dist, np.inf)
             push = np.maximum(self.range_ - (dist - R[:, None] - R[None, :]), 0.0) / self.range_

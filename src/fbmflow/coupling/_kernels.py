@@ -7,7 +7,7 @@ from .._jit import njit
 
 
 @njit
-def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, Jinv, psi, xq):
+def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, Jinv, psi, xq, periods):
     """``F_i = -int sigma . grad alpha_i`` and ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` as
     linear functionals of the flow, one (cut cell, particle) pair at a time.
 
@@ -17,7 +17,8 @@ def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, 
 
     cells, particles (m,) int64; owner (n_v,) int64; centres (n_particles, d); cell_dofs
     (n_cells, nl) int64; dphi (nq, nl, d); detJw (n_cells, nq); Jinv (n_cells, nq, d, d); psi
-    (n_cells, nq, d+1); xq (n_cells, nq, d).
+    (n_cells, nq, d+1); xq (n_cells, nq, d); periods (d,) float64, the period of every periodic axis
+    (0 elsewhere): the torque arm ``x - X_i`` takes the minimum image there.
     Returns ``wu (m, r, d, nl)``, the coefficient of ``mu u_j`` at the cell's node ``a`` (component
     ``j``), and ``wp (m, r, d+1)``, that of the cell's pressure modes, in the ``r`` rows force
     ``0..d-1`` then torque (2D: ``r = 3``, the z component; 3D: ``r = 6``).
@@ -65,6 +66,8 @@ def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, 
                     cp[j, n] = w * psi[c, q, n] * ga[j]
             for k in range(d):
                 rel[k] = xq[c, q, k] - centres[i, k]
+                if periods[k] > 0.0:
+                    rel[k] -= periods[k] * np.round(rel[k] / periods[k])
             for j in range(d):
                 for n in range(d):
                     for a in range(nl):

@@ -111,7 +111,8 @@ def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.nda
     pairs = np.unique(cut[row] * max(n, 1) + o[row, col])               # (cell, particle), sorted
     cells, particle = pairs // max(n, 1), pairs % max(n, 1)
     wu, wp = _kernels.volume_force_rows(cells, particle, owner, centres, space.V.cell_dofs, space.dphi,
-                                        space.detJw, space.Jinv, space.psi, space.xq)
+                                        space.detJw, space.Jinv, space.psi, space.xq,
+                                        space.mesh.periods)
     return ForceFunctional(space, n, cells, particle, wu, wp)
 
 
@@ -120,9 +121,9 @@ def hydrodynamic_forces(space: FlowSpace, owner: np.ndarray, centres: np.ndarray
     """Force (n_particles, dim) [N] and torque (n_particles, 3) [N m] from the flow ``u (dim * n_v,)``,
     ``p (n_p,)`` with dynamic viscosity ``mu``: ``F_i = -int sigma . grad alpha_i``,
     ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` over the cells cut by particle ``i``
-    (``alpha_i`` the Q2 interpolant of its indicator). Periodic minimum images are not applied to
-    the torque arm (particles must not straddle a periodic side). For many flows of one particle
-    state build :func:`volume_force_functional` once."""
+    (``alpha_i`` the Q2 interpolant of its indicator; the arm ``x - X_i`` takes the minimum image
+    on periodic axes). For many flows of one particle state build :func:`volume_force_functional`
+    once."""
     return volume_force_functional(space, owner, centres)(u, p, mu)
 
 

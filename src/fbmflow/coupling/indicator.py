@@ -51,14 +51,12 @@ def candidate_dofs(V: DofMap, centres: np.ndarray, radii: np.ndarray) -> tuple[n
 
 
 def periodic_offset(V: DofMap, x: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """``x - centre`` (``centre`` (dim,) or (n, dim)) with the minimum-image convention on periodic
-    axes, (n, dim)."""
+    """``x - centre`` (``x (..., dim)``, ``centre`` broadcasting to it) with the minimum-image
+    convention on periodic axes, (..., dim) float64."""
     rel = x - centre
-    mesh = V.mesh
-    for d in range(mesh.dim):
-        if mesh.periodic[d]:
-            L = mesh.upper[d] - mesh.lower[d]
-            rel[:, d] -= L * np.round(rel[:, d] / L)
+    L = V.mesh.periods
+    for d in np.flatnonzero(L):
+        rel[..., d] -= L[d] * np.round(rel[..., d] / L[d])
     return rel
 
 

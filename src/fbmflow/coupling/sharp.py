@@ -260,7 +260,7 @@ def fluid_continuity(space: FlowSpace, owner: np.ndarray, cut: np.ndarray, centr
     highest = oc.max(axis=1)
     lowest = np.where(oc >= 0, oc, highest[:, None]).min(axis=1)
     for part in (highest, lowest):
-        rel = x - centres[part][:, None, :]
+        rel = periodic_offset(V, x, centres[part][:, None, :])
         if rotations is not None:
             rel = np.einsum("cqd,cde->cqe", rel, rotations[part])
         for rows, shape in _by_shape(shapes, part):
@@ -288,10 +288,10 @@ def pressure_extension(space: FlowSpace, owner: np.ndarray, cut: np.ndarray,
     npl = d + 1
     fluid = (owner[V.cell_dofs] < 0).all(axis=1)
     idx = mesh.cell_indices()
-    shape = np.array(mesh.shape)
+    shape, periodic = np.array(mesh.shape), np.array(mesh.periodic)
     strides = np.cumprod((1,) + tuple(mesh.shape[:-1]))
     xc = space.Q.centre[cut]
-    out = xc - centres[owner[V.cell_dofs[cut]].max(axis=1)]
+    out = periodic_offset(V, xc, centres[owner[V.cell_dofs[cut]].max(axis=1)])
     out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
     best = np.full(len(cut), -1, dtype=np.int64)
     at = np.arange(len(cut))
@@ -299,10 +299,11 @@ def pressure_extension(space: FlowSpace, owner: np.ndarray, cut: np.ndarray,
         offsets = np.indices((2 * reach + 1,) * d).reshape(d, -1).T - reach
         offsets = offsets[np.any(offsets != 0, axis=1)]
         cand = idx[cut][:, None, :] + offsets[None, :, :]             # (n_c, n_off, d)
+        cand = np.where(periodic, cand % shape, cand)                 # periodic axes wrap
         valid = np.all((cand >= 0) & (cand < shape), axis=2)
         cid = (np.clip(cand, 0, shape - 1) * strides).sum(axis=2)
         valid &= fluid[cid]
-        rel = space.Q.centre[cid] - xc[:, None, :]
+        rel = periodic_offset(V, space.Q.centre[cid], xc[:, None, :])
         score = np.einsum("cod,cd->co", rel, out) / np.maximum(np.linalg.norm(rel, axis=2), 1e-300)
         pick = np.argmax(np.where(valid, score, -np.inf), axis=1)
         found = (best < 0) & valid[at, pick]
@@ -314,7 +315,7 @@ def pressure_extension(space: FlowSpace, owner: np.ndarray, cut: np.ndarray,
     sc, sn = space.Q.scale[cells], space.Q.scale[best]
     E = np.zeros((len(cells), npl, npl))
     E[:, 0, 0] = 1.0
-    E[:, 0, 1:] = (cc - cn) / sn
+    E[:, 0, 1:] = periodic_offset(V, cc, cn) / sn
     E[:, np.arange(1, npl), np.arange(1, npl)] = sc / sn
     rows = np.repeat(cells[:, None] * npl + np.arange(npl), npl, axis=1).ravel()
     cols = np.tile(best[:, None] * npl + np.arange(npl), (1, npl)).ravel()

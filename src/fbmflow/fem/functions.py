@@ -66,6 +66,16 @@ def sample_pressure(space: FlowSpace, p: np.ndarray, points: np.ndarray,
     return np.einsum("nm,nm->n", p.reshape(-1, space.dim + 1)[cells], psi)
 
 
+def mean_velocity(space: FlowSpace, u: np.ndarray) -> np.ndarray:
+    """Volume average of the velocity ``u (dim * n_v,)`` over the mesh, ``int u dx / |Omega|``,
+    (dim,) float64 (exact for the Q2 field: ``int phi_a`` from the element's quadrature). Inside
+    fictitious particles ``u`` is their rigid motion, so with particles this is the mean velocity of
+    the mixture: its volume flux per unit area."""
+    weight = np.einsum("cq,qa->ca", space.detJw, space.phi)
+    w = np.bincount(space.V.cell_dofs.ravel(), weights=weight.ravel(), minlength=space.n_v)
+    return u.reshape(space.dim, space.n_v) @ w / w.sum()
+
+
 def quadrature_fields(space: FlowSpace, u: np.ndarray, p: np.ndarray, n_quad: int = 5):
     """Fields at a Gauss rule of ``n_quad`` points per axis on every cell.
 

@@ -130,6 +130,11 @@ class StructuredMesh:
         return np.array([float(np.diff(a).min()) for a in axes])
 
     @property
+    def periods(self) -> np.ndarray:
+        """Period of every axis, (dim,) float64: ``upper - lower`` on a periodic axis, 0 elsewhere."""
+        return np.where(self.periodic, np.array(self.upper) - np.array(self.lower), 0.0)
+
+    @property
     def tags(self) -> tuple[str, ...]:
         """Boundary face tags of the non-periodic directions."""
         return tuple(t for t in face_tags(self.dim) if not self.periodic[AXES.index(t[0])])

@@ -17,6 +17,7 @@ from .dfg import DFG2D1, DFG3D1Z
 from .dkt import DKT2D
 from .glowinski import GlowinskiFreeFall
 from .sedimentation import FluidizedBed2D, Sedimentation2D, Sedimentation3D
+from .suspension import Suspension2D, Suspension3D
 from .taylor_green import TaylorGreen2D
 from .tencate import TenCate
 
@@ -24,7 +25,8 @@ log = logging.getLogger(__name__)
 
 SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(),
                                                 DFG2D1(), DFG3D1Z(), GlowinskiFreeFall(), TenCate(), DKT2D(),
-                                                Sedimentation2D(), Sedimentation3D(), FluidizedBed2D())}
+                                                Sedimentation2D(), Sedimentation3D(), FluidizedBed2D(),
+                                                Suspension2D(), Suspension3D())}
 
 
 def get_scene(name: str) -> Scene:
