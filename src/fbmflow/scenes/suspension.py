@@ -220,7 +220,8 @@ class _Suspension(ParticleScene):
                     last.add_patch(plt.Circle((x[0] + sx, x[-1] + sz), d / 2, fc="C0", ec="k", lw=0.3))
         last.set_title(f"t = {q['t'][-1]:.3g} s" + (" (projected on x-z)" if X.shape[1] == 3 else ""))
         fig.suptitle(f"{summary['scene']}, level {summary['level']}, volume fraction "
-                     f"{q['volume_fraction']:.3g}, mean settling velocity {q['mean_settling_velocity']:.3g} cm/s")
+                     f"{q['volume_fraction']:.3g}, mean settling velocity "
+                     f"{q['mean_settling_velocity']:.3g} cm/s")
         return save_figure(fig, path)
 
 
