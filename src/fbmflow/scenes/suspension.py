@@ -145,13 +145,13 @@ class _Suspension(ParticleScene):
     max_level = 5
 
     def box(self, params, level: int) -> tuple[int, float]:
-        """Cells per side (even, at least 4) and the side [cm] of the periodic box that holds
-        ``count`` particles at about ``volume_fraction``."""
+        """Cells per side (at least 4) and the side [cm] of the periodic box that holds ``count``
+        particles at about ``volume_fraction`` (the nearest whole number of cells)."""
         pp = params.particles
         h = pp.diameter / 2**level
         volume = Ball(pp.diameter / 2, self.dim).volume
         side = (pp.count * volume / pp.volume_fraction) ** (1.0 / self.dim)
-        n = max(4, 2 * int(round(side / h / 2)))
+        n = max(4, int(round(side / h)))
         return n, n * h
 
     def layout(self, params, level: int) -> Layout:
