@@ -26,7 +26,8 @@ def _periodic_box(n=12, side=3.0, periodic=(True, True)):
 
 def test_drive_carries_the_free_particles_weight():
     mesh = StructuredMesh.box((4, 4, 4), upper=(2.0, 2.0, 4.0), periodic=(True, True, True))
-    p = Particles.at_rest([Ball(0.3, 3)] * 2, np.array([2.0, 3.0]), np.array([[0.5, 0.5, 1.0], [1.5, 1.5, 3.0]]))
+    centres = np.array([[0.5, 0.5, 1.0], [1.5, 1.5, 3.0]])
+    p = Particles.at_rest([Ball(0.3, 3)] * 2, np.array([2.0, 3.0]), centres)
     g = np.array([0.0, 0.0, -9.81])
     f = periodic_drive(mesh, p, g, 1.0)
     np.testing.assert_allclose(f * 16.0 + np.sum(p.mass - p.volume) * g, 0.0, atol=1e-12)
