@@ -54,6 +54,7 @@ SuspensionBoundary = derive(FictitiousBoundaryParams, "SuspensionBoundary",
                             force="surface")
 SuspensionTime = derive(TimeParams, "SuspensionTime", "Time stepping.", dt=0.01, t_end=1.0,
                         scheme="backward-euler")
+SphereSuspensionTime = derive(SuspensionTime, "SphereSuspensionTime", "Time stepping.", t_end=0.5)
 
 
 @dataclass(frozen=True)
@@ -75,7 +76,7 @@ Suspension2DParams = particle_params("Suspension2DParams", "Parameters of ``susp
                                      time=SuspensionTime, fbm=SuspensionBoundary)
 Suspension3DParams = particle_params("Suspension3DParams", "Parameters of ``suspension-3d``.",
                                      fluid=SuspensionFluid, particles=SphereSuspension,
-                                     time=SuspensionTime, fbm=SuspensionBoundary)
+                                     time=SphereSuspensionTime, fbm=SuspensionBoundary)
 
 
 def random_positions(count: int, d: float, box: np.ndarray, gap: float, seed: int,
