@@ -67,7 +67,7 @@ class SuspensionParticles(Section):
     diameter: float = param(0.1, "particle diameter", "cm", positive=True)
     density: float = param(1.5, "particle density", "g/cm^3", positive=True)
     seed: int = param(0, "seed of the random placement", minimum=0)
-    min_gap: float = param(0.25, "smallest gap between particles at the start, in diameters", minimum=0.0)
+    min_gap: float = param(0.1, "smallest gap between particles at the start, in diameters", minimum=0.0)
 
 
 SphereSuspension = derive(SuspensionParticles, "SphereSuspension", "The particles.", count=8)
@@ -80,7 +80,7 @@ Suspension3DParams = particle_params("Suspension3DParams", "Parameters of ``susp
 
 
 def random_positions(count: int, d: float, box: np.ndarray, gap: float, seed: int,
-                     tries: int = 200) -> np.ndarray:
+                     tries: int = 1000) -> np.ndarray:
     """``count`` centres (count, dim) placed one after another at uniformly random points of the
     periodic box ``[0, box]``, each at least ``d + gap`` from the others (nearest images); ParamError
     when a particle finds no place in ``tries`` attempts."""
