@@ -522,10 +522,9 @@ class Simulation:
         exact in a fully periodic box. Returns the velocity removed, (dim,) float64.
 
         The drive carries the particles' weight exactly, so the flux would stay zero, but the
-        particles move under the estimated hydrodynamic force, whose error (about 1 % of the
-        weight) the fluid does not feel: momentum leaks at that rate, and the mixture would drift
-        without bound (measured before this: a suspension-2d disk at 8 cells/d, the mixture at
-        1.6 times the settling velocity after 0.3 s)."""
+        particles move under the estimated hydrodynamic force, whose error the fluid does not
+        feel: momentum leaks at that rate, and without this the mixture would drift without
+        bound (docs/validation.md, "Periodic suspensions")."""
         space = self.flow.space
         shift = mean_velocity(space, self.x[:space.n_u])
         self.x[:space.n_u] -= np.repeat(shift, space.n_v)
