@@ -23,7 +23,6 @@ fails (NaN, Newton) is a row with its failure. Results: ``benchmarks/results/ext
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import h5py
@@ -33,6 +32,7 @@ from fbmbench.common import (
     RUNS,
     RunFailed,
     merge_row,
+    parse_settings,
     provenance,
     run_scene,
     slug,
@@ -101,12 +101,7 @@ def main(argv=None):
     ap.add_argument("--t-end", type=float, help="final time instead of the case's")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
     args = ap.parse_args(argv)
-    extra = dict(item.split("=", 1) for item in args.set)
-    for key, value in extra.items():
-        try:
-            extra[key] = json.loads(value)
-        except json.JSONDecodeError:  # a word: keep the string
-            pass
+    extra = parse_settings(args.set)
     for settings in CASES.values():
         settings.update(extra)
         if args.t_end is not None:

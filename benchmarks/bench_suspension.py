@@ -20,9 +20,17 @@ reference and the error. Results: ``benchmarks/results/suspension.md`` and ``.js
 from __future__ import annotations
 
 import argparse
-import json
 
-from fbmbench.common import RESULTS, RunFailed, merge_row, provenance, run_scene, warm_up, write_text
+from fbmbench.common import (
+    RESULTS,
+    RunFailed,
+    merge_row,
+    parse_settings,
+    provenance,
+    run_scene,
+    warm_up,
+    write_text,
+)
 
 from fbmflow.particles import Ball
 from fbmflow.scenes.suspension import sangani_acrivos_velocity
@@ -100,12 +108,7 @@ def main(argv=None):
     ap.add_argument("--t-end", type=float, help="final time instead of the case's")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
     args = ap.parse_args(argv)
-    extra = dict(item.split("=", 1) for item in args.set)
-    for key, value in extra.items():
-        try:
-            extra[key] = json.loads(value)
-        except json.JSONDecodeError:  # a word: keep the string
-            pass
+    extra = parse_settings(args.set)
     if args.t_end is not None:
         extra["time.t_end"] = args.t_end
     for case in args.cases:

@@ -43,6 +43,18 @@ class RunFailed(RuntimeError):
     """A scene run that exited with a non-zero status."""
 
 
+def parse_settings(items: list[str]) -> dict:
+    """``KEY=VALUE`` items (a benchmark's ``--set``) as a settings dict, each value read as JSON
+    (numbers, true/false) or kept as a word."""
+    settings = dict(item.split("=", 1) for item in items)
+    for key, value in settings.items():
+        try:
+            settings[key] = json.loads(value)
+        except json.JSONDecodeError:  # a word: keep the string
+            pass
+    return settings
+
+
 def cli_value(value) -> str:
     """``value`` as the command line's ``--set KEY=VALUE`` parses it back."""
     if isinstance(value, bool):
