@@ -296,7 +296,8 @@ class CouplingParams(Section):
     """Fluid–particle coupling: the scheme (:data:`fbmflow.coupling.COUPLINGS`) and the particle
     integrator."""
 
-    scheme: str = param("implicit", "coupling: explicit (staggered) or implicit (sub-iterated)",
+    scheme: str = param("implicit", "coupling: explicit (staggered), stabilised (explicit with each "
+                        "particle's own stiffness implicit) or implicit (sub-iterated)",
                         choices=tuple(COUPLINGS))
     tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
@@ -306,6 +307,9 @@ class CouplingParams(Section):
                               "solver.newton_rtol; a value at or below that solves the first one alike)",
                               positive=True, maximum=0.5)
     integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
+    added_mass: float = param(1.0, "stabilised coupling: the added mass in each particle's own stiffness, "
+                              "as a multiple of a ball's potential-flow value (rho_f V for a disk, rho_f V / 2 "
+                              "for a sphere); larger damps more, the steady state stays", minimum=0.0)
 
 
 @dataclasses.dataclass(frozen=True)

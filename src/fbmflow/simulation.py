@@ -42,7 +42,7 @@ from .params import (
     SolverParams,
     TimeParams,
 )
-from .particles import Particles, accelerations, integrate, velocity_gain
+from .particles import Particles, accelerations, integrate, pack_velocities, velocity_gain
 from .solvers import ConvergenceError
 from .solvers.choice import cheapest_solver
 from .solvers.direct import auto_backend, pardiso_available
@@ -207,6 +207,7 @@ class Simulation:
         # the first: unknown, the fluid's reaction to the first acceleration is not zero)
         self._last_force: np.ndarray | None = None
         self._last_torque: np.ndarray | None = None
+        self._held: np.ndarray | None = None  # see held_velocities
         self._warned_fast = False  # the warning about particles crossing cells in a step is given once
 
     # -- the run ------------------------------------------------------------------------------
@@ -441,6 +442,41 @@ class Simulation:
         dF, dT = self._response_forces(owner, dX, dt, about=x)
         return dX, dF, dT
 
+    def own_stiffness(self, x: np.ndarray, free: np.ndarray, dt: float, added_mass: float) -> np.ndarray:
+        """Each particle's generalised force on its own generalised velocity, estimated locally
+        about the flow ``x``: ``S (n, r, r)``, ``S[i, a, b] ~ d f_ia / d v_ib`` for the True entries
+        of ``free (n, r)`` (zero elsewhere).
+
+        Two parts, neither needing a flow solve: the force of the particle's own unit rigid
+        motions on its nodes with the rest of the flow held at zero (the viscous stress across
+        its cut cells: :meth:`~fbmflow.coupling.forces.ForceFunctional.own_response`, one sparse
+        product for all particles), and ``added_mass`` times the potential-flow added mass of a
+        ball, ``-C rho_f V_i / dt`` on the translations with ``C = 1`` for a disk and ``1/2``
+        for a sphere (the ball's value for every shape), which the held flow (no pressure) leaves
+        out (how close the sum comes to the exact blocks: docs/validation.md, "Many particles")."""
+        p, space = self.particles, self.flow.space
+        owner = self._owner(space.V)
+        W = rigid_liftings(space.V, owner, p.position, free)
+        S = self.estimator.own_response(self._rule_here(owner), W, free, self.flow.mu, self.flow.rho, dt=dt,
+                                        about=x[:space.n_u])
+        if self.symmetry:  # whole particles on mirror planes: the images' forces, column by column
+            d = p.dim
+            rows = S[:, d:, :].transpose(2, 0, 1)  # (r, n, 1) in 2D (z), (r, n, 3) in 3D
+            torque = np.zeros(rows.shape[:2] + (3,))
+            torque[..., 3 - rows.shape[-1]:] = rows
+            force, torque = mirror_images(S[:, :d, :].transpose(2, 0, 1), torque, self.symmetry)
+            S = np.concatenate([force, torque[..., 2:] if d == 2 else torque], axis=2).transpose(1, 2, 0)
+        idx = np.arange(p.dim)
+        potential = 1.0 if p.dim == 2 else 0.5
+        S[:, idx, idx] -= added_mass * potential * self.flow.rho * p.volume[:, None] / dt
+        return np.where(free[:, :, None] & free[:, None, :], S, 0.0)
+
+    def held_velocities(self) -> np.ndarray:
+        """The generalised velocities (n, r) the flow holds on the particles: those that
+        constrained its last solve where the coupling scheme says so (:attr:`CoupledFlow.held`,
+        the stabilised scheme), else the particles' own."""
+        return pack_velocities(self.particles) if self._held is None else self._held.copy()
+
     def state(self) -> dict:
         """Everything a restart needs, as arrays and numbers: flow ``x``, time, step count, the
         particles' positions, velocities, orientations, angular velocities, densities, fixed
@@ -452,6 +488,8 @@ class Simulation:
                "density": p.density.copy(), "fixed": p.fixed.copy()}
         if self._last_force is not None:  # the trapezoidal rule's force history (none before step 1)
             out.update(last_force=self._last_force.copy(), last_torque=self._last_torque.copy())
+        if self._held is not None:
+            out["held_velocities"] = self._held.copy()
         if self.contact is not None:
             out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
         return out
@@ -477,6 +515,7 @@ class Simulation:
             raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
         else:
             self._last_force = self._last_torque = None
+        self._held = np.array(state["held_velocities"], dtype=float) if "held_velocities" in state else None
         if self.contact is not None:
             self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
                                     if k.startswith("contact_")})
@@ -508,6 +547,7 @@ class Simulation:
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
                                                   new.angular_velocity)
             self.x[dofs] = values
+        self._held = solved.held
         shift = self._remove_mean_flux() if self.zero_flux else None
         self._last_force, self._last_torque = force, torque
         self.t += dt
@@ -529,6 +569,8 @@ class Simulation:
         shift = mean_velocity(space, self.x[:space.n_u])
         self.x[:space.n_u] -= np.repeat(shift, space.n_v)
         self.particles.velocity = self.particles.velocity - shift
+        if self._held is not None:
+            self._held[:, :len(shift)] -= shift
         return shift
 
     def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:
@@ -765,7 +807,7 @@ def check_memory(n_unknowns: int, dim: int, linear_solver, responses: int = 0) -
             f"the implicit coupling's responses to {responses} rigid-body velocity components need about "
             f"{stored / 1e9:.1f} GB for {n_unknowns} unknowns, and {words} {need / 1e9:.1f} GB: more "
             f"than the {have / 1e9:.1f} GB available; use fewer particles, a coarser mesh (a lower --level) "
-            "or coupling.scheme = explicit (which may be unstable for light particles)")
+            "or coupling.scheme = stabilised (one flow solve per step, no responses kept)")
     need += stored
     if need > have:
         remedy = "a coarser mesh (a lower --level)"

@@ -12,6 +12,7 @@ from fbmflow.coupling import (
     hydrodynamic_forces,
     mirror_images,
     node_owner,
+    rigid_liftings,
 )
 from fbmflow.coupling.forces import volume_force_functional
 from fbmflow.fem import FlowSpace
@@ -112,6 +113,30 @@ def test_force_functional_evaluates_many_flows_as_one_at_a_time(dim):
     F, T = volume_force_functional(space, owner, centres)(U[0], P[0], mu)
     F_ref, T_ref = hydrodynamic_forces(space, owner, centres, U[0], P[0], mu)
     np.testing.assert_array_equal(F, F_ref)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_own_response_is_each_particle_s_block_of_the_forces_of_its_liftings(dim):
+    """``own_response``: particle i's force and torque rows of the functional applied to its own
+    unit rigid motions, one column at a time through ``many`` on dense liftings (the rows of
+    the other particle dropped, unselected components zero)."""
+    space, centres, owner = _two_balls(dim)
+    r = 3 if dim == 2 else 6
+    free = np.ones((2, r), dtype=bool)
+    free[1, 0] = False
+    W = rigid_liftings(space.V, owner, centres, free)
+    mu = 0.7
+    rule = volume_force_functional(space, owner, centres)
+    S = rule.own_response(W, free, mu)
+    F, T = rule.many(W.toarray().T, None, mu)  # (k, 2, dim), (k, 2, 3)
+    rows = np.concatenate([F, T[..., 2:] if dim == 2 else T], axis=2)  # (k, 2, r)
+    expected = np.zeros((2, r, r))
+    for k, (i, b) in enumerate(zip(*np.nonzero(free))):
+        expected[i, :, b] = rows[k, i]
+    assert np.abs(expected).max() > 0.0 and np.all(S[1, :, 0] == 0.0)
+    np.testing.assert_allclose(S, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    # a translation drags its particle back: negative diagonal
+    assert np.all(np.diagonal(S[0])[:dim] < 0.0)
 
 
 def _numpy_surface_force(rule_points, space, u, p, mu, n_particles):

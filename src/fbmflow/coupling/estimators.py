@@ -21,7 +21,11 @@ An estimator has
   (the implicit coupling's lifting responses; None for ``U`` or ``P``: that part left out). The
   estimators linear in the flow evaluate all of them in one pass over their
   :class:`~fbmflow.coupling.forces.ForceFunctional`; the base class's default evaluates them one
-  by one.
+  by one;
+* ``own_response(rule, W, free, mu, rho, dt, about)``: each particle's force and torque on its
+  own unit rigid motions ``W (n_u, k)`` with the rest of the flow held, about the flow ``about``:
+  ``(n, r, r)`` (:meth:`~fbmflow.coupling.forces.ForceFunctional.own_response`; what the
+  stabilised explicit coupling takes as each particle's stiffness).
 """
 from __future__ import annotations
 
@@ -50,6 +54,12 @@ class ForceEstimator:
         out = [self.evaluate(rule, None if U is None else U[i], None if P is None else P[i], mu, rho, dt=dt,
                              about=about) for i in range(k)]
         return np.stack([f for f, _ in out]), np.stack([t for _, t in out])
+
+    def own_response(self, rule, W, free, mu, rho, dt=None, about=None):
+        """Each particle's force and torque on its own unit rigid motions, (n, r, r): the rule's
+        :meth:`~fbmflow.coupling.forces.ForceFunctional.own_response` (the estimators whose
+        rule is not linear in the flow override this)."""
+        return rule.own_response(W, free, mu)
 
     @staticmethod
     def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
@@ -99,6 +109,9 @@ class TestFunctionForce(ForceEstimator):
         if about is None or U is None or P is None:
             return super().evaluate_many(rule, U, P, mu, rho, dt=dt, about=about)
         return rule.linearised(about, mu, rho, dt).many(U, P, 1.0)
+
+    def own_response(self, rule, W, free, mu, rho, dt=None, about=None):
+        return rule.linearised(about, mu, rho, dt).own_response(W, free, 1.0)
 
 
 class SurfaceForce(ForceEstimator):

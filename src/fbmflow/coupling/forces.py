@@ -98,6 +98,21 @@ class ForceFunctional:
                 _kernels.csr_apply_rows(G.indptr, G.indices, G.data, X, float(scale), rows)
         return self._split(rows)
 
+    def own_response(self, W: sp.spmatrix, free: np.ndarray, mu: float) -> np.ndarray:
+        """Each particle's force and torque on its own unit rigid motions ``W (n_u, k)`` (sparse,
+        one column per True entry of ``free (n, r)``, row-major, as
+        :func:`~fbmflow.coupling.rigid_liftings` makes them), the rest of the flow held at zero:
+        ``S (n, r, r)`` float64 with ``S[i, :, b]`` the rows of particle ``i`` of ``mu G_u W``
+        in its column ``b`` (zero where ``free`` is False). One sparse product for all
+        particles; the other particles' rows of a column are dropped."""
+        n, r = self.n_particles, self.rows_per_particle
+        owner_of_column, component = np.nonzero(free)
+        M = (self.G_u @ sp.csc_matrix(W)).tocoo()
+        own = M.row // r == owner_of_column[M.col]
+        S = np.zeros((n, r, r))
+        np.add.at(S, (M.row[own] // r, M.row[own] % r, component[M.col[own]]), mu * M.data[own])
+        return S
+
 
 def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray) -> ForceFunctional:
     """The cut-cell volume force and torque of every particle (see :func:`hydrodynamic_forces`) as a
