@@ -308,8 +308,9 @@ class CouplingParams(Section):
                               positive=True, maximum=0.5)
     integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
     added_mass: float = param(1.0, "stabilised coupling: the added mass in each particle's own stiffness, "
-                              "as a multiple of a ball's potential-flow value (rho_f V for a disk, rho_f V / 2 "
-                              "for a sphere); larger damps more, the steady state stays", minimum=0.0)
+                              "as a multiple of a ball's potential-flow value (rho_f V for a disk, "
+                              "rho_f V / 2 for a sphere); larger damps more, the steady state stays",
+                              minimum=0.0)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,11 +12,18 @@ from .forces import (
 )
 from .indicator import node_owner, rigid_body_constraints, rigid_liftings
 from .obstacles import FixedObstacles
-from .schemes import COUPLINGS, CoupledFlow, ExplicitCoupling, ImplicitCoupling, StabilisedCoupling, make_coupling
+from .schemes import (
+    COUPLINGS,
+    CoupledFlow,
+    ExplicitCoupling,
+    ImplicitCoupling,
+    StabilisedCoupling,
+    make_coupling,
+)
 from .sharp import SharpBoundary, sharp_boundary, supports_sharp_boundary
 
 __all__ = ["node_owner", "rigid_body_constraints", "rigid_liftings", "cut_cells", "hydrodynamic_forces",
            "mirror_images", "TestFunctionForces", "SurfaceForces", "supports_surface_force", "FixedObstacles",
            "SharpBoundary", "sharp_boundary", "supports_sharp_boundary", "FORCE_ESTIMATORS", "VolumeForce",
            "TestFunctionForce", "SurfaceForce", "make_force_estimator", "COUPLINGS", "CoupledFlow",
-           "ExplicitCoupling", "ImplicitCoupling", "make_coupling"]
+           "ExplicitCoupling", "StabilisedCoupling", "ImplicitCoupling", "make_coupling"]
