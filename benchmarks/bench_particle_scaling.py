@@ -1,6 +1,7 @@
 """Cost of a time step against the particle count at a fixed mesh (issue 29, item 1).
 
-Run:  python benchmarks/bench_particle_scaling.py [--counts 10 100 1000] [--couplings explicit implicit]
+Run:  python benchmarks/bench_particle_scaling.py [--counts 10 100 1000]
+      [--couplings explicit stabilised implicit]
       [--level 2] [--diameter 0.03] [--steps 2] [--label after] [--max-response-gb 2.0]
 
 Scene: ``sedimentation-2d`` at ``--level`` (default 2, the scene's default: 80 x 160 cells,
@@ -49,6 +50,7 @@ NAMED = [("coupling/schemes.py", "advance", "coupling scheme (all of the step bu
          ("simulation.py", "flow_and_forces", "flow solves with their forces"),
          ("flow/navier_stokes.py", "solve", "Newton solves"),
          ("simulation.py", "rigid_responses", "lifting responses with their forces"),
+         ("simulation.py", "own_stiffness", "own stiffness (stabilised coupling)"),
          ("flow/navier_stokes.py", "lifting_response", "lifting responses (flow)"),
          ("simulation.py", "_forces", "hydrodynamic forces"),
          ("simulation.py", "_response_forces", "hydrodynamic forces of the responses"),
@@ -186,8 +188,8 @@ def write(rows: list[dict]) -> None:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", type=int, nargs="+", default=[10, 100, 1000])
-    ap.add_argument("--couplings", nargs="+", default=["explicit", "implicit"],
-                    choices=["explicit", "implicit"])
+    ap.add_argument("--couplings", nargs="+", default=["explicit", "stabilised", "implicit"],
+                    choices=["explicit", "stabilised", "implicit"])
     ap.add_argument("--level", type=int, default=2)
     ap.add_argument("--diameter", type=float, default=0.03, help="disk diameter [cm]")
     ap.add_argument("--steps", type=int, default=2, help="timed steps (then one profiled step)")

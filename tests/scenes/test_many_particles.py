@@ -46,6 +46,19 @@ def test_sedimentation_3d_runs_with_contact():
     assert q["max_overlap"] == 0.0 and q["mean_velocity"][-1] < 0.0
 
 
+@pytest.mark.parametrize("name", ["sedimentation-2d", "sedimentation-3d", "fluidized-bed-2d"])
+def test_many_particle_scenes_take_the_stabilised_coupling(name):
+    """One flow solve per step and no stored responses, whatever the count (the implicit
+    scheme's three responses per disk refused 2 000 disks at sedimentation-2d's default level)."""
+    from fbmflow.coupling import make_coupling
+    from fbmflow.particles import Ball, Particles
+
+    params = get_scene(name).Params()
+    assert params.coupling.scheme == "stabilised"
+    many = Particles.at_rest([Ball(0.05, 2)] * 2000, 2.0, np.zeros((2000, 2)))
+    assert make_coupling(params.coupling, 1e-10).stored_responses(many, ()) == 0
+
+
 def test_too_many_particles_are_refused_before_the_first_step():
     with pytest.raises(ParamError, match="do not fit"):
         _run("sedimentation-2d", 0, particles={"count": 10000}, domain={"grow": False})
