@@ -183,6 +183,17 @@ def test_stabilised_coupling_keeps_a_light_disk_stable_where_the_explicit_one_is
     assert held[0, 1] == pytest.approx(stabilised[-2]) and held[0, 1] != pytest.approx(stabilised[-1])
 
 
+def test_auto_coupling_is_implicit_while_its_responses_fit(monkeypatch):
+    from fbmflow import simulation
+
+    mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
+    disk = Particles.at_rest([Ball(0.25, 2)], 1.5, [[0.9, 1.5]])
+    params = CouplingParams(scheme="auto")
+    assert _sim(mesh, disk, coupling_params=params).coupling.name == "implicit"
+    monkeypatch.setattr(simulation, "AUTO_RESPONSE_BYTES", 3 * simulation.RESPONSE_BYTES * 100.0)
+    assert _sim(mesh, disk, coupling_params=params).coupling.name == "stabilised"
+
+
 def test_stabilised_coupling_restarts_exactly_from_a_saved_state():
     """The velocities the flow holds are part of the state: a fresh simulation given the saved
     state repeats the steps exactly; without them (an older state) it differs."""

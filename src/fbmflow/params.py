@@ -297,8 +297,9 @@ class CouplingParams(Section):
     integrator."""
 
     scheme: str = param("implicit", "coupling: explicit (staggered), stabilised (explicit with each "
-                        "particle's own stiffness implicit) or implicit (sub-iterated)",
-                        choices=tuple(COUPLINGS))
+                        "particle's own stiffness implicit), implicit (sub-iterated) or auto (implicit "
+                        "while its stored flow responses fit 4 GB, else stabilised)",
+                        choices=tuple(COUPLINGS) + ("auto",))
     tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
     max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)

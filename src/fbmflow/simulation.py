@@ -19,6 +19,7 @@ import numpy as np
 
 from .contact import ContactReport
 from .coupling import (
+    ImplicitCoupling,
     make_coupling,
     make_force_estimator,
     mirror_images,
@@ -178,6 +179,9 @@ class Simulation:
         self.contact = None if contact is None else contact.make(mesh, fluid.viscosity, walls)
         self.contact_substeps = 1 if contact is None else contact.substeps
         self.repulsion = None if repulsion is None else repulsion.make(mesh, walls)
+        if coupling.scheme == "auto":
+            coupling = dataclasses.replace(
+                coupling, scheme=auto_coupling(FlowSpace.estimate_dofs(mesh), particles, self.symmetry))
         self.coupling = make_coupling(coupling, solver.newton_rtol)
         self.integrator = coupling.integrator
         self.scheme = time.scheme
@@ -755,6 +759,25 @@ MEMORY_BASE = 400e6
 #: (141 762 unknowns), 100 disks: 5.17 GB implicit against 1.70 GB explicit
 #: (benchmarks/results/particle_scaling.md), 3.47 GB over 300 responses
 RESPONSE_BYTES = 80
+
+
+#: the implicit coupling's responses that ``coupling.scheme = "auto"`` allows [bytes]
+AUTO_RESPONSE_BYTES = 4e9
+
+
+def auto_coupling(n_unknowns: int, particles: Particles, symmetry=()) -> str:
+    """The scheme ``coupling.scheme = "auto"`` takes: ``"implicit"`` while the flow responses it
+    keeps (:data:`RESPONSE_BYTES` per unknown each, one per free rigid-body component) fit
+    :data:`AUTO_RESPONSE_BYTES`, else ``"stabilised"`` (one flow solve per step, none kept; less
+    accurate in transients and, in a bed of particles on the floor at 4 cells per diameter,
+    unstable: docs/validation.md, "Many particles"). The same for every machine."""
+    responses = ImplicitCoupling.stored_responses(particles, symmetry)
+    stored = RESPONSE_BYTES * n_unknowns * responses
+    if stored <= AUTO_RESPONSE_BYTES:
+        return "implicit"
+    log.info("coupling.scheme = auto: stabilised, since the implicit scheme's %d responses would need "
+             "%.1f GB for %d unknowns", responses, stored / 1e9, n_unknowns)
+    return "stabilised"
 
 
 def estimate_memory(n_unknowns: int, dim: int, linear_solver) -> tuple[float, str]:

@@ -47,16 +47,22 @@ def test_sedimentation_3d_runs_with_contact():
 
 
 @pytest.mark.parametrize("name", ["sedimentation-2d", "sedimentation-3d", "fluidized-bed-2d"])
-def test_many_particle_scenes_take_the_stabilised_coupling(name):
-    """One flow solve per step and no stored responses, whatever the count (the implicit
-    scheme's three responses per disk refused 2 000 disks at sedimentation-2d's default level)."""
-    from fbmflow.coupling import make_coupling
-    from fbmflow.particles import Ball, Particles
+def test_many_particle_scenes_choose_the_coupling_by_the_responses_it_would_store(name):
+    """``coupling.scheme = auto``: the implicit scheme at the default counts and levels, the
+    stabilised one (no stored responses) for 2 000 disks or 1 000 spheres, which the implicit
+    scheme's responses (137 GB, 614 GB) refused."""
+    from fbmflow.fem import FlowSpace
+    from fbmflow.simulation import auto_coupling
 
-    params = get_scene(name).Params()
-    assert params.coupling.scheme == "stabilised"
-    many = Particles.at_rest([Ball(0.05, 2)] * 2000, 2.0, np.zeros((2000, 2)))
-    assert make_coupling(params.coupling, 1e-10).stored_responses(many, ()) == 0
+    scene = get_scene(name)
+    params = scene.Params()
+    assert params.coupling.scheme == "auto"
+    for count, level, scheme in ((params.particles.count, scene.default_level, "implicit"),
+                                 (2000 if scene.dim == 2 else 1000, scene.default_level, "stabilised")):
+        many = from_dict(scene.Params, {"particles": {"count": count}})
+        layout = scene.layout(many, level)
+        n = FlowSpace.estimate_dofs(layout.mesh)
+        assert auto_coupling(n, layout.particles) == scheme, (count, n)
 
 
 def test_too_many_particles_are_refused_before_the_first_step():

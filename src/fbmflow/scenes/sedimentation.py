@@ -19,11 +19,14 @@ particles fit, so the lattice's volume fraction stays (``sedimentation-2d`` with
 9 x 18 cm box, 90 x 180 cells at level 0).
 
 Hard contact (restitution 0, sub-stepped) keeps the particles apart and inside the box. The
-coupling is the stabilised explicit one (one flow solve per step, no stored responses, so that
-thousands of particles fit): the plain explicit one is unstable here (measured: at 2 cells per
-diameter the disks' rotation rates grow by about 3x per step from the first steps, with
-alternating sign), and the implicit one keeps three flow responses per disk (``coupling.scheme
-= implicit`` for transients resolved to its tolerance; docs/validation.md, "Many particles").
+coupling is ``auto``: implicit while its flow responses (three per disk, six per sphere) fit 4 GB,
+else the stabilised scheme (one flow solve per step, none stored, so that thousands of particles
+fit; :func:`~fbmflow.simulation.auto_coupling`). The plain explicit one is unstable here
+(measured: at 2 cells per diameter the disks' rotation rates grow by about 3x per step from the
+first steps, with alternating sign); the stabilised one is 4 to 12 times faster than the
+implicit one and follows it within about 5 % while the particles settle, but a bed forming on
+the floor at 4 cells per diameter made it oscillate and fail (docs/validation.md, "Many
+particles").
 Quantities:
 ``max_overlap`` (largest overlap of two particles or of a particle with a wall over all steps,
 over the radius; 0 when none; per step in ``overlap``), ``min_height`` / ``max_height`` of the
@@ -49,7 +52,7 @@ from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle
 log = logging.getLogger(__name__)
 
 ManyTime = derive(TimeParams, "ManyTime", "Time stepping.", dt=0.005, scheme="backward-euler")
-ManyCoupling = derive(CouplingParams, "ManyCoupling", CouplingParams.__doc__, scheme="stabilised")
+ManyCoupling = derive(CouplingParams, "ManyCoupling", CouplingParams.__doc__, scheme="auto")
 
 
 @dataclass(frozen=True)
