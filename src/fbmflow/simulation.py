@@ -476,9 +476,11 @@ class Simulation:
         return np.where(free[:, :, None] & free[:, None, :], S, 0.0)
 
     def held_velocities(self) -> np.ndarray:
-        """The generalised velocities (n, r) the flow holds on the particles: those that
-        constrained its last solve where the coupling scheme says so (:attr:`CoupledFlow.held`,
-        the stabilised scheme), else the particles' own."""
+        """The generalised velocities (n, r) the flow holds on the particles, as the coupling
+        scheme counts them: where it says so (:attr:`CoupledFlow.held`, the stabilised scheme)
+        those that constrained its last solve plus the velocity jumps contact made after it (so
+        that the particles' velocities less these are the scheme's own last increments), else the
+        particles' own."""
         return pack_velocities(self.particles) if self._held is None else self._held.copy()
 
     def state(self) -> dict:
@@ -538,6 +540,10 @@ class Simulation:
         try:
             solved = self.coupling.advance(self, dt)
             new = self.integrate(solved.force, solved.torque, dt)
+            held = solved.held
+            if held is not None and self.contact is not None:  # contact's jump: not the scheme's increment
+                free = self.integrate(solved.force, solved.torque, dt, contact=False)
+                held = held + pack_velocities(new) - pack_velocities(free)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
         x, reports, force, torque = solved.x, solved.reports, solved.force, solved.torque
@@ -551,7 +557,7 @@ class Simulation:
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
                                                   new.angular_velocity)
             self.x[dofs] = values
-        self._held = solved.held
+        self._held = held
         shift = self._remove_mean_flux() if self.zero_flux else None
         self._last_force, self._last_torque = force, torque
         self.t += dt
@@ -769,8 +775,8 @@ def auto_coupling(n_unknowns: int, particles: Particles, symmetry=()) -> str:
     """The scheme ``coupling.scheme = "auto"`` takes: ``"implicit"`` while the flow responses it
     keeps (:data:`RESPONSE_BYTES` per unknown each, one per free rigid-body component) fit
     :data:`AUTO_RESPONSE_BYTES`, else ``"stabilised"`` (one flow solve per step, none kept; less
-    accurate in transients and, in a bed of particles on the floor at 4 cells per diameter,
-    unstable: docs/validation.md, "Many particles"). The same for every machine."""
+    accurate in transients, and broken by a hard impact: docs/validation.md, "Many
+    particles"). The same for every machine."""
     responses = ImplicitCoupling.stored_responses(particles, symmetry)
     stored = RESPONSE_BYTES * n_unknowns * responses
     if stored <= AUTO_RESPONSE_BYTES:

@@ -24,9 +24,8 @@ else the stabilised scheme (one flow solve per step, none stored, so that thousa
 fit; :func:`~fbmflow.simulation.auto_coupling`). The plain explicit one is unstable here
 (measured: at 2 cells per diameter the disks' rotation rates grow by about 3x per step from the
 first steps, with alternating sign); the stabilised one is 4 to 12 times faster than the
-implicit one and follows it within about 5 % while the particles settle, but a bed forming on
-the floor at 4 cells per diameter made it oscillate and fail (docs/validation.md, "Many
-particles").
+implicit one and follows it within about 5 % over the first 0.2 s, but lags it over a whole
+settling (docs/validation.md, "Many particles").
 Quantities:
 ``max_overlap`` (largest overlap of two particles or of a particle with a wall over all steps,
 over the radius; 0 when none; per step in ``overlap``), ``min_height`` / ``max_height`` of the
