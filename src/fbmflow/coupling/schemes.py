@@ -108,8 +108,9 @@ class StabilisedCoupling:
         :meth:`~fbmflow.simulation.Simulation.held_velocities`): the last step predicted the
         fluid's reaction to it, ``S_i s'_i``, which ``f`` now measures. Contact's jumps are left
         out of ``s'``: nothing predicted their reaction (with them in, a bed forming on the
-        floor at 4 cells per diameter oscillated and failed). The step's force is ``f_i + S_i (s_i - s'_i)``, with which
-        :meth:`~fbmflow.simulation.Simulation.integrate` gives ``v + s`` (and contact then acts).
+        floor at 4 cells per diameter oscillated and failed). The step's force is
+        ``f_i + S_i (s_i - s'_i)``, with which :meth:`~fbmflow.simulation.Simulation.integrate`
+        gives ``v + s`` (and contact then acts).
 
         The term vanishes at a steady state and in a steady acceleration (``s = s'``), so both
         are the implicit scheme's; it damps the step-to-step oscillation of the explicit scheme,
