@@ -23,7 +23,7 @@ coupling is ``auto``: implicit while its flow responses (three per disk, six per
 else the stabilised scheme (one flow solve per step, none stored, so that thousands of particles
 fit; :func:`~fbmflow.simulation.auto_coupling`). The plain explicit one is unstable here
 (measured: at 2 cells per diameter the disks' rotation rates grow by about 3x per step from the
-first steps, with alternating sign); the stabilised one is 4 to 12 times faster than the
+first steps, with alternating sign); the stabilised one is 3.6 to 12 times faster than the
 implicit one and follows it within about 5 % over the first 0.2 s, but lags it over a whole
 settling (docs/validation.md, "Many particles").
 Quantities:
