@@ -179,8 +179,8 @@ def test_stabilised_coupling_keeps_a_light_disk_stable_where_the_explicit_one_is
     assert np.all(stabilised < (1 / 0.5 - 1) * 980.0 * t)  # below free rise
     np.testing.assert_allclose(stabilised[1:], implicit[1:], rtol=0.15)
     assert abs(stabilised[-1] / implicit[-1] - 1.0) < 0.08
-    held = sim.held_velocities()  # the flow holds the step's starting velocity, not the new one
-    assert held[0, 1] == pytest.approx(stabilised[-2]) and held[0, 1] != pytest.approx(stabilised[-1])
+    # no contact here: the scheme's increment is the whole change of the last step
+    assert sim.last_increment[0, 1] == pytest.approx(stabilised[-1] - stabilised[-2])
 
 
 def test_auto_coupling_is_implicit_while_its_responses_fit(monkeypatch):
@@ -195,8 +195,8 @@ def test_auto_coupling_is_implicit_while_its_responses_fit(monkeypatch):
 
 
 def test_stabilised_coupling_restarts_exactly_from_a_saved_state():
-    """The velocities the flow holds are part of the state: a fresh simulation given the saved
-    state repeats the steps exactly; without them (an older state) it differs."""
+    """The scheme's last increment is part of the state: a fresh simulation given the saved
+    state repeats the steps exactly; without it (an older state) it differs."""
     def make():
         mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
         return _sim(mesh, Particles.at_rest([Ball(0.25, 2)], 0.5, [[0.9, 1.5]]), coupling="stabilised")
@@ -208,7 +208,7 @@ def test_stabilised_coupling_restarts_exactly_from_a_saved_state():
     a.flow.forget_linearisation()
     b, c = make(), make()
     b.set_state(state)
-    c.set_state({k: v for k, v in state.items() if k != "held_velocities"})
+    c.set_state({k: v for k, v in state.items() if k != "coupling_increment"})
     ra, rb, rc = a.step(0.005), b.step(0.005), c.step(0.005)
     assert np.abs(ra.velocity - rb.velocity).max() <= 1e-12 * np.abs(ra.velocity).max()
     assert np.abs(ra.velocity - rc.velocity).max() > 1e-3 * np.abs(ra.velocity).max()

@@ -43,7 +43,7 @@ from .params import (
     SolverParams,
     TimeParams,
 )
-from .particles import Particles, accelerations, integrate, pack_velocities, velocity_gain
+from .particles import Particles, accelerations, integrate, velocity_gain
 from .solvers import ConvergenceError
 from .solvers.choice import cheapest_solver
 from .solvers.direct import auto_backend, pardiso_available
@@ -211,7 +211,7 @@ class Simulation:
         # the first: unknown, the fluid's reaction to the first acceleration is not zero)
         self._last_force: np.ndarray | None = None
         self._last_torque: np.ndarray | None = None
-        self._held: np.ndarray | None = None  # see held_velocities
+        self.last_increment: np.ndarray | None = None  # CoupledFlow.increment of the last step
         self._warned_fast = False  # the warning about particles crossing cells in a step is given once
 
     # -- the run ------------------------------------------------------------------------------
@@ -475,14 +475,6 @@ class Simulation:
         S[:, idx, idx] -= added_mass * potential * self.flow.rho * p.volume[:, None] / dt
         return np.where(free[:, :, None] & free[:, None, :], S, 0.0)
 
-    def held_velocities(self) -> np.ndarray:
-        """The generalised velocities (n, r) the flow holds on the particles, as the coupling
-        scheme counts them: where it says so (:attr:`CoupledFlow.held`, the stabilised scheme)
-        those that constrained its last solve plus the velocity jumps contact made after it (so
-        that the particles' velocities less these are the scheme's own last increments), else the
-        particles' own."""
-        return pack_velocities(self.particles) if self._held is None else self._held.copy()
-
     def state(self) -> dict:
         """Everything a restart needs, as arrays and numbers: flow ``x``, time, step count, the
         particles' positions, velocities, orientations, angular velocities, densities, fixed
@@ -494,8 +486,8 @@ class Simulation:
                "density": p.density.copy(), "fixed": p.fixed.copy()}
         if self._last_force is not None:  # the trapezoidal rule's force history (none before step 1)
             out.update(last_force=self._last_force.copy(), last_torque=self._last_torque.copy())
-        if self._held is not None:
-            out["held_velocities"] = self._held.copy()
+        if self.last_increment is not None:  # the stabilised coupling's last step
+            out["coupling_increment"] = self.last_increment.copy()
         if self.contact is not None:
             out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
         return out
@@ -521,7 +513,8 @@ class Simulation:
             raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
         else:
             self._last_force = self._last_torque = None
-        self._held = np.array(state["held_velocities"], dtype=float) if "held_velocities" in state else None
+        increment = state.get("coupling_increment")
+        self.last_increment = None if increment is None else np.array(increment, dtype=float)
         if self.contact is not None:
             self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
                                     if k.startswith("contact_")})
@@ -540,10 +533,6 @@ class Simulation:
         try:
             solved = self.coupling.advance(self, dt)
             new = self.integrate(solved.force, solved.torque, dt)
-            held = solved.held
-            if held is not None and self.contact is not None:  # contact's jump: not the scheme's increment
-                free = self.integrate(solved.force, solved.torque, dt, contact=False)
-                held = held + pack_velocities(new) - pack_velocities(free)
         except ConvergenceError as err:
             raise ConvergenceError(f"{where}: {err}") from None
         x, reports, force, torque = solved.x, solved.reports, solved.force, solved.torque
@@ -557,7 +546,7 @@ class Simulation:
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
                                                   new.angular_velocity)
             self.x[dofs] = values
-        self._held = held
+        self.last_increment = solved.increment
         shift = self._remove_mean_flux() if self.zero_flux else None
         self._last_force, self._last_torque = force, torque
         self.t += dt
@@ -579,8 +568,6 @@ class Simulation:
         shift = mean_velocity(space, self.x[:space.n_u])
         self.x[:space.n_u] -= np.repeat(shift, space.n_v)
         self.particles.velocity = self.particles.velocity - shift
-        if self._held is not None:
-            self._held[:, :len(shift)] -= shift
         return shift
 
     def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:

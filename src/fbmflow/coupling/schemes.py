@@ -39,9 +39,9 @@ class CoupledFlow:
 
     x : (n_dofs,) float64, the new flow; reports : the Newton reports of its flow solves;
     force : (n, dim) float64 and torque : (n, 3) float64, the hydrodynamic force and torque on the
-    particles; flow_solves : how many flow solves the step took; held : (n, r) float64 or None,
-    the generalised velocities the new flow holds on the particles where they differ from the
-    particles' new ones (the step's starting velocities, in the stabilised scheme).
+    particles; flow_solves : how many flow solves the step took; increment : (n, r) float64 or
+    None, the change of the generalised velocities whose fluid reaction the scheme predicted
+    instead of solving for it (the stabilised scheme: its step; the next flow solve measures it).
     """
 
     x: np.ndarray
@@ -49,7 +49,7 @@ class CoupledFlow:
     force: np.ndarray
     torque: np.ndarray
     flow_solves: int = 1
-    held: np.ndarray | None = None
+    increment: np.ndarray | None = None
 
 
 class ExplicitCoupling:
@@ -103,12 +103,10 @@ class StabilisedCoupling:
             (I - G_i S_i) s_i = Phi_i(v) - v_i - G_i S_i s'_i,
 
         one ``r x r`` solve per particle, ``G_i = d v / d f`` its gain. ``s'_i`` is this
-        scheme's last increment (``v`` less the velocities that constrained the last flow and
-        the jumps contact made after it,
-        :meth:`~fbmflow.simulation.Simulation.held_velocities`): the last step predicted the
-        fluid's reaction to it, ``S_i s'_i``, which ``f`` now measures. Contact's jumps are left
-        out of ``s'``: nothing predicted their reaction (with them in, a bed forming on the
-        floor at 4 cells per diameter oscillated and failed). The step's force is
+        scheme's last increment (:attr:`~fbmflow.simulation.Simulation.last_increment`): the
+        last step predicted the fluid's reaction to it, ``S_i s'_i``, which ``f`` now measures.
+        Contact's jumps are not part of it: nothing predicted their reaction (with them in, a
+        bed forming on the floor at 4 cells per diameter oscillated and failed). The step's force is
         ``f_i + S_i (s_i - s'_i)``, with which :meth:`~fbmflow.simulation.Simulation.integrate`
         gives ``v + s`` (and contact then acts).
 
@@ -119,9 +117,9 @@ class StabilisedCoupling:
         Measured against the implicit scheme: docs/validation.md, "Many particles"."""
         p = sim.particles
         x, reports, force, torque = sim.flow_and_forces(dt)
-        v = pack_velocities(p)
         if p.fixed.all():
-            return CoupledFlow(x, reports, force, torque, held=v)
+            return CoupledFlow(x, reports, force, torque)
+        v = pack_velocities(p)
         new = sim.integrate(force, torque, dt, contact=False)
         gain = sim.velocity_gain(dt)
         r = gain.shape[1]
@@ -129,14 +127,14 @@ class StabilisedCoupling:
         free[~p.fixed] = symmetric_motion(p.dim, sim.symmetry)
         S = sim.own_stiffness(x, free, dt, self.added_mass)
         GS = np.einsum("nab,nbc->nac", gain, S)
-        lag = np.where(free, v - sim.held_velocities(), 0.0)  # s': not in the flow yet
+        lag = np.zeros((p.n, r)) if sim.last_increment is None else np.where(free, sim.last_increment, 0.0)
         res = np.where(free, pack_velocities(new) - v, 0.0) - np.einsum("nab,nb->na", GS, lag)
         step = np.linalg.solve(np.eye(r) - GS, res[:, :, None])[:, :, 0]
         f = np.einsum("nab,nb->na", S, step - lag)
         d = p.dim
         torque = torque.copy()
         torque[:, 3 - (r - d):] += f[:, d:]
-        return CoupledFlow(x, reports, force + f[:, :d], torque, held=v)
+        return CoupledFlow(x, reports, force + f[:, :d], torque, increment=step)
 
 
 class ImplicitCoupling:
