@@ -418,7 +418,9 @@ class ContactParams(Section):
                                       self.lubrication_min_gap_cells * h, self.lubrication_resolved_cells * h)
         return ContactSet(Planes.box(mesh.lower, mesh.upper, walls), restitution=self.restitution,
                           friction=self.friction, iterations=self.iterations, broadphase=self.broadphase,
-                          skin=self.skin_cells * h, lubrication=lubrication)
+                          skin=self.skin_cells * h, lubrication=lubrication,
+                          periods=tuple(float(L) for L in mesh.periods) if any(mesh.periodic) else None,
+                          origin=tuple(mesh.lower))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -92,8 +92,7 @@ class Simulation:
         accelerate; in a box periodic along every axis the step also removes the mixture's mean
         volume flux (:attr:`zero_flux`, a Galilean change of frame that stops the drift the force
         estimator's error would cause). Particles cross periodic sides (their centres wrap into
-        the box); forces, constraints and repulsion take the nearest image. Hard contact does not
-        act across periodic sides yet (refused; use repulsion).
+        the box); forces, constraints, repulsion and hard contact take the nearest image.
     boundary : dict tag -> condition, optional
         One of :mod:`fbmflow.flow.boundary`'s conditions for every non-periodic face of the mesh;
         default: no-slip walls all round.
@@ -155,9 +154,6 @@ class Simulation:
                 raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
                                 f"make it with {expected.split()[0]}(...) or fbmflow.params.from_dict")
         contact = contact if contact is not None and contact.enabled else None
-        if contact is not None and any(mesh.periodic):
-            raise ValueError("hard contact does not act across periodic sides yet: set contact.enabled = "
-                             "false and keep the particles apart with repulsion (repulsion.enabled = true)")
         if contact is not None and coupling.integrator != "semi-implicit-euler":
             raise ValueError("hard contact advances the particles by semi-implicit Euler; integrator "
                              f"{coupling.integrator!r} cannot be combined with it: set coupling.integrator = "
@@ -390,15 +386,16 @@ class Simulation:
 
     # -- what the coupling schemes use (fbmflow.coupling.schemes) ----------------------------------
     def flow_and_forces(self, dt: float, velocities: Particles | None = None, guess: np.ndarray | None = None,
-                        rtol: float | None = None):
+                        rtol: float | None = None, relinearise: bool = False):
         """Solve the flow over the step ``dt`` from the current state, the particles at their
         current positions moving with the velocities of ``velocities`` (default: their own), from
         the initial guess ``guess`` (n_dofs,) with Newton's residual reduction ``rtol`` (default:
-        the solver settings'). Returns ``(x (n_dofs,), Newton reports, force (n, dim), torque
-        (n, 3))``; the state itself is not changed."""
+        the solver settings'), leaving a linearisation built at the new flow with
+        ``relinearise`` (:func:`~fbmflow.flow.advance`). Returns ``(x (n_dofs,), Newton reports,
+        force (n, dim), torque (n, 3))``; the state itself is not changed."""
         self._constraint_state = velocities
         try:
-            x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol)
+            x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol, relinearise)
         finally:
             self._constraint_state = None
         force, torque = self._forces(self._owner(self.flow.space.V), x, dt)

@@ -197,3 +197,55 @@ def test_lubrication_stops_a_slow_approach_before_contact():
     q, _ = _run(cs, p, np.zeros((2, 3)), 1e-3, 3000)
     gap = q.position[1, 0] - q.position[0, 0] - 1.0
     assert 0.0 < gap < 0.2 and abs(q.velocity[0, 0] - q.velocity[1, 0]) < 0.005  # from 0.1
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_pair_across_a_periodic_side_collides_as_the_same_pair_inside_the_box(dim):
+    """Two balls meeting obliquely through the periodic side x = 0 / 4, with restitution and
+    friction (so the contact point's arms matter), move exactly as the same pair shifted into the
+    middle of the box, which meets without the images."""
+    periods = [4.0, 0.0] + [0.0] * (dim - 2)
+    lower = [0.0] * dim
+
+    def pair(x0):
+        X = np.zeros((2, dim))
+        X[:, 0], X[:, 1] = [x0, x0 - 0.62], [1.0, 1.3]
+        p = Particles.at_rest([Ball(0.25, dim), Ball(0.2, dim)], [1.0, 2.0], X)
+        p.velocity[0, 0], p.velocity[1, 0] = -1.0, 0.5
+        return p
+    results = []
+    for x0 in (0.2, 2.2):  # across the side (the second ball at x = 3.58), and inside
+        p = pair(x0)
+        p.position[:, 0] = np.mod(p.position[:, 0], 4.0)
+        cs = ContactSet(restitution=0.5, friction=0.3, periods=periods, origin=lower)
+        q, report = _run(cs, p, np.zeros((2, dim)), 0.01, 40)
+        assert report.max_overlap <= 1e-12
+        results.append(q)
+    across, inside = results
+    assert abs(inside.velocity[0, 0] + 1.0) > 0.1  # they did collide
+    assert np.allclose(across.velocity, inside.velocity, atol=1e-12)
+    assert np.allclose(across.angular_velocity, inside.angular_velocity, atol=1e-12)
+    moved = across.position - inside.position
+    moved[:, 0] += 2.0  # the pairs started 2 apart along x: the same positions up to the period
+    assert np.allclose(moved - np.array(periods) * np.round(moved / np.where(np.array(periods) > 0, periods, 1.0)),
+                       0.0, atol=1e-12)
+
+
+def test_periodic_candidates_are_the_nearest_image_pairs():
+    """Against brute force on the nearest-image distances: random spheres in a box periodic
+    along x and z, some outside it (centres drift out during contact sub-steps)."""
+    from fbmflow.contact.broadphase import candidate_pairs
+    rng = np.random.default_rng(3)
+    L = np.array([3.0, 0.0, 2.0])
+    X = rng.uniform([-0.5, 0.0, 0.0], [3.5, 3.0, 2.0], size=(200, 3))
+    R = rng.uniform(0.05, 0.15, size=200)
+    margin = 0.05
+    for method in ("grid", "brute-force", "hierarchical-grid"):
+        pairs = candidate_pairs(X, R, margin, method, periods=L, origin=np.zeros(3))
+        diff = X[:, None, :] - X[None, :, :]
+        diff -= L * np.round(diff / np.where(L > 0, L, 1.0))
+        close = np.linalg.norm(diff, axis=2) <= R[:, None] + R[None, :] + margin
+        expected = np.argwhere(np.triu(close, 1))
+        assert np.array_equal(pairs, expected), method
+    with pytest.raises(ValueError, match="shorter than twice"):
+        candidate_pairs(X, R, margin, periods=np.array([0.5, 0.0, 0.0]))

@@ -50,6 +50,26 @@ def test_adaptive_forcing_terms_tighten_near_the_root():
     assert counts[True] < counts[False], counts
 
 
+def test_a_step_near_the_target_is_asked_no_more_than_it_needs():
+    """With a fixed ``linear_rtol`` the last step is asked only for half the target over the
+    residual it starts from (at most LAST_STEP_FORCING): the same root in as many iterations,
+    with looser linear solves (each step here leaves exactly the relative residual asked)."""
+    from fbmflow.solvers.newton import LAST_STEP_FORCING
+    asked = []
+
+    def step(x, F, fresh=True, rtol=None):
+        asked.append((rtol, float(abs(F[0]))))
+        return -F / slope * (1 - rtol), LinearReport("linear", 0.0, 1)
+    slope = 2.0
+    settings = NewtonSettings(rtol=1e-6, atol=1e-30, linear_rtol=1e-4)
+    x, report = solve_newton(lambda x: slope * (x - 1.0), step, np.array([2.0]), settings)
+    target = 1e-6 * 2.0
+    assert report.iterations == 2 and abs(report.residuals[-1]) <= target
+    assert asked[0][0] == 1e-4  # far from the target: linear_rtol
+    rtol, norm = asked[1]  # residual 2e-4: half the target over it is 5e-3
+    assert rtol == pytest.approx(0.5 * target / norm) and 1e-4 < rtol < LAST_STEP_FORCING
+
+
 def test_quadratic_convergence_on_a_scalar_equation():
     res, step = _scalar_problem(lambda x: x**3 - 2.0, lambda x: 3 * x**2)
     x, report = solve_newton(res, step, np.array([1.0]))

@@ -4,7 +4,10 @@ A pair ``(i, j)``, ``i < j``, is a candidate when the bounding balls come within
 
     |X_i - X_j| <= R_i + R_j + margin.
 
-Particle–plane candidates (domain walls) come from :func:`plane_candidates`.
+Particle–plane candidates (domain walls) come from :func:`plane_candidates`. In a box with
+periodic axes the pairs meet through their nearest images (:func:`candidate_pairs` with
+``periods``): the particles near a periodic side get images beyond the opposite one, the
+broadphase runs on both, and image pairs map back to their particles.
 
 Broadphases (a registry, :data:`BROADPHASES`), all returning the same pairs sorted by ``(i, j)``:
 
@@ -207,11 +210,40 @@ BROADPHASES = {"brute-force": brute_force_pairs, "grid": grid_pairs,
                "hierarchical-grid": hierarchical_grid_pairs}
 
 
-def candidate_pairs(X: np.ndarray, R: np.ndarray, margin: float = 0.0, method: str = "grid") -> np.ndarray:
-    """Candidate pairs by the broadphase ``method`` (see :data:`BROADPHASES`)."""
+def candidate_pairs(X: np.ndarray, R: np.ndarray, margin: float = 0.0, method: str = "grid",
+                    periods: np.ndarray | None = None, origin: np.ndarray | None = None) -> np.ndarray:
+    """Candidate pairs by the broadphase ``method`` (see :data:`BROADPHASES`), (k, 2) int64
+    sorted by ``(i, j)``, ``i < j``. With ``periods (dim,)`` (0 along non-periodic axes) and the
+    box's lower corner ``origin (dim,)``: the pairs whose nearest images are candidates (each
+    period at least twice ``2 max R + margin``, so that a pair has one such image)."""
     if method not in BROADPHASES:
         raise ValueError(f"unknown broadphase {method!r}; choose one of {sorted(BROADPHASES)}")
-    return BROADPHASES[method](X, R, margin)
+    if periods is None or not np.any(np.asarray(periods) > 0):
+        return BROADPHASES[method](X, R, margin)
+    X = np.asarray(X, dtype=float)
+    R = np.broadcast_to(np.asarray(R, dtype=float), (len(X),))
+    L = np.asarray(periods, dtype=float)
+    origin = np.zeros_like(L) if origin is None else np.asarray(origin, dtype=float)
+    reach = 2.0 * float(R.max(initial=0.0)) + margin
+    if np.any((L > 0) & (L < 2.0 * reach)):
+        raise ValueError(f"periods {L.tolist()} are shorter than twice the contact reach {reach:.3g} "
+                         "(2 max R + margin): a pair would meet two images of each other")
+    Y = X.copy()
+    periodic = L > 0
+    Y[:, periodic] = origin[periodic] + np.mod(X[:, periodic] - origin[periodic], L[periodic])
+    owner = np.arange(len(X))
+    for a in np.flatnonzero(periodic):  # images of the particles near either side, corners too
+        low = Y[:, a] - origin[a] < reach
+        high = origin[a] + L[a] - Y[:, a] < reach
+        shifted = np.concatenate([Y[low], Y[high]])
+        shifted[:, a] += np.concatenate([np.full(low.sum(), L[a]), np.full(high.sum(), -L[a])])
+        Y = np.concatenate([Y, shifted])
+        owner = np.concatenate([owner, owner[low], owner[high]])
+    pairs = BROADPHASES[method](Y, R[owner], margin)
+    i, j = owner[pairs[:, 0]], owner[pairs[:, 1]]
+    keep = i != j
+    pairs = np.unique(np.column_stack([np.minimum(i, j), np.maximum(i, j)])[keep], axis=0)
+    return pairs.reshape(-1, 2).astype(np.int64)
 
 
 def plane_candidates(X: np.ndarray, R: np.ndarray, points: np.ndarray, normals: np.ndarray,

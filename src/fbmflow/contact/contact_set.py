@@ -119,12 +119,16 @@ class ContactSet:
         free fluid nodes between surfaces, which the fictitious boundary method needs.
     lubrication : :class:`~fbmflow.contact.lubrication.Lubrication` or None, the film force
         below the resolved gap, applied implicitly before the contact impulses of each sub-step
+    periods : (dim,) or None, the period of every axis of a box with periodic sides (0 along
+        the others), whose lower corner is ``origin (dim,)``: pairs meet through their nearest
+        images (:func:`~fbmflow.contact.broadphase.candidate_pairs`); the planes should then
+        leave out the periodic faces
     """
 
     def __init__(self, planes: Planes | None = None, restitution: float = 0.0, friction: float = 0.0,
                  iterations: int = 50, tol: float = 1e-8, restitution_threshold: float | None = None,
                  broadphase: str = "grid", slop: float = 0.0, projection_sweeps: int = 20,
-                 skin: float = 0.0, lubrication=None):
+                 skin: float = 0.0, lubrication=None, periods=None, origin=None):
         if not 0.0 <= restitution <= 1.0:
             raise ValueError(f"restitution must lie in [0, 1], got {restitution}")
         if friction < 0 or (restitution_threshold or 0.0) < 0 or slop < 0 or skin < 0:
@@ -144,6 +148,9 @@ class ContactSet:
         self.projection_sweeps = int(projection_sweeps)
         self.skin = float(skin)
         self.lubrication = lubrication
+        self.periods = None if periods is None or not np.any(np.asarray(periods) > 0) else \
+            np.asarray(periods, dtype=float)
+        self.origin = None if origin is None else np.asarray(origin, dtype=float)
         # warm-start state: sorted pair keys, normal impulses, friction impulses (world vectors)
         self._stored_keys = np.zeros(0, dtype=np.int64)
         self._stored_normal = np.zeros(0)
@@ -170,14 +177,14 @@ class ContactSet:
         gaps are measured from the skin (``gap - skin``)."""
         margin = margin + self.skin
         R = p.bounding_radius
-        contacts = pair_contacts(p, candidate_pairs(p.position, R, margin, self.broadphase))
+        pairs = candidate_pairs(p.position, R, margin, self.broadphase, self.periods, self.origin)
+        contacts = pair_contacts(p, pairs, self.periods)
         if self.planes is not None:
             part, plane = plane_candidates(p.position, R, self.planes.points, self.planes.normals, margin)
             contacts = concatenate(contacts, plane_contacts(p, part, plane, self.planes))
         both_fixed = p.fixed[contacts.i] & np.where(contacts.j >= 0, p.fixed[np.maximum(contacts.j, 0)], True)
         if both_fixed.any():
-            keep = ~both_fixed
-            contacts = Contacts(*(getattr(contacts, f)[keep] for f in ("i", "j", "normal", "point", "gap")))
+            contacts = contacts.select(~both_fixed)
         contacts.gap = contacts.gap - self.skin
         return contacts
 
@@ -193,7 +200,7 @@ class ContactSet:
             t1, t2 = np.zeros_like(n), np.zeros_like(n)
         D = np.ascontiguousarray(np.stack([n, t1, t2], axis=1))
         X, point = _pad(p.position), _pad(contacts.point)
-        ri, rj = point - X[ci], np.where(wall, 0.0, point - X[jj])
+        ri, rj = point - X[ci], np.where(wall, 0.0, point - X[jj] - _pad(contacts.image))
         Ai = np.cross(ri[:, None, :], D)
         Aj = np.cross(rj[:, None, :], D)
         Bi = np.einsum("mab,mqb->mqa", inv_I[ci], Ai)

@@ -15,6 +15,10 @@ point farthest along ``d``, :meth:`support` of the shapes, in world axes):
   rather than the true normal. Implicit shapes act as their bounding balls.
 * **particle–plane** (exact for every shape with an exact support): the plane normal ``n_w``
   (into the domain) and ``gap = n_w . (s_i(-n_w) - p_w)``; point at the deepest surface point.
+
+Along periodic axes a pair meets through the nearest image of ``j``: ``X_j + image`` with
+``image`` a multiple of the periods (:func:`nearest_image`), and the contact point lies between
+``X_i`` and that image.
 """
 from __future__ import annotations
 
@@ -69,6 +73,8 @@ class Contacts:
 
     i : (m,) int64, the particle; j : (m,) int64, the other particle, or ``-1 - w`` for plane w
     normal : (m, dim) unit, from j towards i; point : (m, dim) [m]; gap : (m,) [m], < 0 overlapping
+    image : (m, dim) [m], the shift of j's image that meets i across periodic sides (zero
+    otherwise: planes, and every pair in a box without periodic axes)
     """
 
     i: np.ndarray
@@ -76,6 +82,13 @@ class Contacts:
     normal: np.ndarray
     point: np.ndarray
     gap: np.ndarray
+    image: np.ndarray
+
+    FIELDS = ("i", "j", "normal", "point", "gap", "image")
+
+    def select(self, keep: np.ndarray) -> "Contacts":
+        """The contacts where ``keep (m,)`` bool is True."""
+        return Contacts(*(getattr(self, f)[keep] for f in self.FIELDS))
 
     @property
     def m(self) -> int:
@@ -102,20 +115,32 @@ def _support_world(p: Particles, idx: np.ndarray, d: np.ndarray) -> np.ndarray:
     return p.position[idx] + np.einsum("kij,kj->ki", R, out)
 
 
-def pair_contacts(p: Particles, pairs: np.ndarray) -> Contacts:
-    """Contacts of candidate pairs ``(k, 2)`` (see the module docstring)."""
+def nearest_image(diff: np.ndarray, periods: np.ndarray | None) -> np.ndarray:
+    """``diff (k, dim)`` reduced to its nearest periodic image: each component along an axis of
+    period ``periods[a] > 0`` into ``[-L/2, L/2]`` (``periods`` None or 0: unchanged)."""
+    if periods is None:
+        return diff
+    L = np.asarray(periods, dtype=float)
+    return diff - L * np.round(diff / np.where(L > 0, L, 1.0))
+
+
+def pair_contacts(p: Particles, pairs: np.ndarray, periods: np.ndarray | None = None) -> Contacts:
+    """Contacts of candidate pairs ``(k, 2)`` (see the module docstring), through the nearest
+    image along the axes with ``periods (dim,) > 0``."""
     i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    diff = p.position[i] - p.position[j]
+    raw = p.position[i] - p.position[j]
+    diff = nearest_image(raw, periods)
+    image = raw - diff  # X_j + image is the image of j next to i
     dist = np.linalg.norm(diff, axis=1)
     n = np.divide(diff, dist[:, None], out=np.zeros_like(diff), where=dist[:, None] > 0)
     n[dist == 0, -1] = 1.0  # coincident centres: any direction
     r = p.ball_radius
     if r is not None:
-        si, sj = p.position[i] - r[i, None] * n, p.position[j] + r[j, None] * n
+        si, sj = p.position[i] - r[i, None] * n, p.position[j] + image + r[j, None] * n
     else:
-        si, sj = _support_world(p, i, -n), _support_world(p, j, n)
+        si, sj = _support_world(p, i, -n), _support_world(p, j, n) + image
     gap = np.einsum("kd,kd->k", si - sj, n)
-    return Contacts(i, j, n, 0.5 * (si + sj), gap)
+    return Contacts(i, j, n, 0.5 * (si + sj), gap, image)
 
 
 def plane_contacts(p: Particles, part: np.ndarray, plane: np.ndarray, planes: Planes) -> Contacts:
@@ -123,9 +148,9 @@ def plane_contacts(p: Particles, part: np.ndarray, plane: np.ndarray, planes: Pl
     n = planes.normals[plane]
     s = _support_world(p, part, -n)
     gap = np.einsum("kd,kd->k", s - planes.points[plane], n)
-    return Contacts(part.astype(np.int64), -1 - plane.astype(np.int64), n, s - 0.5 * gap[:, None] * n, gap)
+    return Contacts(part.astype(np.int64), -1 - plane.astype(np.int64), n, s - 0.5 * gap[:, None] * n, gap,
+                    np.zeros_like(n))
 
 
 def concatenate(a: Contacts, b: Contacts) -> Contacts:
-    return Contacts(*(np.concatenate([getattr(a, f), getattr(b, f)])
-                      for f in ("i", "j", "normal", "point", "gap")))
+    return Contacts(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in Contacts.FIELDS))

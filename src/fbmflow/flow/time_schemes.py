@@ -67,13 +67,14 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
 
 
 def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None,
-            rtol: float | None = None):
+            rtol: float | None = None, relinearise: bool = False):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
 
     ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
     the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
-    (default the problem's).
+    (default the problem's). ``relinearise``: the last substep leaves a linearisation built at
+    its solution, not the one its Newton iteration kept (:meth:`NavierStokesProblem.solve`).
 
     Returns
     -------
@@ -84,7 +85,8 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         raise ValueError(f"time step must be positive, got {dt}")
     reports = []
     s = problem.space
-    for sub in get_scheme(scheme):
+    subs = get_scheme(scheme)
+    for i, sub in enumerate(subs):
         k = sub.fraction * dt
         t_new = t + k
         u_old = x[:s.n_u]
@@ -94,7 +96,8 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
         x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
-                                  guess=guess if len(get_scheme(scheme)) == 1 else None, rtol=rtol)
+                                  guess=guess if len(subs) == 1 else None, rtol=rtol,
+                                  relinearise=relinearise and i == len(subs) - 1)
         reports.append(report)
         t = t_new
     return x, reports

@@ -8,7 +8,8 @@ mu = 0.2 g/(cm s), g = 980 cm/s^2: a single sphere settles at about 1.2 cm/s (Re
 Gravity points along a periodic axis, so a mean pressure gradient carries the particles' weight in
 the fluid (:func:`~fbmflow.simulation.periodic_drive`): the suspension as a whole does not
 accelerate and its mean volume flux stays zero. The particles cross the periodic sides; repulsion
-(nearest image) keeps them apart (hard contact does not act across periodic sides yet).
+(nearest image) keeps them apart, or hard contact (``contact.enabled``, off by default), which
+acts across the periodic sides too.
 
 Level ``L``: ``2^L`` cells per diameter (uniform, square / cubic cells).
 
@@ -42,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh import StructuredMesh
-from ..params import FictitiousBoundaryParams, ParamError, Section, TimeParams, derive, param
+from ..params import ContactParams, FictitiousBoundaryParams, ParamError, Section, TimeParams, derive, param
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CgsFluid, Layout, ParticleScene, particle_params
@@ -71,12 +72,16 @@ class SuspensionParticles(Section):
 
 
 SphereSuspension = derive(SuspensionParticles, "SphereSuspension", "The particles.", count=8)
+SuspensionContact = derive(ContactParams, "SuspensionContact",
+                           "Hard contact between the particles, through the periodic sides (off by default: "
+                           "repulsion keeps them apart).",
+                           enabled=param(False, "hard contact on (no overlap, nearest images)"))
 Suspension2DParams = particle_params("Suspension2DParams", "Parameters of ``suspension-2d``.",
                                      fluid=SuspensionFluid, particles=SuspensionParticles,
-                                     time=SuspensionTime, fbm=SuspensionBoundary)
+                                     time=SuspensionTime, fbm=SuspensionBoundary, contact=SuspensionContact)
 Suspension3DParams = particle_params("Suspension3DParams", "Parameters of ``suspension-3d``.",
                                      fluid=SuspensionFluid, particles=SphereSuspension,
-                                     time=SphereSuspensionTime, fbm=SuspensionBoundary)
+                                     time=SphereSuspensionTime, fbm=SuspensionBoundary, contact=SuspensionContact)
 
 
 def random_positions(count: int, d: float, box: np.ndarray, gap: float, seed: int,

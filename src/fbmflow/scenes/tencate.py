@@ -18,7 +18,10 @@ pressure's force taken half a step back, against +2.3 / +1.5 % without, see docs
 semi-implicit Euler, the earlier defaults, settled 6-8 % too fast at level 1 (E4).
 
 The run stops at ``time.t_end`` (by default the time the experiment reached the bottom) or when
-the gap between sphere and bottom falls below ``stop_gap`` diameters (no contact model here).
+the gap between sphere and bottom falls below ``stop_gap`` diameters. Contact with the walls
+(``contact.enabled``, with ``coupling.integrator = "semi-implicit-euler"``) is off by default; it
+carries the lubrication correction (``contact.lubrication``; its effect on the approach to the
+bottom: docs/validation.md, "Lubrication").
 """
 from __future__ import annotations
 
@@ -37,6 +40,7 @@ from ..params import (
     Section,
     SolverParams,
     TimeParams,
+    WallContactParams,
     derive,
     param,
 )
@@ -105,7 +109,8 @@ def _inside_the_box(params) -> None:
 
 TenCateParams = particle_params("TenCateParams", "Parameters of ``ten-cate``.", _inside_the_box,
                                 fluid=TenCateFluid, particle=TenCateParticle, domain=TenCateDomain,
-                                time=TenCateTime, coupling=SecondOrderCouplingParams, solver=TenCateSolver)
+                                time=TenCateTime, coupling=SecondOrderCouplingParams, solver=TenCateSolver,
+                                contact=WallContactParams)
 
 
 def gap_deviation(t: np.ndarray, gap: np.ndarray, case: str, up_to: float = 1.0,

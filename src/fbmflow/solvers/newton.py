@@ -28,7 +28,8 @@ class NewtonSettings:
     takes one per solve (multigrid; the direct solver's PARDISO refinement; None: the solver's
     own target). A Newton (or chord) step needs no more than a small fraction of the residual it
     reduces; the stopping rule above, on the nonlinear residual, decides the accuracy of the
-    solution.
+    solution. A step near the target is asked no more than to reach it: ``max(linear_rtol,
+    target / (2 |F_k|))``, at most :data:`LAST_STEP_FORCING`.
 
     ``adaptive_linear_rtol``: Eisenstat and Walker's forcing terms (1996, choice 2) instead:
     ``eta_k = 0.9 (|F_k| / |F_(k-1)|)^2``, safeguarded by ``0.9 eta_(k-1)^2`` where that exceeds
@@ -103,6 +104,8 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
                 f"(started at {report.residuals[0]:.3e}, target {target:.3e})")
         if settings.adaptive_linear_rtol and settings.linear_rtol is not None:
             eta = _forcing_term(eta, report.residuals, settings.linear_rtol, target)
+        elif settings.linear_rtol is not None:  # no tighter than the step to the target needs
+            eta = min(max(settings.linear_rtol, 0.5 * target / norm), LAST_STEP_FORCING)
         dx, lin = linear_step(x, F, fresh, eta)
         report.linear_iterations += lin.iterations
         report.linear_time_s += lin.wall_time_s
@@ -133,6 +136,10 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     report.converged = True
     return x, report
 
+
+#: the loosest linear solve asked of a Newton step that is to reach the target on its own (the
+#: residual it leaves is only the linear one where the Jacobian is exact)
+LAST_STEP_FORCING = 0.1
 
 #: the tightest linear solve the forcing terms ask for (multigrid stagnated near 3e-6 on dfg-3d-1z
 #: level 3, measured; each Newton step then still reduces the residual 10^4-fold)
