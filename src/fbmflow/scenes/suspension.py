@@ -81,7 +81,8 @@ Suspension2DParams = particle_params("Suspension2DParams", "Parameters of ``susp
                                      time=SuspensionTime, fbm=SuspensionBoundary, contact=SuspensionContact)
 Suspension3DParams = particle_params("Suspension3DParams", "Parameters of ``suspension-3d``.",
                                      fluid=SuspensionFluid, particles=SphereSuspension,
-                                     time=SphereSuspensionTime, fbm=SuspensionBoundary, contact=SuspensionContact)
+                                     time=SphereSuspensionTime, fbm=SuspensionBoundary,
+                                     contact=SuspensionContact)
 
 
 def random_positions(count: int, d: float, box: np.ndarray, gap: float, seed: int,
