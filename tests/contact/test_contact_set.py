@@ -247,5 +247,5 @@ def test_periodic_candidates_are_the_nearest_image_pairs():
         close = np.linalg.norm(diff, axis=2) <= R[:, None] + R[None, :] + margin
         expected = np.argwhere(np.triu(close, 1))
         assert np.array_equal(pairs, expected), method
-    with pytest.raises(ValueError, match="shorter than twice"):
+    with pytest.raises(ValueError, match="shorter than two of the largest"):
         candidate_pairs(X, R, margin, periods=np.array([0.5, 0.0, 0.0]))

@@ -214,8 +214,8 @@ def candidate_pairs(X: np.ndarray, R: np.ndarray, margin: float = 0.0, method: s
                     periods: np.ndarray | None = None, origin: np.ndarray | None = None) -> np.ndarray:
     """Candidate pairs by the broadphase ``method`` (see :data:`BROADPHASES`), (k, 2) int64
     sorted by ``(i, j)``, ``i < j``. With ``periods (dim,)`` (0 along non-periodic axes) and the
-    box's lower corner ``origin (dim,)``: the pairs whose nearest images are candidates (each
-    period at least twice ``2 max R + margin``, so that a pair has one such image)."""
+    box's lower corner ``origin (dim,)``: the pairs with an image within reach (a pair meets
+    through its nearest image only, so each period must hold two of the largest particles)."""
     if method not in BROADPHASES:
         raise ValueError(f"unknown broadphase {method!r}; choose one of {sorted(BROADPHASES)}")
     if periods is None or not np.any(np.asarray(periods) > 0):
@@ -225,9 +225,9 @@ def candidate_pairs(X: np.ndarray, R: np.ndarray, margin: float = 0.0, method: s
     L = np.asarray(periods, dtype=float)
     origin = np.zeros_like(L) if origin is None else np.asarray(origin, dtype=float)
     reach = 2.0 * float(R.max(initial=0.0)) + margin
-    if np.any((L > 0) & (L < 2.0 * reach)):
-        raise ValueError(f"periods {L.tolist()} are shorter than twice the contact reach {reach:.3g} "
-                         "(2 max R + margin): a pair would meet two images of each other")
+    if np.any((L > 0) & (L < 4.0 * float(R.max(initial=0.0)))):
+        raise ValueError(f"periods {L.tolist()} are shorter than two of the largest particles (diameter "
+                         f"{2 * R.max():.3g}): a pair could touch two images of each other; use a larger box")
     Y = X.copy()
     periodic = L > 0
     Y[:, periodic] = origin[periodic] + np.mod(X[:, periodic] - origin[periodic], L[periodic])

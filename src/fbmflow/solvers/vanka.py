@@ -159,9 +159,9 @@ class FactoredVankaSmoother:
     Cell patches go in slab order (:mod:`fbmflow.solvers.ordering`: a sequential block
     Gauss–Seidel sweep in lexicographic order within slabs that threads sweep at once);
     then the patches at and inside the fictitious boundaries (those that hold a constrained
-    velocity, fixed or row-constrained, not a wall's; the agglomerated ones among them) get
-    ``interface_sweeps`` more updates one after the other, and the agglomerated patches follow
-    one after the other, with one more patch per cluster of cells whose pressures share an
+    velocity, fixed or row-constrained, not a wall's) get ``interface_sweeps`` more updates, the
+    cell patches among them in slab phases as well and the agglomerated ones after them one after
+    the other, and the agglomerated patches follow one after the other, with one more patch per cluster of cells whose pressures share an
     orphaned mode (the pressure block couples them; :func:`_cluster_patches`).
 
     Parameters
@@ -234,6 +234,12 @@ class FactoredVankaSmoother:
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
         self.interface_sweeps = interface_sweeps
         self.interface = self._interface_patches(system)
+        # the cell patches among them in slab phases too (patch k < cells.size is cell cells[k]);
+        # the agglomerated ones, which may reach across slabs, one after the other
+        plain_interface = self.interface[self.interface < cells.size]
+        self.interface_phases = [(gptr, plain_interface[order]) for gptr, order in ordering.slab_phases(
+            mesh.shape, mesh.periodic, mesh.cell_indices(), cells[plain_interface], reach)]
+        self.interface_merged = self.interface[self.interface >= cells.size]
 
     @property
     def _patches(self) -> tuple:
@@ -268,5 +274,7 @@ class FactoredVankaSmoother:
             for gptr, order in self.sweeps[k % len(self.sweeps)]:
                 _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
             for _ in range(self.interface_sweeps):
-                self.update(self.interface, b, x)
+                for gptr, order in self.interface_phases:
+                    _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
+                self.update(self.interface_merged, b, x)
             self.update(self.merged, b, x)

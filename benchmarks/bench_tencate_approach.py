@@ -1,0 +1,157 @@
+"""ten Cate's approach to the bottom with and without the lubrication correction: the gap curve
+below gap/d = 1 against the experiment.
+
+Run:  python benchmarks/bench_tencate_approach.py [--case E4] [--level 1] [--dt 0.01]
+      [--branch-gap 2.0] [--steps 30] [--base RUN_DIR]
+
+One run of the scene (its defaults, ``solver.linear = multigrid``) goes to the first step whose
+gap falls below ``--branch-gap`` diameters, or ``--base`` names a run whose checkpoint is that
+state (e.g. ``fbmflow run ten-cate --level 1 --set time.dt=0.01 --set time.t_end=0.95 --set
+solver.linear=multigrid --checkpoint-every 5``). From that state
+three variants take ``--steps`` more steps (a run made here is not kept):
+
+* ``defaults``: the scene as it is (Crank-Nicolson with the trapezoidal particle integrator, no
+  contact; the sphere sinks until the run's end);
+* ``contact``: wall contact with a skin of 0.1 cells, which contact needs with semi-implicit
+  Euler (the integrator hard contact advances the sphere with);
+* ``lubrication``: the same with the lubrication correction at the package's defaults.
+
+Each variant's gap and velocity per step go into ``benchmarks/results/tencate_approach.json``,
+with ``.md`` (the gap at the experiment's samples below gap/d = 1, and the time from gap/d = 1
+to the experiment's last sample) and ``.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from fbmbench.common import RESULTS, provenance
+
+from fbmflow.io import load_checkpoint
+from fbmflow.params import from_dict
+from fbmflow.scenes import get_scene
+from fbmflow.scenes.data import tencate2002
+
+VARIANTS = {
+    "defaults": {},
+    "contact": {"contact": {"enabled": True, "skin_cells": 0.1},
+                "coupling": {"integrator": "semi-implicit-euler"}},
+    "lubrication": {"contact": {"enabled": True, "skin_cells": 0.1, "lubrication": True},
+                    "coupling": {"integrator": "semi-implicit-euler"}},
+}
+
+
+def _params(scene, case: str, dt: float, extra: dict):
+    tree = {"fluid": {"case": case}, "time": {"dt": dt}, "solver": {"linear": "multigrid"}}
+    for section, values in extra.items():
+        tree.setdefault(section, {}).update(values)
+    return from_dict(scene.Params, tree)
+
+
+def _gap(sim, d: float) -> float:
+    return float(sim.particles.position[0, 2] - d / 2) / d
+
+
+def base_state(scene, args) -> tuple[dict, list]:
+    """The state at the branch point and the curve up to it: the checkpoint of ``--base`` (the
+    curve before it is then left out) or a run made here."""
+    if args.base is not None:
+        return load_checkpoint(args.base / "checkpoint.h5")[0], []
+    params = _params(scene, args.case, args.dt, {})
+    sim = scene.build(params, args.level).sim
+    d = params.particle.diameter
+    rows = []
+    while _gap(sim, d) > args.branch_gap:
+        r = sim.step()
+        rows.append((r.t, _gap(sim, d), float(r.velocity[0, 2])))
+        print(f"base step {r.step}: t = {r.t:.3f} s, gap/d = {rows[-1][1]:.3f}", flush=True)
+    return sim.state(), rows
+
+
+def branch(scene, args, state: dict, name: str) -> dict:
+    params = _params(scene, args.case, args.dt, VARIANTS[name])
+    sim = scene.build(params, args.level).sim
+    sim.set_state(state)
+    d = params.particle.diameter
+    rows, t0 = [], time.perf_counter()
+    for _ in range(args.steps):
+        r = sim.step()
+        rows.append((r.t, _gap(sim, d), float(r.velocity[0, 2])))
+        print(f"{name} step {r.step}: t = {r.t:.3f} s, gap/d = {rows[-1][1]:.4f}, "
+              f"w = {rows[-1][2]:.5f} m/s", flush=True)
+    return {"variant": name, "rows": rows, "wall_s": time.perf_counter() - t0}
+
+
+def summary(case: str, runs: list[dict], base: list) -> list[dict]:
+    """Per variant: the gap at the experiment's samples with gap_exp < 1, and the time from the
+    crossing of gap/d = 1 to the experiment's last sample's gap, against the experiment's."""
+    ref = tencate2002.GAP[case]
+    below = ref[ref[:, 1] < 1.0]
+    t_exp_1 = float(np.interp(1.0, ref[::-1, 1], ref[::-1, 0]))
+    g_last = float(below[-1, 1])
+    out = []
+    for run in runs:
+        rows = np.array(base + run["rows"])
+        t, gap = rows[:, 0], rows[:, 1]
+        t1 = float(np.interp(1.0, gap[::-1], t[::-1]))
+        reached = gap.min() <= g_last
+        t_last = float(np.interp(g_last, gap[::-1], t[::-1])) if reached else float("nan")
+        out.append({"variant": run["variant"], "gap_at_samples": np.interp(below[:, 0], t, gap).tolist(),
+                    "t_gap_1": t1, "time_1_to_last": t_last - t1, "min_gap": float(gap.min()),
+                    "exp_time_1_to_last": float(below[-1, 0]) - t_exp_1, "wall_s": run["wall_s"]})
+    return out
+
+
+def write(case: str, level: int, runs: list[dict], base: list, stats: list[dict]) -> None:
+    ref = tencate2002.GAP[case]
+    below = ref[ref[:, 1] < 1.0]
+    stem = RESULTS / "tencate_approach"
+    stem.with_suffix(".json").write_text(json.dumps({"case": case, "level": level, "base": base, "runs": runs,
+                                                     "summary": stats, **provenance()}, indent=1))
+    samples = " | ".join(f"t = {t:.3f} s" for t in below[:, 0])
+    lines = [f"# ten Cate {case}, level {level}: the approach to the bottom, with and without lubrication "
+             "(benchmarks/bench_tencate_approach.py)", "",
+             "Gap/d at the experiment's samples below gap/d = 1, and the time from gap/d = 1 to the "
+             "experiment's last sample's gap (experiment: first row).", "",
+             f"| variant | {samples} | time from gap/d = 1 | smallest gap/d | wall s |",
+             "|---" * (len(below) + 4) + "|",
+             "| experiment | " + " | ".join(f"{g:.3f}" for g in below[:, 1])
+             + f" | {stats[0]['exp_time_1_to_last']:.3f} s | | |"]
+    for s in stats:
+        lines.append(f"| {s['variant']} | " + " | ".join(f"{g:.3f}" for g in s["gap_at_samples"])
+                     + f" | {s['time_1_to_last']:.3f} s | {s['min_gap']:.3f} | {s['wall_s']:.0f} |")
+    stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    from fbmflow.scenes.base import pyplot, save_figure
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(ref[:, 0], ref[:, 1], "ko", label="experiment")
+    for run in runs:
+        rows = np.array(base + run["rows"])
+        ax.plot(rows[:, 0], rows[:, 1], label=run["variant"])
+    ax.set(xlabel="t [s]", ylabel="gap / d", ylim=(0, 2.5), title=f"ten Cate {case}, level {level}")
+    ax.legend()
+    save_figure(fig, stem.with_suffix(".png"))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", default="E4", choices=sorted(tencate2002.GAP))
+    ap.add_argument("--level", type=int, default=1)
+    ap.add_argument("--dt", type=float, default=0.01)
+    ap.add_argument("--branch-gap", type=float, default=2.0, help="branch below this gap/d")
+    ap.add_argument("--steps", type=int, default=30, help="steps of each variant after the branch")
+    ap.add_argument("--base", type=Path, help="a run directory whose checkpoint is the branch point")
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    args = ap.parse_args(argv)
+    scene = get_scene("ten-cate")
+    state, base = base_state(scene, args)
+    runs = [branch(scene, args, state, name) for name in args.variants]
+    stats = summary(args.case, runs, base)
+    write(args.case, args.level, runs, base, stats)
+
+
+if __name__ == "__main__":
+    main()
