@@ -161,8 +161,9 @@ class FactoredVankaSmoother:
     then the patches at and inside the fictitious boundaries (those that hold a constrained
     velocity, fixed or row-constrained, not a wall's) get ``interface_sweeps`` more updates, the
     cell patches among them in slab phases as well and the agglomerated ones after them one after
-    the other, and the agglomerated patches follow one after the other, with one more patch per cluster of cells whose pressures share an
-    orphaned mode (the pressure block couples them; :func:`_cluster_patches`).
+    the other; then all agglomerated patches one after the other, with one more patch per
+    cluster of cells whose pressures share an orphaned mode (the pressure block couples them;
+    :func:`_cluster_patches`).
 
     Parameters
     ----------
