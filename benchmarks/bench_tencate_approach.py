@@ -8,7 +8,8 @@ One run of the scene (its defaults, ``solver.linear = multigrid``) goes to the f
 gap falls below ``--branch-gap`` diameters, or ``--base`` names a run whose checkpoint is that
 state (e.g. ``fbmflow run ten-cate --level 1 --set time.dt=0.01 --set time.t_end=0.95 --set
 solver.linear=multigrid --checkpoint-every 5``). From that state
-three variants take ``--steps`` more steps (a run made here is not kept):
+three variants take ``--steps`` more steps, or fewer where the gap falls below the scene's
+``particle.stop_gap`` (a run made here is not kept):
 
 * ``defaults``: the scene as it is (Crank-Nicolson with the trapezoidal particle integrator, no
   contact; the sphere sinks until the run's end);
@@ -82,6 +83,8 @@ def branch(scene, args, state: dict, name: str) -> dict:
         rows.append((r.t, _gap(sim, d), float(r.velocity[0, 2])))
         print(f"{name} step {r.step}: t = {r.t:.3f} s, gap/d = {rows[-1][1]:.4f}, "
               f"w = {rows[-1][2]:.5f} m/s", flush=True)
+        if rows[-1][1] < params.particle.stop_gap:  # the scene's own end
+            break
     return {"variant": name, "rows": rows, "wall_s": time.perf_counter() - t0}
 
 
