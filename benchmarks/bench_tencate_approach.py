@@ -75,6 +75,9 @@ def base_state(scene, args) -> tuple[dict, list]:
 def branch(scene, args, state: dict, name: str) -> dict:
     params = _params(scene, args.case, args.dt, VARIANTS[name])
     sim = scene.build(params, args.level).sim
+    if sim.contact is not None and "contact_keys" not in state:  # no warm start from a run without
+        state = {**state, "contact_keys": np.zeros(0, dtype=np.int64), "contact_normal": np.zeros(0),
+                 "contact_friction": np.zeros((0, 3))}
     sim.set_state(state)
     d = params.particle.diameter
     rows, t0 = [], time.perf_counter()
@@ -152,6 +155,12 @@ def main(argv=None):
     scene = get_scene("ten-cate")
     state, base = base_state(scene, args)
     runs = [branch(scene, args, state, name) for name in args.variants]
+    earlier = RESULTS / "tencate_approach.json"  # keep the other variants of the same case and level
+    if earlier.is_file():
+        old = json.loads(earlier.read_text())
+        if (old["case"], old["level"]) == (args.case, args.level) and old["base"] == base:
+            runs = [r for r in old["runs"] if r["variant"] not in args.variants] + runs
+    runs.sort(key=lambda r: list(VARIANTS).index(r["variant"]))
     stats = summary(args.case, runs, base)
     write(args.case, args.level, runs, base, stats)
 
