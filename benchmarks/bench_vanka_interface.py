@@ -35,8 +35,8 @@ def main(argv=None):
     system = sim.flow._linearisation[4]
     system = system.preconditioner or system
     smoother = FactoredVankaSmoother(system)
-    print(f"{system.n_u + system.n_p} unknowns, {smoother.ptr.size - 1} patches, {smoother.interface.size} at "
-          "the interface", flush=True)
+    print(f"{system.n_u + system.n_p} unknowns, {smoother.ptr.size - 1} patches, "
+          f"{smoother.interface.size} at the interface", flush=True)
     b = np.random.default_rng(0).standard_normal(system.n_u + system.n_p)
     phases, merged = smoother.interface_phases, smoother.interface_merged
 
@@ -57,7 +57,8 @@ def main(argv=None):
     for _ in range(2):
         for order in ("one after the other", "slab phases", "none"):
             t, r = timed(order)
-            print(f"interface sweeps {order}: {args.sweeps} sweeps {t:.3f} s, residual after {r:.4e}", flush=True)
+            print(f"interface sweeps {order}: {args.sweeps} sweeps {t:.3f} s, residual after {r:.4e}",
+                  flush=True)
 
 
 if __name__ == "__main__":
