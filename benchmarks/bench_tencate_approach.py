@@ -111,12 +111,12 @@ def summary(case: str, runs: list[dict], base: list) -> list[dict]:
     return out
 
 
-def write(case: str, level: int, runs: list[dict], base: list, stats: list[dict]) -> None:
+def write(case: str, level: int, runs: list[dict], base: list, stats: list[dict], measured: dict) -> None:
     ref = tencate2002.GAP[case]
     below = ref[ref[:, 1] < 1.0]
     stem = RESULTS / "tencate_approach"
     stem.with_suffix(".json").write_text(json.dumps({"case": case, "level": level, "base": base, "runs": runs,
-                                                     "summary": stats, **provenance()}, indent=1))
+                                                     "summary": stats, **measured}, indent=1))
     samples = " | ".join(f"t = {t:.3f} s" for t in below[:, 0])
     lines = [f"# ten Cate {case}, level {level}: the approach to the bottom, with and without lubrication "
              "(benchmarks/bench_tencate_approach.py)", "",
@@ -132,12 +132,17 @@ def write(case: str, level: int, runs: list[dict], base: list, stats: list[dict]
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     from fbmflow.scenes.base import pyplot, save_figure
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(ref[:, 0], ref[:, 1], "ko", label="experiment")
-    for run in runs:
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    t0 = min(np.array(base + run["rows"])[0, 0] for run in runs) - 0.02
+    shown = ref[ref[:, 0] >= t0]
+    ax.plot(shown[:, 0], shown[:, 1], "ko", label="experiment")
+    for k, run in enumerate(runs):
         rows = np.array(base + run["rows"])
-        ax.plot(rows[:, 0], rows[:, 1], label=run["variant"])
-    ax.set(xlabel="t [s]", ylabel="gap / d", ylim=(0, 2.5), title=f"ten Cate {case}, level {level}")
+        style = dict(label=run["variant"], ls=("-", "--", ":")[k % 3])
+        ax.plot(rows[:, 0], rows[:, 1], **style)
+        bx.plot(rows[:, 0], -rows[:, 2], **style)
+    ax.set(xlabel="t [s]", ylabel="gap / d", ylim=(0, None), title=f"ten Cate {case}, level {level}: gap")
+    bx.set(xlabel="t [s]", ylabel="settling velocity [m/s]", title="velocity")
     ax.legend()
     save_figure(fig, stem.with_suffix(".png"))
 
@@ -151,7 +156,14 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=30, help="steps of each variant after the branch")
     ap.add_argument("--base", type=Path, help="a run directory whose checkpoint is the branch point")
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument("--table-only", action="store_true", help="redraw the table and plot from the JSON")
     args = ap.parse_args(argv)
+    if args.table_only:
+        old = json.loads((RESULTS / "tencate_approach.json").read_text())
+        stats = summary(old["case"], old["runs"], old["base"])
+        write(old["case"], old["level"], old["runs"], old["base"], stats,
+              {k: old[k] for k in ("date", "commit", "cpus")})
+        return
     scene = get_scene("ten-cate")
     state, base = base_state(scene, args)
     runs = [branch(scene, args, state, name) for name in args.variants]
@@ -162,7 +174,7 @@ def main(argv=None):
             runs = [r for r in old["runs"] if r["variant"] not in args.variants] + runs
     runs.sort(key=lambda r: list(VARIANTS).index(r["variant"]))
     stats = summary(args.case, runs, base)
-    write(args.case, args.level, runs, base, stats)
+    write(args.case, args.level, runs, base, stats, provenance())
 
 
 if __name__ == "__main__":
