@@ -17,9 +17,10 @@ three variants take ``--steps`` more steps, or fewer where the gap falls below t
   Euler (the integrator hard contact advances the sphere with);
 * ``lubrication``: the same with the lubrication correction at the package's defaults.
 
-Each variant's gap and velocity per step go into ``benchmarks/results/tencate_approach.json``,
-with ``.md`` (the gap at the experiment's samples below gap/d = 1, and the time from gap/d = 1
-to the experiment's last sample) and ``.png``.
+Each variant's gap and velocity per step go into
+``benchmarks/results/tencate_approach_CASE_LLEVEL.json``, with ``.md`` (the gap at the
+experiment's samples below gap/d = 1, and the time from gap/d = 1 to the experiment's last
+sample) and ``.png``.
 """
 from __future__ import annotations
 
@@ -111,10 +112,14 @@ def summary(case: str, runs: list[dict], base: list) -> list[dict]:
     return out
 
 
+def _stem(case: str, level: int) -> Path:
+    return RESULTS / f"tencate_approach_{case}_L{level}"
+
+
 def write(case: str, level: int, runs: list[dict], base: list, stats: list[dict], measured: dict) -> None:
     ref = tencate2002.GAP[case]
     below = ref[ref[:, 1] < 1.0]
-    stem = RESULTS / "tencate_approach"
+    stem = _stem(case, level)
     stem.with_suffix(".json").write_text(json.dumps({"case": case, "level": level, "base": base, "runs": runs,
                                                      "summary": stats, **measured}, indent=1))
     samples = " | ".join(f"t = {t:.3f} s" for t in below[:, 0])
@@ -159,7 +164,7 @@ def main(argv=None):
     ap.add_argument("--table-only", action="store_true", help="redraw the table and plot from the JSON")
     args = ap.parse_args(argv)
     if args.table_only:
-        old = json.loads((RESULTS / "tencate_approach.json").read_text())
+        old = json.loads(_stem(args.case, args.level).with_suffix(".json").read_text())
         stats = summary(old["case"], old["runs"], old["base"])
         write(old["case"], old["level"], old["runs"], old["base"], stats,
               {k: old[k] for k in ("date", "commit", "cpus")})
@@ -167,10 +172,10 @@ def main(argv=None):
     scene = get_scene("ten-cate")
     state, base = base_state(scene, args)
     runs = [branch(scene, args, state, name) for name in args.variants]
-    earlier = RESULTS / "tencate_approach.json"  # keep the other variants of the same case and level
+    earlier = _stem(args.case, args.level).with_suffix(".json")  # keep the other variants of the run
     if earlier.is_file():
         old = json.loads(earlier.read_text())
-        if (old["case"], old["level"]) == (args.case, args.level) and old["base"] == base:
+        if old["base"] == base:
             runs = [r for r in old["runs"] if r["variant"] not in args.variants] + runs
     runs.sort(key=lambda r: list(VARIANTS).index(r["variant"]))
     stats = summary(args.case, runs, base)
