@@ -157,7 +157,6 @@ class ImplicitCoupling:
         self.tol = float(params.tol)
         self.max_subiterations = int(params.max_subiterations)
         self.first_rtol = float(params.first_rtol) if params.first_rtol > newton_rtol else None
-        self.relinearise = False  # under measurement: a fresh linearisation after the loose solve
 
     @staticmethod
     def stored_responses(particles, symmetry) -> int:
@@ -194,8 +193,7 @@ class ImplicitCoupling:
         """
         p = sim.particles
         loose = self.first_rtol is not None and not p.fixed.all()
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.first_rtol if loose else None,
-                                                        relinearise=loose and self.relinearise)
+        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.first_rtol if loose else None)
         exact = not loose
         new = sim.integrate(force, torque, dt, contact=False)
         gain = sim.velocity_gain(dt)

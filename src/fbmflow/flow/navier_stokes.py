@@ -320,16 +320,13 @@ class NavierStokesProblem:
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
               guess: np.ndarray | None = None, rtol: float | None = None,
-              newton: NewtonSettings | None = None, relinearise: bool = False):
+              newton: NewtonSettings | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
         the stopping rule stays relative to the residual at ``x0``, so the accuracy is the same.
         ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``);
         ``newton``: settings for this solve instead of ``self.newton``.
-        The linearisation kept for :meth:`lifting_response` and the next solve is the last one
-        Newton used (possibly built at an earlier iterate), or with ``relinearise`` one built
-        afresh at the solution: worth its set-up after a loose solve that the next one continues.
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t)
@@ -351,7 +348,7 @@ class NavierStokesProblem:
         settings = settings if rtol is None else dataclasses.replace(settings, rtol=rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
                                  settings, reference)
-        self._linearise(x, m, a, con, t, fresh=relinearise)  # keeps one for lifting_response
+        self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
         return x, report
 
     def _linearise(self, x, m, a, con, t, fresh: bool):

@@ -67,14 +67,13 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
 
 
 def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None,
-            rtol: float | None = None, relinearise: bool = False):
+            rtol: float | None = None):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
 
     ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
     the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
-    (default the problem's). ``relinearise``: the last substep leaves a linearisation built at
-    its solution, not the one its Newton iteration kept (:meth:`NavierStokesProblem.solve`).
+    (default the problem's).
 
     Returns
     -------
@@ -86,7 +85,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
     reports = []
     s = problem.space
     subs = get_scheme(scheme)
-    for i, sub in enumerate(subs):
+    for sub in subs:
         k = sub.fraction * dt
         t_new = t + k
         u_old = x[:s.n_u]
@@ -96,8 +95,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
         x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
-                                  guess=guess if len(subs) == 1 else None, rtol=rtol,
-                                  relinearise=relinearise and i == len(subs) - 1)
+                                  guess=guess if len(subs) == 1 else None, rtol=rtol)
         reports.append(report)
         t = t_new
     return x, reports
