@@ -48,8 +48,8 @@ def main(argv=None):
                 wall = time.perf_counter() - t0
                 rows[name].append((wall, r.linear.time_s, r.linear.solves, r.linear.iterations))
                 print(f"{name}: step {r.step} {wall:.2f} s (solves {r.linear.time_s:.2f} s), "
-                      f"{r.linear.solves} solves, {r.linear.iterations} cycles, velocity {r.velocity[0].tolist()}",
-                      flush=True)
+                      f"{r.linear.solves} solves, {r.linear.iterations} cycles, "
+                      f"velocity {r.velocity[0].tolist()}", flush=True)
     for name, values in rows.items():
         v = np.array(values)
         print(f"{name}: {v[:, 0].mean():.2f} s per step ({v[:, 1].mean():.2f} s in {v[:, 2].mean():.2f} "
