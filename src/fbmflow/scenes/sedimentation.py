@@ -43,7 +43,7 @@ import numpy as np
 from ..contact.broadphase import candidate_pairs
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import CouplingParams, ParamError, Section, TimeParams, derive, param
+from ..params import CouplingParams, ParamError, Section, SolverParams, TimeParams, derive, param
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle_params
@@ -94,18 +94,25 @@ SphereParticles = derive(ManyParticles, "SphereParticles", "The particles.", cou
                          bottom=0.0)
 BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60, density=1.5, bottom=0.0,
                       top=0.5)
+ManySolver = derive(
+    SolverParams, "ManySolver", "Nonlinear and linear solver settings: Newton stops at a 1e-6 residual "
+    "reduction, each linear step at 1e-3 (the mean settling velocity the same to 6e-7 of its largest "
+    "value as at 1e-10 / 1e-8; docs/validation.md, \"Many particles\").",
+    newton_rtol=param(1e-6, "Newton stop: residual reduction", positive=True, maximum=1.0),
+    linear_rtol=param(1e-3, "relative residual per linear solve (multigrid: its stopping rule; Newton's "
+                      "stopping rule decides the accuracy)", positive=True, maximum=0.1))
 Sedimentation2DParams = particle_params("Sedimentation2DParams", "Parameters of ``sedimentation-2d``.",
                                         fluid=CgsFluid, particles=ManyParticles, domain=ManyDomain,
-                                        time=ManyTime, coupling=ManyCoupling,
+                                        time=ManyTime, coupling=ManyCoupling, solver=ManySolver,
                                         **CONTACT_SECTIONS)
 Sedimentation3DParams = particle_params("Sedimentation3DParams", "Parameters of ``sedimentation-3d``.",
                                         fluid=CgsFluid, particles=SphereParticles, domain=ManyDomain,
-                                        time=ManyTime, coupling=ManyCoupling,
+                                        time=ManyTime, coupling=ManyCoupling, solver=ManySolver,
                                         **CONTACT_SECTIONS)
 FluidizedBedParams = particle_params("FluidizedBedParams", "Parameters of ``fluidized-bed-2d``.",
                                      fluid=CgsFluid, particles=BedParticles, domain=ManyDomain,
                                      inflow=BedInflow,
-                                     time=ManyTime, coupling=ManyCoupling,
+                                     time=ManyTime, coupling=ManyCoupling, solver=ManySolver,
                                      **CONTACT_SECTIONS)
 
 
