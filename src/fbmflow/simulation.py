@@ -758,8 +758,8 @@ def auto_coupling(n_unknowns: int, particles: Particles, symmetry=()) -> str:
     """The scheme ``coupling.scheme = "auto"`` takes: ``"implicit"`` while the flow responses it
     keeps (:data:`RESPONSE_BYTES` per unknown each, one per free rigid-body component) fit
     :data:`AUTO_RESPONSE_BYTES`, else ``"stabilised"`` (one flow solve per step, none kept; less
-    accurate in transients, and broken by a hard impact: docs/validation.md, "Many
-    particles"). The same for every machine."""
+    accurate in transients, and at a hard impact it needs half a cell per step: docs/validation.md,
+    "Many particles"). The same for every machine."""
     responses = ImplicitCoupling.stored_responses(particles, symmetry)
     stored = RESPONSE_BYTES * n_unknowns * responses
     if stored <= AUTO_RESPONSE_BYTES:

@@ -272,10 +272,14 @@ class FactoredVankaSmoother:
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
         for k in range(sweeps):
-            for gptr, order in self.sweeps[k % len(self.sweeps)]:
-                _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
+            self._sweep(self.sweeps[k % len(self.sweeps)], b, x)
             for _ in range(self.interface_sweeps):
-                for gptr, order in self.interface_phases:
-                    _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
+                self._sweep(self.interface_phases, b, x)
                 self.update(self.interface_merged, b, x)
             self.update(self.merged, b, x)
+
+    def _sweep(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
+        """The patches of ``phases`` (:func:`~fbmflow.solvers.ordering.slab_phases`), each phase's
+        slabs in parallel."""
+        for gptr, order in phases:
+            _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
