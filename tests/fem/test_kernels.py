@@ -580,6 +580,33 @@ def test_apply_convection_is_n_of_u_times_u(case):
     assert_rel(out, expected)
 
 
+def test_velocity_coefficients(space):
+    from fbmflow.fem import velocity_coefficients
+    u = np.random.default_rng(44).normal(size=space.n_u)
+    uq = np.einsum("icb,qb->cqi", u.reshape(space.dim, space.n_v)[:, space.V.cell_dofs], space.phi)
+    assert_rel(velocity_coefficients(space, u), uq * space.detJw[:, :, None])
+
+
+def test_apply_convection_by_another_velocity_is_n_of_c_times_w(case):
+    """``N(c) w`` with a convecting field other than the convected one (the Newton block's
+    drift), over all cells and over the cells of a local field only."""
+    from fbmflow.fem import apply_convection, velocity_coefficients
+    space, ref = case
+    d, n = space.dim, space.n_v
+    rng = np.random.default_rng(45)
+    c, w = rng.normal(size=space.n_u), rng.normal(size=space.n_u)
+    conv = velocity_coefficients(space, c)
+    out = np.ones(space.n_u)
+    apply_convection(space, w, 0.7, out, conv=conv)
+    assert_rel(out, 1.0 + 0.7 * (ref.convection(c) @ w.reshape(d, n).T).T.ravel())
+    local = np.zeros(space.n_u)
+    local[[0, n + 1]] = 1.0  # two nodes of a corner cell
+    cells = np.flatnonzero(np.isin(space.V.cell_dofs, [0, 1]).any(axis=1))
+    out = np.zeros(space.n_u)
+    apply_convection(space, local, 1.0, out, conv=conv, cells=cells)
+    assert_rel(out, (ref.convection(c) @ local.reshape(d, n).T).T.ravel())
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_free_node_components_equal_scipy_on_the_masked_cell_graph(dim):
     """The union-find kernel against scipy.sparse.csgraph on the graph of free nodes that share a

@@ -284,6 +284,20 @@ def test_a_picard_hierarchy_preconditions_the_newton_time_step(dim, n):
     assert system.preconditioner.A.nnz < newton_system.A.nnz / (dim - 0.5)
     counts["picard"] = cycles(*args)
     assert counts["picard"] <= counts["newton"] + 1, counts
+    # moved to another velocity, the Newton block is the one assembled there (the Picard block
+    # and its hierarchy stay where they were); the velocity changed in one corner (the drift's
+    # convection is applied there only)
+    _, _, x, con, _ = args
+    space = args[0].space
+    corner = np.all(space.V.coordinates < 0.4, axis=1)
+    assert 0 < corner.sum() < space.n_v / 4
+    x1 = x.copy()
+    x1[:system.n_u] += np.tile(corner, dim) * np.random.default_rng(4).random(system.n_u)
+    con.apply_to_vector(x1)
+    system.A.relinearise(x1[:system.n_u])
+    (prob, *_), _ = time_step_system("newton")
+    system1 = prob.linear_system(x1, 100.0, 1.0, con)  # assembled at x1
+    assert np.allclose(system.apply(v), system1.apply(v), rtol=1e-12, atol=1e-12 * np.abs(v).max())
     prob, mg, x, con, F = _cavity_system(n, dim, re=100, smoother="vanka-factored", krylov="fgmres")
     assert prob.linear_system(x, 0.0, 1.0, con).preconditioner is None  # steady: auto keeps Newton
 

@@ -9,8 +9,10 @@ from .assembly import (
                        assemble_load,
                        assemble_mass,
                        expand_to_coupled,
+                       masked_groups,
                        pressure_mean_weights,
                        reaction_coefficients,
+                       velocity_coefficients,
 )
 from .dofmap import DofMap, PressureDofMap
 from .elements import ElementP1Disc, ElementQ1, ElementQ2
@@ -20,4 +22,5 @@ from .space import FlowSpace
 __all__ = ["FlowSpace", "DofMap", "PressureDofMap", "ElementQ1", "ElementQ2", "ElementP1Disc",
            "gauss_tensor", "assemble_mass", "assemble_laplace", "assemble_convection",
            "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights",
-           "apply_convection", "apply_reaction", "apply_scalar_pair", "reaction_coefficients"]
+           "apply_convection", "apply_reaction", "apply_scalar_pair", "reaction_coefficients",
+           "velocity_coefficients", "masked_groups"]

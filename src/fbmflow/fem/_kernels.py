@@ -389,28 +389,52 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
 
 
 @njit(parallel=True)
-def apply_convection(cells, u, cell_dofs, phi, dphi, detJw, Jinv, scale, out):
-    """Add ``scale N(u) u`` to ``out``: ``out[i, a] += scale int phi_a (u . grad) u_i``, for
-    ``u (d, n_v)``; cells as in :func:`apply_reaction`; out (d, n_v) float64, updated in place."""
+def velocity_coefficients(u, cell_dofs, phi, detJw):
+    """``|det J| w_q u_k`` at every cell's quadrature points, (n_cells, nq, d) float64, for
+    ``u (d, n_v)``: what :func:`apply_convection` needs of the convecting velocity."""
+    n_cells, nl = cell_dofs.shape
+    nq = phi.shape[0]
+    d = u.shape[0]
+    conv = np.zeros((n_cells, nq, d))
+    for c in prange(n_cells):
+        for a in range(nl):
+            dof = cell_dofs[c, a]
+            for k in range(d):
+                uk = u[k, dof]
+                if uk != 0.0:
+                    for q in range(nq):
+                        conv[c, q, k] += phi[q, a] * uk
+        for q in range(nq):
+            for k in range(d):
+                conv[c, q, k] *= detJw[c, q]
+    return conv
+
+
+@njit(parallel=True)
+def apply_convection(cells, conv, cell_dofs, phi, dphi, Jinv, w, scale, out):
+    """Add ``scale N(c) w`` to ``out``: ``out[i, a] += scale int phi_a (c . grad) w_i``, for
+    ``w (d, n_v)`` and the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
+    ``|det J| w_q c_k`` (:func:`velocity_coefficients`); cells as in :func:`apply_reaction`;
+    out (d, n_v) float64, updated in place."""
     n_groups, length = cells.shape
     nq, nl = phi.shape
-    d = u.shape[0]
+    d = w.shape[0]
     for g in prange(n_groups):
-        ul = np.empty((d, nl))
-        uq = np.empty((nq, d))
+        wl = np.empty((d, nl))
+        wq = np.empty((nq, d))
         gq = np.empty((nq, d, d))
         fq = np.empty((nq, d))
         for j in range(length):
             c = cells[g, j]
             if c < 0:
                 continue
-            _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq)
+            _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
             for q in range(nq):
                 for i in range(d):
                     s = 0.0
                     for k in range(d):
-                        s += uq[q, k] * gq[q, i, k]
-                    fq[q, i] = detJw[c, q] * s
+                        s += conv[c, q, k] * gq[q, i, k]
+                    fq[q, i] = s
             _test(c, fq, phi, cell_dofs, scale, out)
 
 

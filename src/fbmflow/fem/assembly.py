@@ -144,14 +144,43 @@ def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
     return np.einsum("cq,cqm->cm", space.detJw, space.psi).ravel()
 
 
-def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndarray) -> None:
-    """Add ``scale N(u) u``, ``int phi_a (u . grad) u_i`` per velocity DOF, to ``out``
-    (dim * n_v,) float64 in place, without assembling ``N(u)``."""
+def velocity_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
+    """``|det J| w_q u_k`` at every quadrature point, (n_cells, nq, dim) float64: what
+    :func:`apply_convection` needs of a convecting velocity ``u`` (dim * n_v,)."""
+    uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
+    return _kernels.velocity_coefficients(uu, space.V.cell_dofs, space.phi, space.detJw)
+
+
+def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndarray,
+                     conv: np.ndarray | None = None, cells: np.ndarray | None = None,
+                     groups: list[np.ndarray] | None = None) -> None:
+    """Add ``scale N(c) u``, ``int phi_a (c . grad) u_i`` per velocity DOF, to ``out``
+    (dim * n_v,) float64 in place, without assembling ``N(c)``.
+
+    conv : (n_cells, nq, dim) float64, optional: :func:`velocity_coefficients` of the convecting
+        velocity ``c``; default ``u`` itself (``N(u) u``)
+    cells : (m,) int64, optional: only these cells' contributions (sequentially)
+    groups : list of (n_groups, length) int64, optional: only these cells, in parallel groups of
+        DOF-disjoint cells (-1 = padding), e.g. ``space.colour_groups`` with cells masked out
+        (:func:`masked_groups`); default all cells in ``space.colour_groups``
+    """
+    if conv is None:
+        conv = velocity_coefficients(space, u)
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     target = out.reshape(space.dim, space.n_v)
-    for cells in space.colour_groups:
-        _kernels.apply_convection(cells, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
-                                  space.Jinv, scale, target)
+    if cells is not None:
+        batches = [np.asarray(cells, dtype=np.int64)[None, :]]
+    else:
+        batches = space.colour_groups if groups is None else groups
+    for batch in batches:
+        _kernels.apply_convection(batch, conv, space.V.cell_dofs, space.phi, space.dphi, space.Jinv, uu,
+                                  scale, target)
+
+
+def masked_groups(space: FlowSpace, keep: np.ndarray) -> list[np.ndarray]:
+    """``space.colour_groups`` with the cells not in ``keep`` (n_cells,) bool set to -1 (padding):
+    parallel groups of only the kept cells, for :func:`apply_convection`."""
+    return [np.where((g >= 0) & keep[np.maximum(g, 0)], g, -1) for g in space.colour_groups]
 
 
 def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:

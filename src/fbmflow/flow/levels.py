@@ -10,14 +10,17 @@ import scipy.sparse as sp
 
 from ..fem import (
     FlowSpace,
+    apply_convection,
     apply_reaction,
     assemble_convection,
     assemble_divergence,
     assemble_laplace,
     assemble_mass,
     expand_to_coupled,
+    masked_groups,
     pressure_mean_weights,
     reaction_coefficients,
+    velocity_coefficients,
 )
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
@@ -28,28 +31,66 @@ from .boundary import build_constraints
 log = logging.getLogger(__name__)
 
 
+#: the drift ``u - u0`` of a :class:`NewtonBlock`, relative to its largest value, below which a
+#: cell's convection of it is left out (the Jacobian is then approximate there: the Newton
+#: steps' residuals, evaluated exactly, keep the solution the same)
+DRIFT_CUTOFF = 1e-3
+
+
 class NewtonBlock:
-    """The velocity block ``A + s R(u)`` of a Newton system: ``A`` the assembled Picard block
-    ``m rho M + a (mu L + rho N(u))`` with its constraint rows, and the Newton term ``s R(u)``,
-    ``s = a rho``, applied without a matrix (:func:`~fbmflow.fem.apply_reaction`) and left out on
+    """The velocity block ``A + s (N(u - u0) + R(u))`` of a Newton system at ``u``: ``A`` the
+    assembled Picard block ``m rho M + a (mu L + rho N(u0))`` with its constraint rows, linearised
+    at ``u0``, and the rest, ``s = a rho``, applied without a matrix
+    (:func:`~fbmflow.fem.apply_convection`, :func:`~fbmflow.fem.apply_reaction`) and left out on
     the ``constrained`` rows. An iterative solver needs only its products; it stores ``dim``
-    times fewer entries than the assembled Newton block.
+    times fewer entries than the assembled Newton block, and :meth:`relinearise` moves it to
+    another ``u`` without an assembly (the Picard block, and the hierarchy built from it, stay
+    at ``u0``).
 
     Parameters
     ----------
     picard : (n_u, n_u) CSR
     space : FlowSpace
-    react : (n_cells, nq, dim, dim) float64, :func:`~fbmflow.fem.reaction_coefficients` of ``u``
+    u0 : (n_u,) float64, the velocity ``picard`` is linearised at (the block starts there)
     scale : float, ``s``
     constrained : (k,) int64, rows without the Newton term
     """
 
-    def __init__(self, picard: sp.csr_matrix, space: FlowSpace, react: np.ndarray, scale: float,
+    def __init__(self, picard: sp.csr_matrix, space: FlowSpace, u0: np.ndarray, scale: float,
                  constrained: np.ndarray):
-        self.picard, self.space, self.react, self.scale = picard, space, react, scale
+        self.picard, self.space, self.scale = picard, space, scale
+        self.u0 = u0.copy()
         self.constrained = constrained
         self.shape = picard.shape
         self.dtype = picard.dtype
+        self.relinearise(u0)
+
+    def relinearise(self, u: np.ndarray) -> None:
+        """The Newton block at ``u`` (n_u,) from now on: ``R(u)``, and ``N(u - u0)`` added to
+        the Picard block's convection on the cells where the drift ``u - u0`` reaches
+        :data:`DRIFT_CUTOFF` of its largest value (none where ``u`` is ``u0``). A moving particle
+        changes the flow about itself: the cells far from it, where the drift is round-off
+        compared with the near field, are left out of every product."""
+        s = self.space
+        self.react = reaction_coefficients(s, u)
+        drift = u - self.u0
+        size = np.abs(drift).reshape(s.dim, s.n_v).max(axis=0)
+        largest = float(size.max()) if size.size else 0.0
+        self.drift = self.drift_groups = self.drift_cells = None
+        if largest > 0.0:
+            self.drift_cells = (size > DRIFT_CUTOFF * largest)[s.V.cell_dofs].any(axis=1)
+            self.drift = velocity_coefficients(s, drift)
+            self.drift_groups = masked_groups(s, self.drift_cells)
+
+    def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
+        """``s (N(u - u0) + R(u)) v`` with the constrained rows zero, (n_u,)."""
+        out = np.zeros(v.size)
+        apply_reaction(self.space, self.react, v, self.scale, out, cells=cells)
+        if self.drift is not None:
+            apply_convection(self.space, v, self.scale, out, conv=self.drift, groups=self.drift_groups,
+                             cells=None if cells is None else cells[self.drift_cells[cells]])
+        out[self.constrained] = 0.0
+        return out
 
     def __matmul__(self, v):
         """Product with a vector (n_u,), or with a dense or sparse matrix (n_u, k) (dense result;
@@ -59,10 +100,7 @@ class NewtonBlock:
         v = np.asarray(v)
         if v.ndim == 2:
             return np.column_stack([self @ v[:, k] for k in range(v.shape[1])])
-        reaction = np.zeros(v.size)
-        apply_reaction(self.space, self.react, v, self.scale, reaction)
-        reaction[self.constrained] = 0.0
-        return self.picard @ v + reaction
+        return self.picard @ v + self._newton_terms(v)
 
     def _sparse(self, W: sp.csc_matrix) -> np.ndarray:
         out = (self.picard @ W).toarray()
@@ -72,10 +110,7 @@ class NewtonBlock:
             if rows.size == 0:
                 continue
             cells = np.unique(s.node_cells[np.unique(rows % s.n_v)].indices)
-            reaction = np.zeros(W.shape[0])
-            apply_reaction(s, self.react, W[:, k].toarray().ravel(), self.scale, reaction, cells=cells)
-            reaction[self.constrained] = 0.0
-            out[:, k] += reaction
+            out[:, k] += self._newton_terms(W[:, k].toarray().ravel(), cells)
         return out
 
 
@@ -183,8 +218,7 @@ class FlowLevel:
         constrained = np.concatenate([d for d in (picard.fixed, picard.rows) if d is not None] or
                                      [np.zeros(0, dtype=np.int64)])
         system = copy.copy(picard)  # shares the blocks and the derived ones already computed
-        react = reaction_coefficients(self.space, u)
-        system.A = NewtonBlock(picard.A, self.space, react, a * rho, constrained)
+        system.A = NewtonBlock(picard.A, self.space, u, a * rho, constrained)
         system.preconditioner, system.coarser, system.prolongation = picard, None, None
         return system
 

@@ -30,7 +30,7 @@ from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.reports import LinearWork
 from ..solvers.system import balance_volume, orphan_pressure_modes
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
-from .levels import FlowLevel, coarse_levels, inject_velocity
+from .levels import FlowLevel, NewtonBlock, coarse_levels, inject_velocity
 
 log = logging.getLogger(__name__)
 
@@ -353,7 +353,13 @@ class NavierStokesProblem:
 
     def _linearise(self, x, m, a, con, t, fresh: bool):
         """The factorised Newton linearisation at ``x`` (a new one when ``fresh`` or when the
-        stored one belongs to other time-step weights or another constrained set)."""
+        stored one belongs to other time-step weights or another constrained set).
+
+        A stored one whose operator is applied without a matrix (:class:`~fbmflow.flow.levels.
+        NewtonBlock`: multigrid inside FGMRES with the Picard hierarchy) is moved to ``x`` at no
+        assembly: the Newton step then solves with the Jacobian at ``x``, preconditioned by the
+        hierarchy of the earlier point, and contracts like Newton rather than like the chord
+        method."""
         last = self._linearisation
         if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
@@ -362,6 +368,8 @@ class NavierStokesProblem:
             self._linearisation = (m, a, con, self.linear_solver.factor(system), system)
         else:
             self._linearisation = (m, a, con) + last[3:]
+            if isinstance(last[4].A, NewtonBlock):
+                last[4].A.relinearise(x[:self.space.n_u])
         return self._linearisation[3]
 
     def _linear_solve(self, solve, f, g, rtol=None):
