@@ -330,3 +330,50 @@ def test_incompatible_continuity_data_get_the_bordered_systems_solution():
     lam = sol[n]
     np.testing.assert_allclose(balance_volume(g, system.mean_weights, system.orphans, npl), g - lam * w,
                                atol=1e-12 * np.abs(g).max())
+
+
+def test_nested_dissection_cuts_at_cell_boundaries_and_puts_the_cuts_last():
+    """Nine unknowns on a line (half-cell units, cell boundaries at even positions), boxes of one:
+    the middle boundary 4 last, each half dissected first at its own boundary (2 and 6); a box
+    whose only inner boundary is at its edge stays whole."""
+    from fbmflow.solvers.ordering import nested_dissection
+
+    order = nested_dissection(np.arange(9)[:, None], leaf=1)
+    assert order.tolist() == [0, 1, 3, 2, 5, 7, 8, 6, 4]
+    rng = np.random.default_rng(0)
+    points = rng.integers(0, 20, size=(500, 3))
+    assert np.array_equal(np.sort(nested_dissection(points, leaf=16)), np.arange(500))
+
+
+def test_superlu_in_3d_eliminates_in_nested_dissection_order(monkeypatch):
+    """In 3D SuperLU factorises in the geometric nested-dissection order: on a closed Stokes
+    system of 6^3 cells it fills L + U less than in COLAMD's order (measured: 3.06 M against
+    3.85 M entries), and its solution meets the system."""
+    import scipy.sparse.linalg as spla
+
+    fill = {}
+    splu = spla.splu
+
+    def counted(K, permc_spec, **kwargs):
+        lu = splu(K, permc_spec=permc_spec, **kwargs)
+        fill[permc_spec] = lu.L.nnz + lu.U.nnz
+        return lu
+
+    monkeypatch.setattr(direct.spla, "splu", counted)
+    mesh = StructuredMesh.box((6, 6, 6))
+    prob = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
+                               linear_solver=DirectSolver("superlu"))
+    system = prob.linear_system(prob.zero_state(), 0.0, 1.0, prob.constraints())
+    rng = np.random.default_rng(5)
+    f, g = rng.normal(size=system.n_u), rng.normal(size=system.n_p)
+    f[system.fixed] = 0.0
+    u, p = factorize(system, "superlu")(f, g)
+    assert list(fill) == ["NATURAL"]  # the order given, not SuperLU's own
+    r = system.apply(np.concatenate([u, p])) - np.concatenate([f, system.balance(g)])
+    assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f, g]))
+    K = system.matrix(bordered=False)
+    free = np.ones(K.shape[0], dtype=bool)
+    free[system.fixed] = False
+    free[direct._pinned_pressure(system) + system.n_u] = False
+    counted(K[free][:, free].tocsc(), "COLAMD", diag_pivot_thresh=0.01)
+    assert fill["NATURAL"] < 0.9 * fill["COLAMD"], fill

@@ -38,54 +38,66 @@ DRIFT_CUTOFF = 1e-3
 
 
 class NewtonBlock:
-    """The velocity block ``A + s (N(u - u0) + R(u))`` of a Newton system at ``u``: ``A`` the
-    assembled Picard block ``m rho M + a (mu L + rho N(u0))`` with its constraint rows, linearised
-    at ``u0``, and the rest, ``s = a rho``, applied without a matrix
-    (:func:`~fbmflow.fem.apply_convection`, :func:`~fbmflow.fem.apply_reaction`) and left out on
-    the ``constrained`` rows. An iterative solver needs only its products; it stores ``dim``
-    times fewer entries than the assembled Newton block, and :meth:`relinearise` moves it to
-    another ``u`` without an assembly (the Picard block, and the hierarchy built from it, stay
-    at ``u0``).
+    """The velocity block of a Newton system at ``u``, applied from an assembled block ``A`` of
+    an earlier point ``u0`` plus, without a matrix (:func:`~fbmflow.fem.apply_convection`,
+    :func:`~fbmflow.fem.apply_reaction`) and left out on the ``constrained`` rows, what the
+    Newton linearisation adds or changes at ``u``, ``s = a rho``:
+
+    * ``A`` the Picard block ``m rho M + a (mu L + rho N(u0))`` (``newton_base`` False):
+      ``A + s (N(u - u0) + R(u))``; it stores ``dim`` times fewer entries than the assembled
+      Newton block;
+    * ``A`` the Newton block ``m rho M + a (mu L + rho (N(u0) + R(u0)))`` (``newton_base``
+      True): ``A + s (N(u - u0) + R(u - u0))``, nothing at ``u0`` itself.
+
+    With constraint rows as assembled in ``A``. An iterative solver needs only its products;
+    :meth:`relinearise` moves it to another ``u`` without an assembly (``A``, and the hierarchy
+    built from it, stay at ``u0``).
 
     Parameters
     ----------
-    picard : (n_u, n_u) CSR
+    base : (n_u, n_u) CSR, ``A``
     space : FlowSpace
-    u0 : (n_u,) float64, the velocity ``picard`` is linearised at (the block starts there)
+    u0 : (n_u,) float64, the velocity ``base`` is linearised at (the block starts there)
     scale : float, ``s``
     constrained : (k,) int64, rows without the Newton term
+    newton_base : bool, whether ``base`` holds the Newton term ``R(u0)``
     """
 
-    def __init__(self, picard: sp.csr_matrix, space: FlowSpace, u0: np.ndarray, scale: float,
-                 constrained: np.ndarray):
-        self.picard, self.space, self.scale = picard, space, scale
+    def __init__(self, base: sp.csr_matrix, space: FlowSpace, u0: np.ndarray, scale: float,
+                 constrained: np.ndarray, newton_base: bool = False):
+        self.base, self.space, self.scale = base, space, scale
         self.u0 = u0.copy()
         self.constrained = constrained
-        self.shape = picard.shape
-        self.dtype = picard.dtype
+        self.newton_base = newton_base
+        self.shape = base.shape
+        self.dtype = base.dtype
         self.relinearise(u0)
 
     def relinearise(self, u: np.ndarray) -> None:
-        """The Newton block at ``u`` (n_u,) from now on: ``R(u)``, and ``N(u - u0)`` added to
-        the Picard block's convection on the cells where the drift ``u - u0`` reaches
-        :data:`DRIFT_CUTOFF` of its largest value (none where ``u`` is ``u0``). A moving particle
-        changes the flow about itself: the cells far from it, where the drift is round-off
-        compared with the near field, are left out of every product."""
+        """The Newton block at ``u`` (n_u,) from now on. The drift ``u - u0``'s convection is
+        applied on the cells where the drift reaches :data:`DRIFT_CUTOFF` of its largest value
+        (none where ``u`` is ``u0``): a moving particle changes the flow about itself, and the
+        cells far from it, where the drift is round-off next to the near field, are left out of
+        every product."""
         s = self.space
-        self.react = reaction_coefficients(s, u)
         drift = u - self.u0
         size = np.abs(drift).reshape(s.dim, s.n_v).max(axis=0)
         largest = float(size.max()) if size.size else 0.0
         self.drift = self.drift_groups = self.drift_cells = None
+        if self.newton_base:
+            self.react = reaction_coefficients(s, drift) if largest > 0.0 else None
+        else:
+            self.react = reaction_coefficients(s, u)
         if largest > 0.0:
             self.drift_cells = (size > DRIFT_CUTOFF * largest)[s.V.cell_dofs].any(axis=1)
             self.drift = velocity_coefficients(s, drift)
             self.drift_groups = masked_groups(s, self.drift_cells)
 
     def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
-        """``s (N(u - u0) + R(u)) v`` with the constrained rows zero, (n_u,)."""
+        """What the Newton block adds to ``A v``, with the constrained rows zero, (n_u,)."""
         out = np.zeros(v.size)
-        apply_reaction(self.space, self.react, v, self.scale, out, cells=cells)
+        if self.react is not None:
+            apply_reaction(self.space, self.react, v, self.scale, out, cells=cells)
         if self.drift is not None:
             apply_convection(self.space, v, self.scale, out, conv=self.drift, groups=self.drift_groups,
                              cells=None if cells is None else cells[self.drift_cells[cells]])
@@ -100,10 +112,10 @@ class NewtonBlock:
         v = np.asarray(v)
         if v.ndim == 2:
             return np.column_stack([self @ v[:, k] for k in range(v.shape[1])])
-        return self.picard @ v + self._newton_terms(v)
+        return self.base @ v + self._newton_terms(v)
 
     def _sparse(self, W: sp.csc_matrix) -> np.ndarray:
-        out = (self.picard @ W).toarray()
+        out = (self.base @ W).toarray()
         s = self.space
         for k in range(W.shape[1]):
             rows = W.indices[W.indptr[k]:W.indptr[k + 1]]
@@ -210,16 +222,18 @@ class FlowLevel:
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
                                  extension=con.extension, transient=m != 0.0)
 
-    def newton_system(self, picard: SaddlePointSystem, u: np.ndarray, a: float,
-                      rho: float) -> SaddlePointSystem:
-        """The Newton system of the Picard system ``picard`` (this level's, linearised at ``u``
-        with weight ``a``): the same blocks and constraints, the velocity block a
-        :class:`NewtonBlock` (no hierarchy of its own; ``picard`` is its preconditioner)."""
-        constrained = np.concatenate([d for d in (picard.fixed, picard.rows) if d is not None] or
+    def newton_system(self, assembled: SaddlePointSystem, u: np.ndarray, a: float, rho: float,
+                      newton_base: bool = False) -> SaddlePointSystem:
+        """The Newton system of ``assembled`` (this level's, linearised at ``u`` with weight
+        ``a``; its velocity block the Picard one, or the Newton one where ``newton_base``): the
+        same blocks and constraints, the velocity block a :class:`NewtonBlock` that
+        :meth:`NewtonBlock.relinearise` moves to other velocities (no hierarchy of its own;
+        ``assembled`` is its preconditioner)."""
+        constrained = np.concatenate([d for d in (assembled.fixed, assembled.rows) if d is not None] or
                                      [np.zeros(0, dtype=np.int64)])
-        system = copy.copy(picard)  # shares the blocks and the derived ones already computed
-        system.A = NewtonBlock(picard.A, self.space, u, a * rho, constrained)
-        system.preconditioner, system.coarser, system.prolongation = picard, None, None
+        system = copy.copy(assembled)  # shares the blocks and the derived ones already computed
+        system.A = NewtonBlock(assembled.A, self.space, u, a * rho, constrained, newton_base)
+        system.preconditioner, system.coarser, system.prolongation = assembled, None, None
         return system
 
     def row_scale(self, dofs: np.ndarray, m: float, a: float, rho: float, mu: float) -> np.ndarray:

@@ -16,6 +16,7 @@ import scipy.sparse.linalg as spla
 
 from . import _kernels
 from .krylov import fgmres
+from .ordering import lattice_points, nested_dissection
 from .reports import LinearReport
 from .system import SaddlePointSystem, expansion
 
@@ -54,9 +55,10 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     """Sparse LU of the saddle-point matrix with the constrained velocity DOFs eliminated; returns
     ``solve(f, g) -> (u, p)``.
 
-    ``backend``: ``"superlu"`` (SciPy, COLAMD ordering; always there), ``"pardiso"`` (Intel MKL
-    PARDISO through the optional ``pypardiso``: nested-dissection ordering, two threads; in 3D it
-    factorises 200 000 unknowns in about 30 s where SuperLU runs out of memory) or ``"auto"``
+    ``backend``: ``"superlu"`` (SciPy; always there; COLAMD's ordering in 2D, a geometric nested
+    dissection of the mesh in 3D, :func:`~fbmflow.solvers.ordering.nested_dissection`),
+    ``"pardiso"`` (Intel MKL PARDISO through the optional ``pypardiso``: nested-dissection
+    ordering, two threads; in 3D it factorises 200 000 unknowns in about 30 s) or ``"auto"``
     (:func:`auto_backend`: PARDISO for 3D and large 2D systems when installed, else SuperLU).
 
     ``analysis``: with PARDISO, factorise with this :class:`PardisoAnalysis`, which keeps the
@@ -103,8 +105,11 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
             npl = system.space.dim + 1 if system.space is not None else 1
             reserve = lambda: _pressure_cell_pattern(system.n_u, system.n_p, npl, free)  # noqa: E731
         lu_solve = _pardiso(K_free[:, free], rtol=rtol, analysis=analysis, reserve=reserve)
-    else:
-        superlu = _superlu(K_free[:, free])
+    else:  # in 3D, COLAMD's order fills several times more than a nested dissection
+        order = None
+        if system.space is not None and system.space.dim == 3:
+            order = nested_dissection(lattice_points(system.space)[free])
+        superlu = _superlu(K_free[:, free], order)
         lu_solve = lambda b, tol=None: superlu(b)  # noqa: E731
 
     border = None
@@ -155,9 +160,19 @@ def _pressure_cell_pattern(n_u: int, n_p: int, npl: int, free: np.ndarray) -> sp
     return sp.csr_matrix((np.ones(rows.size), (rows, np.concatenate(cols))), shape=(m, m))
 
 
-def _superlu(K: sp.spmatrix):
-    """SuperLU with COLAMD and threshold pivoting 0.01 (so that the ordering survives)."""
-    return spla.splu(K.tocsc(), permc_spec="COLAMD", diag_pivot_thresh=0.01).solve
+def _superlu(K: sp.spmatrix, order: np.ndarray | None = None):
+    """SuperLU with threshold pivoting 0.01 (so that the ordering survives), eliminating in the
+    fill-reducing ``order`` (a permutation of the unknowns) where given, else in COLAMD's."""
+    if order is None:
+        return spla.splu(K.tocsc(), permc_spec="COLAMD", diag_pivot_thresh=0.01).solve
+    lu = spla.splu(sp.csr_matrix(K)[order][:, order].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.01)
+
+    def solve(b):
+        x = np.empty_like(b)
+        x[order] = lu.solve(b[order])
+        return x
+
+    return solve
 
 
 def _ones(P: sp.csr_matrix) -> sp.csr_matrix:

@@ -1,5 +1,6 @@
-"""Orders of the cell patches of a multiplicative (Gauss–Seidel) smoother sweep on a structured
-mesh, split into slabs that threads sweep at the same time.
+"""Orders of the unknowns on a structured mesh: the cell patches of a multiplicative
+(Gauss–Seidel) smoother sweep, split into slabs that threads sweep at the same time, and the
+nested dissection that a sparse direct factorisation eliminates in (:func:`nested_dissection`).
 
 The cells are cut into ``n_slabs`` (a power of two) slabs of whole cell layers along the axis
 with the most cells. A sweep has two phases, each one parallel loop over the slabs of one
@@ -41,6 +42,49 @@ def dof_planes(space, axis: int) -> np.ndarray:
     lattice = space.V.lattice[:, axis]
     layer = space.mesh.cell_indices()[:, axis]
     return np.concatenate([np.tile(lattice, space.dim), np.repeat(2 * layer + 1, space.dim + 1)])
+
+
+def lattice_points(space) -> np.ndarray:
+    """Position of every unknown of ``space`` on all axes in half-cell units (:func:`dof_planes`),
+    (n_u + n_p, dim) int64."""
+    return np.column_stack([dof_planes(space, axis) for axis in range(space.dim)])
+
+
+#: unknowns at most in a leaf of :func:`nested_dissection` (measured on the coarsest level of
+#: dfg-3d-1z level 3, 24 173 unknowns: SuperLU factorises in 2.1 s with leaves of 128, 2.9 s
+#: with 32, 10.3 s in COLAMD's order)
+DISSECTION_LEAF = 128
+
+
+def nested_dissection(points: np.ndarray, leaf: int = DISSECTION_LEAF) -> np.ndarray:
+    """Geometric nested dissection of unknowns at lattice ``points`` (n, dim) int, half-cell
+    units (cell boundaries at even positions, :func:`lattice_points`): the box the points span
+    is cut at the cell boundary nearest its middle across its longest side; the unknowns on
+    either side come first (each dissected in turn), those on the cut last. In the plain
+    Q2/P1disc discretisation, where a row reaches at most one cell (two half-cells), the cut
+    separates the two sides, and eliminating in this order fills the factors about as little as
+    a graph partitioner's order would. Boxes of at most ``leaf`` unknowns keep the given order.
+    Returns the permutation, (n,) int64."""
+    points = np.asarray(points)
+    parts: list[np.ndarray] = []
+
+    def dissect(idx: np.ndarray) -> None:
+        p = points[idx]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        axis = int(np.argmax(hi - lo))
+        cut = (lo[axis] + hi[axis]) // 2
+        cut += cut % 2 if cut - cut % 2 <= lo[axis] else -(cut % 2)
+        if idx.size <= leaf or not lo[axis] < cut < hi[axis]:
+            parts.append(idx)
+            return
+        side = p[:, axis]
+        dissect(idx[side < cut])
+        dissect(idx[side > cut])
+        parts.append(idx[side == cut])
+
+    if len(points):
+        dissect(np.arange(len(points)))
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
 def plane_reach(k_ptr: np.ndarray, k_idx: np.ndarray, planes: np.ndarray, period: int = 0,
