@@ -110,7 +110,6 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
-        self._linearised_for = None  # (mu, rho, convection) of that linearisation
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
 
     # -- data ---------------------------------------------------------------------------------
@@ -365,14 +364,11 @@ class NavierStokesProblem:
         hierarchy of the earlier point, and contracts like Newton rather than like the chord
         method."""
         last = self._linearisation
-        fluid = (self.mu, self.rho, self.convection)  # a continuation in Re changes mu between solves
-        if (fresh or last is None or last[:2] != (m, a) or self._linearised_for != fluid
-                or not np.array_equal(last[2].dofs, con.dofs)
+        if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
             self._linearisation = last = None  # freed before the next is built (peak memory)
             system = self.linear_system(x, m, a, con, t)
             self._linearisation = (m, a, con, self.linear_solver.factor(system), system)
-            self._linearised_for = fluid
         else:
             self._linearisation = (m, a, con) + last[3:]
             if isinstance(last[4].A, NewtonBlock):

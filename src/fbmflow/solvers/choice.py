@@ -19,14 +19,15 @@ from collections.abc import Callable
 #: Re 400 / 1000; glowinski-free-fall level 2 (17 106 unknowns, time steps to 1e-8): SuperLU
 #: 0.19 s, multigrid 1.4 s (12 cycles); ten-cate (time steps to 1e-3): PARDISO about 1.0 / 11 s
 #: at 64 547 / 278 739 unknowns, multigrid 0.5 / 1.7 s; channel-3d level 4 (486 979 unknowns,
-#: steady Newton): multigrid 8.6 s (3.3 cycles). SuperLU in 3D, one factorisation and solve of a
-#: channel-3d Stokes system: 0.35 / 42.7 s at 9 043 / 64 547 unknowns (beside another job).
+#: steady Newton): multigrid 8.6 s (3.3 cycles). SuperLU in 3D (nested-dissection order), one
+#: factorisation and solve of a channel-3d Stokes system: 0.13 / 16.0 s at 9 043 / 64 547
+#: unknowns (idle machine; 0.35 / 42.7 s in COLAMD's order beside another job).
 SOLVE_COST = {
     (2, "superlu"): (9.5e-6, 45_570, 0.5),
     (2, "pardiso"): (3.5e-6, 45_570, 0.2),
     (2, "multigrid"): (7.0e-6, 45_570, 0.0),
     (2, "multigrid-tight"): (8.0e-5, 17_106, 0.0),
-    (3, "superlu"): (6.6e-4, 64_547, 1.4),
+    (3, "superlu"): (2.5e-4, 64_547, 1.45),
     (3, "pardiso"): (1.6e-5, 64_547, 0.5),
     (3, "multigrid"): (1.2e-5, 278_739, 0.0),
     (3, "multigrid-tight"): (4.0e-5, 278_739, 0.0),
