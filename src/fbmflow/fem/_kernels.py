@@ -352,6 +352,21 @@ def _test(c, fq, phi, cell_dofs, scale, out):
             out[i, dof] += scale * s
 
 
+@njit
+def _values(c, w, cell_dofs, phi, wq):
+    """Values ``wq (nq, d)`` of ``w (d, n_v)`` at the quadrature points of cell ``c``, overwritten
+    (zero DOF values skipped: sparse fields, e.g. a lifting, cost only their non-zeros)."""
+    nq, nl = phi.shape
+    wq[:, :] = 0.0
+    for b in range(nl):
+        dof = cell_dofs[c, b]
+        for k in range(w.shape[0]):
+            wb = w[k, dof]
+            if wb != 0.0:
+                for q in range(nq):
+                    wq[q, k] += phi[q, b] * wb
+
+
 @njit(parallel=True)
 def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
     """Add ``scale R(u) w`` to ``out``: the Newton term ``R_ik[a, b] = int phi_a phi_b d u_i/d x_k``
@@ -362,7 +377,7 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
     (n_cells, nl) int64; phi (nq, nl); w (d, n_v) float64; out (d, n_v) float64, updated in place.
     """
     n_groups, length = cells.shape
-    nq, nl = phi.shape
+    nq = phi.shape[0]
     d = w.shape[0]
     for g in prange(n_groups):
         wq = np.empty((nq, d))
@@ -371,14 +386,7 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
             c = cells[g, j]
             if c < 0:
                 continue
-            wq[:, :] = 0.0
-            for b in range(nl):
-                dof = cell_dofs[c, b]
-                for k in range(d):
-                    wb = w[k, dof]
-                    if wb != 0.0:
-                        for q in range(nq):
-                            wq[q, k] += phi[q, b] * wb
+            _values(c, w, cell_dofs, phi, wq)
             for q in range(nq):
                 for i in range(d):
                     s = 0.0
@@ -392,18 +400,12 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
 def velocity_coefficients(u, cell_dofs, phi, detJw):
     """``|det J| w_q u_k`` at every cell's quadrature points, (n_cells, nq, d) float64, for
     ``u (d, n_v)``: what :func:`apply_convection` needs of the convecting velocity."""
-    n_cells, nl = cell_dofs.shape
+    n_cells = cell_dofs.shape[0]
     nq = phi.shape[0]
     d = u.shape[0]
-    conv = np.zeros((n_cells, nq, d))
+    conv = np.empty((n_cells, nq, d))
     for c in prange(n_cells):
-        for a in range(nl):
-            dof = cell_dofs[c, a]
-            for k in range(d):
-                uk = u[k, dof]
-                if uk != 0.0:
-                    for q in range(nq):
-                        conv[c, q, k] += phi[q, a] * uk
+        _values(c, u, cell_dofs, phi, conv[c])
         for q in range(nq):
             for k in range(d):
                 conv[c, q, k] *= detJw[c, q]

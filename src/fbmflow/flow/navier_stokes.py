@@ -359,7 +359,7 @@ class NavierStokesProblem:
         stored one belongs to other time-step weights or another constrained set).
 
         A stored one whose operator is applied without a matrix (:class:`~fbmflow.flow.levels.
-        NewtonBlock`: multigrid inside FGMRES with the Picard hierarchy) is moved to ``x`` at no
+        NewtonBlock`: multigrid inside FGMRES, on a Picard or Newton hierarchy) is moved to ``x`` at no
         assembly: the Newton step then solves with the Jacobian at ``x``, preconditioned by the
         hierarchy of the earlier point, and contracts like Newton rather than like the chord
         method."""
