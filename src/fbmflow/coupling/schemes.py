@@ -146,7 +146,7 @@ def flow_rtol(params, newton_rtol: float | None) -> float | None:
     where it is above ``newton_rtol`` (the solver's), else None (the solver's own). A step's flow
     solve starts from the last step's flow, so its residual is the step's change, and a loose
     reduction of it errs by a fraction of that change (docs/validation.md, "2 000 disks")."""
-    loose = 0.0 if params is None else float(getattr(params, "flow_rtol", 0.0))
+    loose = 0.0 if params is None else float(params.flow_rtol)
     return loose if newton_rtol is not None and loose > newton_rtol else None
 
 

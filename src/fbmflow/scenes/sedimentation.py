@@ -51,12 +51,7 @@ from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle
 log = logging.getLogger(__name__)
 
 ManyTime = derive(TimeParams, "ManyTime", "Time stepping.", dt=0.005, scheme="backward-euler")
-ManyCoupling = derive(CouplingParams, "ManyCoupling", CouplingParams.__doc__, scheme="auto",
-                      flow_rtol=param(1e-2, "explicit and stabilised coupling: Newton's residual "
-                                      "reduction in the step's one flow solve (0, or a value at or below "
-                                      "solver.newton_rtol: solver.newton_rtol; 1e-2 moves the mean "
-                                      "settling velocity of 2 000 disks by less than half the time "
-                                      "step's error, docs/validation.md)", minimum=0.0, maximum=0.5))
+ManyCoupling = derive(CouplingParams, "ManyCoupling", CouplingParams.__doc__, scheme="auto", flow_rtol=1e-2)
 
 
 @dataclass(frozen=True)
