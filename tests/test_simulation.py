@@ -601,3 +601,31 @@ def test_a_loose_flow_solve_takes_fewer_newton_steps_and_stays_close(coupling):
     same, same_newton, sim = fall(1e-12)  # below the solver's 1e-10: the solver's own
     assert sim.coupling.flow_rtol is None and same_newton == tight_newton
     np.testing.assert_array_equal(same, tight)
+
+
+def test_a_loose_flow_solve_asks_its_linear_steps_for_no_more_than_its_reduction(monkeypatch):
+    """The stabilised scheme's loose flow solve (``coupling.flow_rtol``) asks each multigrid
+    solve for the loose reduction, not the tighter ``solver.linear_rtol``; the tight solve
+    keeps the solver's."""
+    mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
+
+    def asked(flow_rtol):
+        sim = Simulation(mesh, Particles.at_rest([Ball(0.25, 2)], 1.5, [[0.9, 1.5]]),
+                         FluidParams(density=1.0, viscosity=0.1, gravity=980.0),
+                         solver=SolverParams(linear="multigrid", newton_rtol=1e-8, linear_rtol=1e-4),
+                         coupling=CouplingParams(scheme="stabilised", flow_rtol=flow_rtol),
+                         fbm=FictitiousBoundaryParams(boundary="sharp"))
+        rtols, real = [], sim.flow._linear_solve
+
+        def recording(solve, f, g, rtol=None):
+            rtols.append(rtol)
+            return real(solve, f, g, rtol)
+
+        monkeypatch.setattr(sim.flow, "_linear_solve", recording)
+        for _ in range(3):
+            sim.step(0.005)
+        return rtols
+
+    loose, tight = asked(1e-2), asked(0.0)
+    assert min(loose) >= 1e-2 and max(loose) <= 0.1, loose
+    assert min(tight) == pytest.approx(1e-4), tight

@@ -386,15 +386,16 @@ class Simulation:
 
     # -- what the coupling schemes use (fbmflow.coupling.schemes) ----------------------------------
     def flow_and_forces(self, dt: float, velocities: Particles | None = None, guess: np.ndarray | None = None,
-                        rtol: float | None = None):
+                        rtol: float | None = None, linear_rtol: float | None = None):
         """Solve the flow over the step ``dt`` from the current state, the particles at their
         current positions moving with the velocities of ``velocities`` (default: their own), from
         the initial guess ``guess`` (n_dofs,) with Newton's residual reduction ``rtol`` (default:
-        the solver settings'). Returns ``(x (n_dofs,), Newton reports, force (n, dim), torque
+        the solver settings') and linear steps no tighter than ``linear_rtol`` (default: the
+        solver settings'). Returns ``(x (n_dofs,), Newton reports, force (n, dim), torque
         (n, 3))``; the state itself is not changed."""
         self._constraint_state = velocities
         try:
-            x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol)
+            x, reports = advance(self.flow, self.x, self.t, dt, self.scheme, guess, rtol, linear_rtol)
         finally:
             self._constraint_state = None
         force, torque = self._forces(self._owner(self.flow.space.V), x, dt)

@@ -32,6 +32,10 @@ def test_sedimentation_2d_keeps_particles_apart_and_inside():
     assert np.all(np.isfinite(v)) and v[-1] < 0.0
     X = np.array(q["final_positions"])
     assert np.all((X > 0.05) & (X < [2.0 - 0.05, 4.0 - 0.05]))
+    front = np.array(q["front_height"])  # the suspension's top comes down with the disks
+    assert front.shape == (len(q["t"]),) and front[-1] < front[0] <= 4.0
+    top = np.sort(X[:, 1])[-3:]  # the highest tenth of 30
+    assert front[-1] == pytest.approx(top.mean() + 0.05)
 
 
 def test_fluidized_bed_inflow_lifts_the_bed():

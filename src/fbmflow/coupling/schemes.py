@@ -16,7 +16,7 @@ A scheme is made from the coupling parameters (``tol``, ``max_subiterations``, `
 ``flow_rtol``: :class:`~fbmflow.params.CouplingParams`) and the Newton tolerance of the flow solves; its
 ``advance(sim, dt)`` returns a :class:`CoupledFlow`. ``sim`` offers (see
 :class:`~fbmflow.simulation.Simulation`): ``particles``, ``gravity``, ``flow``,
-``flow_and_forces(dt, velocities=None, guess=None, rtol=None)``,
+``flow_and_forces(dt, velocities=None, guess=None, rtol=None, linear_rtol=None)``,
 ``integrate(force, torque, dt, contact=True)``, ``velocity_gain(dt)`` and
 ``rigid_responses(x, free, dt)``.
 """
@@ -63,7 +63,7 @@ class ExplicitCoupling:
         self.flow_rtol = flow_rtol(params, newton_rtol)
 
     def advance(self, sim, dt: float) -> CoupledFlow:
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol)
+        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
         return CoupledFlow(x, reports, force, torque)
 
     @staticmethod
@@ -120,7 +120,7 @@ class StabilisedCoupling:
         of all particles; above one for light particles and for many particles in a closed box).
         Measured against the implicit scheme: docs/validation.md, "Many particles"."""
         p = sim.particles
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol)
+        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
         if p.fixed.all():
             return CoupledFlow(x, reports, force, torque)
         v = pack_velocities(p)
@@ -145,7 +145,8 @@ def flow_rtol(params, newton_rtol: float | None) -> float | None:
     """Newton's residual reduction for a scheme's single flow solve per step: ``params.flow_rtol``
     where it is above ``newton_rtol`` (the solver's), else None (the solver's own). A step's flow
     solve starts from the last step's flow, so its residual is the step's change, and a loose
-    reduction of it errs by a fraction of that change (docs/validation.md, "2 000 disks")."""
+    reduction of it errs by a fraction of that change (docs/validation.md, "2 000 disks"). The
+    schemes ask the solve's linear steps for no more than the same reduction."""
     loose = 0.0 if params is None else float(params.flow_rtol)
     return loose if newton_rtol is not None and loose > newton_rtol else None
 

@@ -323,13 +323,15 @@ class NavierStokesProblem:
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
               guess: np.ndarray | None = None, rtol: float | None = None,
-              newton: NewtonSettings | None = None):
+              newton: NewtonSettings | None = None, linear_rtol: float | None = None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
         the stopping rule stays relative to the residual at ``x0``, so the accuracy is the same.
         ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``);
-        ``newton``: settings for this solve instead of ``self.newton``.
+        ``newton``: settings for this solve instead of ``self.newton``; ``linear_rtol``: the
+        relative residual asked of its linear steps where that is looser than the settings' own
+        (a loose solve's steps need no more than its own reduction).
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t)
@@ -349,6 +351,8 @@ class NavierStokesProblem:
             con.apply_to_vector(x0)
         settings = newton or self.newton
         settings = settings if rtol is None else dataclasses.replace(settings, rtol=rtol)
+        if linear_rtol is not None and settings.linear_rtol is not None and linear_rtol > settings.linear_rtol:
+            settings = dataclasses.replace(settings, linear_rtol=linear_rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
                                  settings, reference)
         self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response

@@ -67,13 +67,14 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
 
 
 def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None,
-            rtol: float | None = None):
+            rtol: float | None = None, linear_rtol: float | None = None):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
 
     ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
     the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
-    (default the problem's).
+    (default the problem's); ``linear_rtol``: a looser target for its linear steps
+    (:meth:`~fbmflow.flow.NavierStokesProblem.solve`).
 
     Returns
     -------
@@ -95,7 +96,8 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         if sub.explicit:
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
         x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
-                                  guess=guess if len(subs) == 1 else None, rtol=rtol)
+                                  guess=guess if len(subs) == 1 else None, rtol=rtol,
+                                  linear_rtol=linear_rtol)
         reports.append(report)
         t = t_new
     return x, reports

@@ -30,8 +30,9 @@ Quantities:
 ``max_overlap`` (largest overlap of two particles or of a particle with a wall over all steps,
 over the radius; 0 when none; per step in ``overlap``), ``min_height`` / ``max_height`` of the
 centres, time series ``t`` and ``mean_velocity`` (mean vertical particle velocity, cm/s),
-``final_positions``, ``box`` (its upper corner, cm), and for the bed ``bed_height`` (mean centre
-height of the top tenth of the particles plus a radius, cm).
+``final_positions``, ``box`` (its upper corner, cm), and the height of the suspension's top, the
+mean centre height of the highest tenth of the particles plus a radius (cm): ``front_height``
+for the settling scenes (the suspension front), ``bed_height`` for the bed.
 """
 from __future__ import annotations
 
@@ -168,7 +169,7 @@ class _ManyParticles(ParticleScene):
     dim = 2
     box = (2.0, 4.0)
     cells_level0 = (20, 40)
-    reports_bed_height = False
+    height_name = "front_height"  # the series of the suspension's top (_top)
     default_level = 2
     max_level = 5
 
@@ -233,8 +234,7 @@ class _ManyParticles(ParticleScene):
         row = {"t": sim.t, "mean_velocity": float(p.velocity[:, -1].mean()),
                "overlap": max_overlap(p, mesh.lower, mesh.upper),
                "min_height": float(p.position[:, -1].min()), "max_height": float(p.position[:, -1].max())}
-        if self.reports_bed_height:
-            row["bed_height"] = self._top(p.position, params.particles.diameter)
+        row[self.height_name] = self._top(p.position, params.particles.diameter)
         return row
 
     def quantities(self, params, series: dict, sim) -> dict:
@@ -243,9 +243,7 @@ class _ManyParticles(ParticleScene):
              "cells_per_diameter": float(params.particles.diameter / sim.flow.mesh.spacing[0]),
              "box": [float(b) for b in sim.flow.mesh.upper],
              "t": series["t"], "mean_velocity": series["mean_velocity"], "overlap": series["overlap"],
-             "final_positions": sim.particles.position.tolist()}
-        if self.reports_bed_height:
-            q["bed_height"] = series["bed_height"]
+             "final_positions": sim.particles.position.tolist(), self.height_name: series[self.height_name]}
         return q
 
     @staticmethod
@@ -258,14 +256,12 @@ class _ManyParticles(ParticleScene):
         plt = pyplot()
 
         q = summary["quantities"]
-        panels = 2 if "bed_height" in q else 1
-        fig, ax = plt.subplots(1, panels + 1, figsize=(4.5 * (panels + 1), 4.2))
+        fig, ax = plt.subplots(1, 3, figsize=(13.5, 4.2))
         ax[0].plot(q["t"], q["mean_velocity"])
         ax[0].set_ylabel("mean vertical velocity [cm/s]")
-        if "bed_height" in q:
-            ax[1].plot(q["t"], q["bed_height"])
-            ax[1].set_ylabel("bed height [cm]")
-        for a in ax[:panels]:
+        ax[1].plot(q["t"], q[self.height_name])
+        ax[1].set_ylabel(("bed height" if self.height_name == "bed_height" else "suspension front") + " [cm]")
+        for a in ax[:2]:
             a.set_xlabel("t [s]")
             a.grid(alpha=0.3)
         X = np.array(q["final_positions"])
@@ -303,7 +299,7 @@ class FluidizedBed2D(_ManyParticles):
     name = "fluidized-bed-2d"
     description = "60 disks fluidised by inflow through the bottom of a 2 x 4 cm channel"
     Params = FluidizedBedParams
-    reports_bed_height = True
+    height_name = "bed_height"
 
     def boundary(self, mesh, params) -> dict:
         bc = {t: NoSlip() for t in mesh.tags}
