@@ -309,7 +309,8 @@ class CouplingParams(Section):
                               positive=True, maximum=0.5)
     flow_rtol: float = param(0.0, "explicit and stabilised coupling: Newton's residual reduction in the "
                              "step's one flow solve, its linear steps asked for no more than that (0, "
-                             "or a value at or below solver.newton_rtol: solver.newton_rtol)", minimum=0.0, maximum=0.5)
+                             "or a value at or below solver.newton_rtol: solver.newton_rtol)",
+                             minimum=0.0, maximum=0.5)
     integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
     added_mass: float = param(1.0, "stabilised coupling: the added mass in each particle's own stiffness, "
                               "as a multiple of a ball's potential-flow value (rho_f V for a disk, "

@@ -351,7 +351,7 @@ class NavierStokesProblem:
             con.apply_to_vector(x0)
         settings = newton or self.newton
         settings = settings if rtol is None else dataclasses.replace(settings, rtol=rtol)
-        if linear_rtol is not None and settings.linear_rtol is not None and linear_rtol > settings.linear_rtol:
+        if None not in (linear_rtol, settings.linear_rtol) and linear_rtol > settings.linear_rtol:
             settings = dataclasses.replace(settings, linear_rtol=linear_rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
                                  settings, reference)
