@@ -1,13 +1,14 @@
 """Profile one time step of a run from its checkpoint: where the time goes outside the linear
 solves.
 
-Run:  python benchmarks/profile_step.py RUN_DIR [--top 40]
+Run:  python benchmarks/profile_step.py RUN_DIR [--top 40] [--warm N]
 
 ``RUN_DIR``: the output folder of a run with ``--checkpoint-every`` (``run.json`` and
 ``checkpoint.h5``, e.g. from ``python benchmarks/bench_tencate.py --cases E4 --levels 2 --dt 0.01
 --set solver.linear=multigrid --checkpoint-every 5``). The scene is built from ``run.json``, the
-state restored from the checkpoint, and the next step runs under cProfile (it is the first step
-after the build, so it includes the multigrid hierarchy's construction). Prints the wall time,
+state restored from the checkpoint, ``--warm`` steps run unprofiled (0: the profiled step is the
+first after the build and includes the multigrid hierarchy's construction), and the next step
+runs under cProfile. Prints the wall time,
 the time in the linear solves (``StepReport.linear.time_s``), and the functions by cumulative
 and by own time.
 """
@@ -30,6 +31,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--top", type=int, default=40, help="functions listed per ordering")
+    ap.add_argument("--warm", type=int, default=0, help="steps run before the profiled one")
     args = ap.parse_args(argv)
     run = json.loads((args.run_dir / "run.json").read_text())
     scene = get_scene(run["scene"])
@@ -37,6 +39,11 @@ def main(argv=None):
     sim = scene.build(from_dict(scene.Params, run["params"]), run["level"]).sim
     sim.set_state(load_checkpoint(args.run_dir / "checkpoint.h5")[0])
     print(f"built and restored in {time.perf_counter() - t0:.1f} s, t = {sim.t:.4g} s", flush=True)
+    for _ in range(args.warm):
+        t0 = time.perf_counter()
+        report = sim.step()
+        print(f"warm step: {time.perf_counter() - t0:.1f} s, linear solves {report.linear.time_s:.1f} s",
+              flush=True)
     profile = cProfile.Profile()
     t0 = time.perf_counter()
     profile.enable()

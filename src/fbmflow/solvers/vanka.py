@@ -107,12 +107,14 @@ def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None
     return ptr, idx, val
 
 
-def _cluster_patches(system: SaddlePointSystem, cell_dofs: np.ndarray, npl: int) -> list[np.ndarray]:
-    """One patch per cluster of cells that the pressure block couples (an orphaned pressure
-    mode spread over several cells: cut cells along a cylinder that spans the domain, whose few
-    free velocities only balance each other): the cells' pressures and their free velocities,
-    (k,) int64 each. Cell patches see only their own part of such a mode, and block
-    Gauss–Seidel over them leaves it nearly untouched."""
+def _clusters(system: SaddlePointSystem, npl: int) -> list[np.ndarray]:
+    """The clusters of cells that the pressure block couples (an orphaned pressure mode spread
+    over several cells: cut cells along a cylinder that spans the domain, whose few free
+    velocities only balance each other; cells next to each other inside particles at a wall on
+    a coarse level), (k,) int64 cells each. Cell patches see only their own part of such a mode:
+    block Gauss–Seidel over them leaves it nearly untouched, and alternating them with a patch
+    of the whole cluster can diverge (measured: 1e3 times per sweep on a coarse level of 2 000
+    disks), so each cluster is one patch instead of its cells' patches."""
     C = system.pressure_block
     if C is None:
         return []
@@ -125,15 +127,7 @@ def _cluster_patches(system: SaddlePointSystem, cell_dofs: np.ndarray, npl: int)
                           shape=(n_cells, n_cells))
     n_parts, label = csgraph.connected_components(graph, directed=False)
     size = np.bincount(label, minlength=n_parts)
-    free = np.ones(system.n_u, dtype=bool)
-    if system.fixed is not None:
-        free[system.fixed] = False
-    patches = []
-    for part in np.flatnonzero(size > 1):
-        cells = np.flatnonzero(label == part)
-        velocity = np.unique(cell_dofs[cells, :-npl].ravel())
-        patches.append(np.concatenate([velocity[free[velocity]], cell_dofs[cells, -npl:].ravel()]))
-    return patches
+    return [np.flatnonzero(label == part) for part in np.flatnonzero(size > 1)]
 
 
 def _rows_of(M: sp.csr_matrix, keep: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -161,9 +155,9 @@ class FactoredVankaSmoother:
     then the patches at and inside the fictitious boundaries (those that hold a constrained
     velocity, fixed or row-constrained, not a wall's) get ``interface_sweeps`` more updates, the
     cell patches among them in slab phases as well and the agglomerated ones after them one after
-    the other; then all agglomerated patches one after the other, with one more patch per
-    cluster of cells whose pressures share an orphaned mode (the pressure block couples them;
-    :func:`_cluster_patches`).
+    the other; then all agglomerated patches one after the other. A cluster of cells whose
+    pressures share an orphaned mode (the pressure block couples them; :func:`_clusters`) is
+    agglomerated too, into one patch instead of its cells' patches.
 
     Parameters
     ----------
@@ -201,7 +195,13 @@ class FactoredVankaSmoother:
             for t in np.unique(target):
                 cells = np.concatenate([[t], source[target == t]])
                 merged.append(np.unique(cell_dofs[cells].ravel()))
-        merged += _cluster_patches(system, cell_dofs, npl)
+        free = np.ones(n_u, dtype=bool)
+        if system.fixed is not None:
+            free[system.fixed] = False
+        for cluster in _clusters(system, npl):  # the cells' pressures and free velocities
+            plain[cluster] = False
+            velocity = np.unique(cell_dofs[cluster, :-npl].ravel())
+            merged.append(np.concatenate([velocity[free[velocity]], cell_dofs[cluster, -npl:].ravel()]))
         cells = np.flatnonzero(plain)
         # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
         # and every other row (the kernels' "op")
