@@ -256,7 +256,9 @@ class _ManyParticles(ParticleScene):
         plt = pyplot()
 
         q = summary["quantities"]
-        fig, ax = plt.subplots(1, 3, figsize=(13.5, 4.2))
+        box = q.get("box", self.box)
+        wide = min(1.5, max(0.5, box[0] / box[-1]))  # the positions' panel keeps the box's shape
+        fig, ax = plt.subplots(1, 3, figsize=(9.0 + 4.5 * wide, 4.2), width_ratios=[1.0, 1.0, wide])
         ax[0].plot(q["t"], q["mean_velocity"])
         ax[0].set_ylabel("mean vertical velocity [cm/s]")
         ax[1].plot(q["t"], q[self.height_name])
@@ -268,7 +270,6 @@ class _ManyParticles(ParticleScene):
         d = summary["params"]["particles"]["diameter"]
         last = ax[-1]
         last.set_aspect("equal")
-        box = q.get("box", self.box)
         last.set_xlim(0, box[0])
         last.set_ylim(0, box[-1])
         for x in X:
