@@ -549,14 +549,20 @@ def test_a_scene_placed_through_a_wall_exits_2_with_one_line(capsys, tmp_path):
     assert len(err) == 1 and "reaches outside the domain" in err[0]
 
 
-def test_a_step_that_moves_a_particle_over_a_cell_warns_once(caplog):
-    """dt 0.05 s at level 0 moves the disk 1.2 cells in step 2 (before: no word of it)."""
+def test_a_step_that_moves_a_particle_over_a_cell_warns_and_again_when_that_doubles(caplog):
+    """dt 0.05 s at level 0 moves the disk 1.2 cells in step 2 (before: no word of it); a warning
+    follows only where the move has doubled since the last one (before: one warning per run, so
+    2 000 disks moving 5 cells per step late in a run went unreported)."""
     import logging
+    import re
     scene = get_scene("glowinski-free-fall")
     with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
-        scene.run(from_dict(scene.Params, {"time": {"dt": 0.05, "t_end": 0.2}}), 0)
+        scene.run(from_dict(scene.Params, {"time": {"dt": 0.05, "t_end": 0.4}}), 0)
     warnings = [r.getMessage() for r in caplog.records if "cells; forces and contact" in r.getMessage()]
-    assert len(warnings) == 1 and "reduce the time step (dt = 0.05 s)" in warnings[0], warnings
+    assert warnings and "reduce the time step (dt = 0.05 s)" in warnings[0], warnings
+    moves = [float(re.search(r"by ([0-9.]+) cells", w).group(1)) for w in warnings]
+    assert 1.0 < moves[0] < 2.0 and len(moves) >= 2, moves
+    assert all(b > 2.0 * a - 0.1 for a, b in zip(moves, moves[1:])), moves
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
         scene.run(from_dict(scene.Params, {"time": {"dt": 0.005, "t_end": 0.02}}), 0)

@@ -208,7 +208,7 @@ class Simulation:
         self._last_force: np.ndarray | None = None
         self._last_torque: np.ndarray | None = None
         self.last_increment: np.ndarray | None = None  # CoupledFlow.increment of the last step
-        self._warned_fast = False  # the warning about particles crossing cells in a step is given once
+        self._warned_fast = 0.0  # the largest move in cells per step warned about (_warn_if_fast)
 
     # -- the run ------------------------------------------------------------------------------
     @property
@@ -568,14 +568,15 @@ class Simulation:
         return shift
 
     def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:
-        """Warn once when a step moves a particle more than a finest cell: the fictitious
-        boundary jumps over velocity nodes, and forces and contact lose accuracy."""
-        if self._warned_fast or moved.size == 0:
+        """Warn when a step moves a particle more than a finest cell (the fictitious boundary
+        jumps over velocity nodes, and forces and contact lose accuracy), and again each time
+        the largest such move doubles."""
+        if moved.size == 0:
             return
         cells = np.linalg.norm(moved, axis=1) / float(np.min(self.flow.mesh.finest_spacing))
         k = int(np.argmax(cells))
-        if cells[k] > 1.0:
-            self._warned_fast = True
+        if cells[k] > max(1.0, 2.0 * self._warned_fast):
+            self._warned_fast = float(cells[k])
             log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above "
                         "about one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less",
                         self.step_count + 1, k, cells[k], dt, dt / cells[k])
