@@ -274,7 +274,7 @@ class _ManyParticles(ParticleScene):
         last.set_ylim(0, box[-1])
         for x in X:
             last.add_patch(plt.Circle((x[0], x[-1]), d / 2, fc="C0", ec="k", lw=0.3))
-        last.set_title(f"t = {q['t'][-1]:.3g} s" + (" (projected on x-z)" if X.shape[1] == 3 else ""))
+        last.set_title(f"t = {q['t'][-1]:.3g} s" + ("\n(projected on x-z)" if X.shape[1] == 3 else ""))
         fig.suptitle(f"{summary['scene']}, level {summary['level']}, max overlap {q['max_overlap']:.2g} r")
         return save_figure(fig, path)
 
