@@ -180,12 +180,14 @@ class FlowLevel:
 
     def system(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
                con: DirichletConstraints | None = None, newton: bool = True,
-               own_buffer: bool = False) -> SaddlePointSystem:
+               own_buffer: bool = False, orphans: sp.csr_matrix | None = None) -> SaddlePointSystem:
         """Newton linearisation ``m rho M + a (mu L + rho (N(u) + R(u)))`` at velocity ``u``.
 
         The velocity block's data lives in a buffer of this level and is overwritten by the next
         call: use the returned system before linearising again (or pass ``own_buffer`` to get a
-        fresh array that nothing else writes to).
+        fresh array that nothing else writes to). ``orphans``: the orphaned pressure modes under
+        ``con`` where the caller has them (an empty matrix: none), else they are computed
+        (:class:`~fbmflow.solvers.system.SaddlePointSystem`).
         """
         s = self.space
         con = con or self.homogeneous_constraints()
@@ -212,7 +214,8 @@ class FlowLevel:
         con.zero_rows(A)
         if not con.sharp:
             return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
-                                     fixed_always=self.boundary_constraints.dofs, transient=m != 0.0)
+                                     fixed_always=self.boundary_constraints.dofs, transient=m != 0.0,
+                                     orphans=orphans)
         rows = None
         if con.rows is not None:
             rows = con.rows.dofs
@@ -220,7 +223,7 @@ class FlowLevel:
         return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
-                                 extension=con.extension, transient=m != 0.0)
+                                 extension=con.extension, transient=m != 0.0, orphans=orphans)
 
     def newton_system(self, assembled: SaddlePointSystem, u: np.ndarray, a: float, rho: float,
                       newton_base: bool = False) -> SaddlePointSystem:

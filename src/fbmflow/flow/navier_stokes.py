@@ -110,6 +110,7 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
+        self._orphans = None  # (constraints, their orphaned pressure modes) last computed
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
 
     # -- data ---------------------------------------------------------------------------------
@@ -220,14 +221,28 @@ class NavierStokesProblem:
         return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1, con.extension)
 
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
-        """Pressure modes that no free velocity sees under the constraints ``con``."""
+        """Pressure modes that no free velocity sees under the constraints ``con`` (those of the
+        last ``con`` asked for are kept: a Newton solve's residuals and linear systems share
+        them)."""
         if self.extra_constraints is None:
             return None
+        if self._orphans is not None and self._orphans[0] is con:
+            return self._orphans[1]
         P = orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1,
                                   closed=self.mean_weights is not None)
         if con.extension is not None:
             P = con.extension.exclude(P)
+        self._orphans = (con, P)
         return P
+
+    def _known_orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
+        """The fine level system's orphaned modes where this problem computes them (an empty
+        matrix: none), else None (the system finds those of the walls itself)."""
+        if self.extra_constraints is None:
+            return None
+        P = self.orphans(con)
+        n_p = self.BT.shape[0]
+        return sp.csr_matrix((n_p, n_p)) if P is None else P
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
                       con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
@@ -246,13 +261,14 @@ class NavierStokesProblem:
         newton = not (self.coarse and self.convection and a != 0.0 and picard is not None
                       and picard(m != 0.0))
         if newton:
-            system = finer_system = self.fine.system(u, *args, con=con)
+            system = finer_system = self.fine.system(u, *args, con=con, orphans=self._known_orphans(con))
             if self.coarse and self.convection and a != 0.0 and getattr(settings, "krylov", None) == "fgmres":
                 # FGMRES applies it: it can follow later Newton iterates (relinearise)
                 system = self.fine.newton_system(finer_system, u, a, self.rho, newton_base=True)
         else:  # the hierarchy of the Picard linearisation preconditions the Newton system, whose
             # Newton term is applied without a matrix
-            finer_system = self.fine.system(u, *args, con=con, newton=False)
+            finer_system = self.fine.system(u, *args, con=con, newton=False,
+                                            orphans=self._known_orphans(con))
             system = self.fine.newton_system(finer_system, u, a, self.rho)
         finer_level = self.fine
         galerkin = (getattr(settings, "coarse_obstacle", "nodes") == "galerkin"

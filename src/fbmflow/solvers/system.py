@@ -52,7 +52,8 @@ class SaddlePointSystem:
         inside a fictitious boundary, alone or in clusters). Those modes would make the system
         singular; ``C`` sets them to ``g`` (zero for Newton updates) and leaves every other
         unknown unchanged. Computed from ``B^T`` (the columns of ``rows`` zeroed) when ``space``
-        is given (:func:`orphan_pressure_modes`).
+        is given and ``orphans`` is None (:func:`orphan_pressure_modes`); a caller that has
+        computed them passes them, an empty matrix where there are none.
     rows : (n_r,) int64 or None, velocity DOFs whose rows of ``A`` are linear constraints
         (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
         are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
@@ -86,6 +87,8 @@ class SaddlePointSystem:
                                                  closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
+        elif self.orphans is not None and self.orphans.nnz == 0:  # the caller found none
+            self.orphans = None
         if self.rows is not None and self.orphans is not None:
             # the orphaned modes' continuity equations drop out (as in the residual): they see the
             # row-constrained columns only, and would otherwise tie those to the modes' g
@@ -184,8 +187,7 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
     while active.size:
         count = np.bincount(cols[active][live[active]], minlength=n_u)
         private = live[active] & (count[cols[active]] == 1)
-        sv = np.linalg.svd(Bc[active] * private[:, None, :], compute_uv=False)
-        keep = (sv <= tol * scale).any(axis=1)
+        keep = _rank_deficient(Bc[active] * private[:, None, :], tol * scale)
         if keep.all():
             break
         active = active[keep]
@@ -233,6 +235,23 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
     if closed and P.nnz:
         P = _without_constant(P, npl)
     return P if P is not None and P.nnz else None
+
+
+def _rank_deficient(blocks: np.ndarray, threshold: float) -> np.ndarray:
+    """Which blocks (n, m, k) have a singular value at most ``threshold``, (n,) bool.
+
+    The eigenvalues of the Gram matrices ``b b^T`` (m x m, a few times cheaper than the blocks'
+    SVD) clear most blocks: one whose smallest eigenvalue exceeds ``threshold^2 + 1e-12
+    lambda_max`` has every singular value above ``threshold`` (the eigenvalues' rounding error is
+    a few ``eps lambda_max``). The rest, the candidates, get the SVD's answer.
+    """
+    lam = np.linalg.eigvalsh(blocks @ blocks.transpose(0, 2, 1))
+    out = lam[:, 0] <= threshold**2 + 1e-12 * lam[:, -1]
+    check = np.flatnonzero(out)
+    if check.size:
+        sv = np.linalg.svd(blocks[check], compute_uv=False)
+        out[check] = (sv <= threshold).any(axis=1)
+    return out
 
 
 def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matrix | None,

@@ -1,0 +1,72 @@
+"""Orphaned pressure modes: the Gram pre-filter of the rank test against the SVD, and the fine
+system sharing the modes its Newton solve computed for the residual."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fbmflow.solvers import system as system_module
+from fbmflow.solvers.system import _rank_deficient
+
+
+def test_the_gram_prefilter_decides_as_the_svd():
+    """Blocks (3 x 18, as a 2D cell's B) with planted singular values from 1e-16 to 1 times the
+    largest, around the threshold among them, and at scales from 1e-8 to 1e8: the pre-filtered
+    test flags exactly the blocks whose SVD has a singular value at most the threshold."""
+    rng = np.random.default_rng(7)
+    n, m, k = 3000, 3, 18
+    U = np.linalg.qr(rng.standard_normal((n, m, m)))[0]
+    V = np.linalg.qr(rng.standard_normal((n, k, m)))[0]
+    smallest = 10.0 ** rng.uniform(-16, 0, n)
+    smallest[:200] = 1e-10 * (1 + rng.uniform(-1e-3, 1e-3, 200))  # at the threshold
+    sv = np.stack([np.ones(n), rng.uniform(0.1, 1, n), smallest], axis=1)
+    scale = 10.0 ** rng.uniform(-8, 8, n)
+    blocks = np.einsum("cij,cj,ckj->cik", U, sv * scale[:, None], V)
+    blocks[:50] = 0.0  # a cell inside a particle: no private velocity at all
+    for s in (1e-8, 1.0, 1e8):  # one threshold per call, as in orphan_pressure_modes
+        pick = np.flatnonzero(np.isclose(scale, s, rtol=0.9) | (np.arange(n) < 50))
+        threshold = 1e-10 * s
+        ref = (np.linalg.svd(blocks[pick], compute_uv=False) <= threshold).any(axis=1)
+        assert ref.any() and not ref.all()
+        assert np.array_equal(_rank_deficient(blocks[pick], threshold), ref)
+
+
+@pytest.mark.parametrize("sharp", [False, True])
+def test_a_newton_solve_finds_the_orphaned_modes_once(sharp, monkeypatch):
+    """A disk moving down in a closed box, one backward-Euler Newton solve with the direct solver:
+    its residuals and its linear systems share one search for orphaned pressure modes, and the
+    system's modes are the ones it would find itself."""
+    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
+    from fbmflow.flow import NavierStokesProblem, NoSlip
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.particles import Ball
+
+    mesh = StructuredMesh.box((16, 16))
+    centre, shapes = np.array([[0.513, 0.521]]), [Ball(0.15, 2)]
+    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
+
+    def disk(V, t):
+        rigid = rigid_body_constraints(V, node_owner(V, centre, shapes), centre, vel, ang)
+        if sharp:
+            owner = node_owner(V, centre, shapes)
+            return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
+        return rigid
+
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, linear_solver="direct",
+                               extra_constraints=disk)
+    calls = []
+    search = system_module.orphan_pressure_modes
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return search(*args, **kwargs)
+
+    monkeypatch.setattr(system_module, "orphan_pressure_modes", counted)
+    monkeypatch.setattr("fbmflow.flow.navier_stokes.orphan_pressure_modes", counted)
+    x, report = prob.solve(prob.zero_state(), 100.0, 1.0, prob.load(), 0.0)
+    assert report.converged and report.iterations >= 1
+    assert len(calls) == 1
+    system = prob._linearisation[4]
+    assert system.orphans is not None and system.orphans.nnz > 0
+    own = dataclasses.replace(system, orphans=None)  # the system's own search
+    assert len(calls) == 2 and abs(own.orphans - system.orphans).max() == 0.0
