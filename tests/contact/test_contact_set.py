@@ -249,3 +249,66 @@ def test_periodic_candidates_are_the_nearest_image_pairs():
         assert np.array_equal(pairs, expected), method
     with pytest.raises(ValueError, match="shorter than two of the largest"):
         candidate_pairs(X, R, margin, periods=np.array([0.5, 0.0, 0.0]))
+
+
+def test_row_masses_kernel_matches_numpy():
+    """The kernel's angular parts and effective inverse masses against the NumPy formulas
+    (cross products, ``I^-1 a``, ``k = 1/m_i |d|^2 + a_i . b_i + ...``) on random contacts,
+    a third of them with a plane (``j < 0``)."""
+    from fbmflow.contact import _kernels
+    rng = np.random.default_rng(5)
+    n, m = 7, 40
+    ci = rng.integers(0, n, m)
+    cj = np.where(rng.random(m) < 1 / 3, -1, rng.integers(0, n, m))
+    D = rng.standard_normal((m, 3, 3))
+    ri, rj = rng.standard_normal((m, 3)), rng.standard_normal((m, 3))
+    inv_m = rng.uniform(0.5, 2.0, n)
+    S = rng.standard_normal((n, 3, 3))
+    inv_I = S @ S.transpose(0, 2, 1) + np.eye(3)
+    Ai, Aj, Bi, Bj, K = _kernels.row_masses(ci, cj, D, ri, rj, inv_m, inv_I)
+    wall = (cj < 0)[:, None]
+    jj = np.maximum(cj, 0)
+    ref_Ai = np.cross(ri[:, None, :], D)
+    ref_Aj = np.where(wall[:, :, None], 0.0, np.cross(rj[:, None, :], D))
+    ref_Bi = np.einsum("mab,mqb->mqa", inv_I[ci], ref_Ai)
+    ref_Bj = np.einsum("mab,mqb->mqa", inv_I[jj], ref_Aj)
+    dd = np.einsum("mqa,mqa->mq", D, D)
+    ref_K = (inv_m[ci][:, None] * dd + np.einsum("mqa,mqa->mq", ref_Ai, ref_Bi)
+             + np.where(wall, 0.0, inv_m[jj][:, None] * dd + np.einsum("mqa,mqa->mq", ref_Aj, ref_Bj)))
+    for got, ref in ((Ai, ref_Ai), (Aj, ref_Aj), (Bi, ref_Bi), (Bj, ref_Bj), (K, ref_K)):
+        np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_an_advance_with_its_pair_list_takes_the_substeps_one_by_one(periodic, monkeypatch):
+    """200 disks falling and colliding in a box (periodic in x or walled), 40 sub-steps in one
+    :meth:`ContactSet.advance`, whose sub-steps share a pair list (a broadphase every few
+    sub-steps), against the same sub-steps called one by one with a broadphase each: the same
+    contacts, impulses and states."""
+    from fbmflow.contact import contact_set
+    broadphases = []
+    search = contact_set.candidate_pairs
+    monkeypatch.setattr(contact_set, "candidate_pairs",
+                        lambda *a, **k: broadphases.append(1) or search(*a, **k))
+    N, R = 200, 0.01
+    rng = np.random.default_rng(3)
+    k = np.arange(N)
+    X = np.column_stack([(k % 20 + 0.5) * 2.05 * R, (k // 20 + 0.5) * 2.05 * R + R])
+    X += rng.uniform(-0.02 * R, 0.02 * R, X.shape)
+    p = Particles.at_rest([Ball(R, 2)] * N, 2500.0, X)
+    p.velocity = rng.normal(0.0, 0.3, (N, 2))
+    L = 20 * 2.05 * R
+    planes = Planes.box([0.0, 0.0], [L, 1.0], faces=[(1, 0), (1, 1)] if periodic else None)
+    kwargs = dict(restitution=0.5, friction=0.3, skin=0.1 * R,
+                  periods=[L, 0.0] if periodic else None, origin=[0.0, 0.0] if periodic else None)
+    acc, alpha = np.tile([0.0, -9.81], (N, 1)), np.zeros(N)
+    listed, single = ContactSet(planes, **kwargs), ContactSet(planes, **kwargs)
+    q, report = listed.advance(p, acc, alpha, 0.02, substeps=40)
+    assert 1 <= len(broadphases) <= 20
+    r = p
+    for _ in range(40):
+        r, _ = single.substep(r, acc, alpha, 0.02 / 40)
+    assert report.contacts > N  # many pairs in touch, some of them across the periodic side
+    np.testing.assert_array_equal(listed.state()["keys"], single.state()["keys"])
+    np.testing.assert_allclose(q.position, r.position, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(q.velocity, r.velocity, rtol=0, atol=1e-12)

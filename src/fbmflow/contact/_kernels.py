@@ -40,6 +40,52 @@ def _apply(v, w, inv_m, i, j, d, bi, bj, lam):
 
 
 @njit
+def row_masses(ci, cj, D, ri, rj, inv_m, inv_I):
+    """Angular parts and effective inverse masses of every row: ``A = r x d`` (m, 3, 3) for
+    either side, ``B = I^{-1} A`` (m, 3, 3) with the inverse world inertia ``inv_I (n, 3, 3)``
+    and ``K = 1/m_i |d|^2 + a_i . b_i + 1/m_j |d|^2 + a_j . b_j`` (m, 3), from the row
+    directions ``D (m, 3, 3)`` and the arms ``ri, rj (m, 3)``; a plane (``j < 0``) adds nothing
+    (its ``A`` and ``B`` are zero). Returns Ai, Aj, Bi, Bj, K."""
+    m = ci.shape[0]
+    Ai = np.zeros((m, 3, 3))
+    Aj = np.zeros((m, 3, 3))
+    Bi = np.zeros((m, 3, 3))
+    Bj = np.zeros((m, 3, 3))
+    K = np.zeros((m, 3))
+    for c in range(m):
+        i, j = ci[c], cj[c]
+        for q in range(3):
+            d = D[c, q]
+            dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            _cross(ri[c], d, Ai[c, q])
+            k = inv_m[i] * dd
+            for a in range(3):
+                b = 0.0
+                for e in range(3):
+                    b += inv_I[i, a, e] * Ai[c, q, e]
+                Bi[c, q, a] = b
+                k += Ai[c, q, a] * b
+            if j >= 0:
+                _cross(rj[c], d, Aj[c, q])
+                k += inv_m[j] * dd
+                for a in range(3):
+                    b = 0.0
+                    for e in range(3):
+                        b += inv_I[j, a, e] * Aj[c, q, e]
+                    Bj[c, q, a] = b
+                    k += Aj[c, q, a] * b
+            K[c, q] = k
+    return Ai, Aj, Bi, Bj, K
+
+
+@njit
+def _cross(r, d, out):
+    out[0] = r[1] * d[2] - r[2] * d[1]
+    out[1] = r[2] * d[0] - r[0] * d[2]
+    out[2] = r[0] * d[1] - r[1] * d[0]
+
+
+@njit
 def row_velocities(ci, cj, D, Ai, Aj, v, w, q):
     """Relative velocities (m,) of every contact along its row ``q``."""
     m = ci.shape[0]

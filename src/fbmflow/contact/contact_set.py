@@ -84,8 +84,12 @@ class _Rows:
 
 
 def _pad(a: np.ndarray) -> np.ndarray:
-    padded = np.pad(a, ((0, 0), (0, 3 - a.shape[1]))) if a.shape[1] < 3 else a
-    return np.ascontiguousarray(padded, dtype=float)
+    """``a (m, k)``, k <= 3, as a C-contiguous float (m, 3) array, zeros in the added columns."""
+    if a.shape[1] == 3:
+        return np.ascontiguousarray(a, dtype=float)
+    out = np.zeros((a.shape[0], 3))
+    out[:, :a.shape[1]] = a
+    return out
 
 
 def _tangents(n: np.ndarray, dim: int):
@@ -155,6 +159,8 @@ class ContactSet:
         self._stored_keys = np.zeros(0, dtype=np.int64)
         self._stored_normal = np.zeros(0)
         self._stored_friction = np.zeros((0, 3))
+        # pair list of the current advance (Verlet list): positions, reach and pairs of its broadphase
+        self._pair_list = None
 
     # --- warm-start state (for checkpoints) -------------------------------------------------
     def state(self) -> dict:
@@ -177,7 +183,7 @@ class ContactSet:
         gaps are measured from the skin (``gap - skin``)."""
         margin = margin + self.skin
         R = p.bounding_radius
-        pairs = candidate_pairs(p.position, R, margin, self.broadphase, self.periods, self.origin)
+        pairs = self._candidate_pairs(p.position, R, margin)
         contacts = pair_contacts(p, pairs, self.periods)
         if self.planes is not None:
             part, plane = plane_candidates(p.position, R, self.planes.points, self.planes.normals, margin)
@@ -187,6 +193,28 @@ class ContactSet:
             contacts = contacts.select(~both_fixed)
         contacts.gap = contacts.gap - self.skin
         return contacts
+
+    def _candidate_pairs(self, X: np.ndarray, R: np.ndarray, margin: float) -> np.ndarray:
+        """The broadphase's pairs within ``margin`` (:func:`~fbmflow.contact.broadphase.
+        candidate_pairs`). Inside :meth:`advance` they come from a pair list of twice the reach,
+        kept while no particle has moved far enough since its broadphase to bring in a pair the
+        list lacks (``margin + 2 max|X - X_0| <= reach``), and picked from it by the
+        broadphase's own test ``|X_i - X_j| <= R_i + R_j + margin`` (nearest images on
+        periodic axes): the same pairs, one broadphase per few sub-steps."""
+        kept = self._pair_list
+        if kept is None:
+            return candidate_pairs(X, R, margin, self.broadphase, self.periods, self.origin)
+        moved = np.inf if kept[0] is None else float(np.max(np.linalg.norm(X - kept[0], axis=1), initial=0.0))
+        if margin + 2.0 * moved > kept[1]:
+            reach = 2.0 * margin
+            pairs = candidate_pairs(X, R, reach, self.broadphase, self.periods, self.origin)
+            kept = self._pair_list = (X.copy(), reach, pairs)
+        pairs = kept[2]
+        d = X[pairs[:, 0]] - X[pairs[:, 1]]
+        if self.periods is not None:
+            L = self.periods[None, :]
+            d = np.where(L > 0, d - L * np.round(d / np.where(L > 0, L, 1.0)), d)
+        return pairs[np.linalg.norm(d, axis=1) <= R[pairs[:, 0]] + R[pairs[:, 1]] + margin]
 
     def prepare(self, p: Particles, contacts: Contacts, v: np.ndarray, w: np.ndarray, h: float,
                 inv_m: np.ndarray, inv_I: np.ndarray, threshold: float) -> _Rows:
@@ -201,13 +229,7 @@ class ContactSet:
         D = np.ascontiguousarray(np.stack([n, t1, t2], axis=1))
         X, point = _pad(p.position), _pad(contacts.point)
         ri, rj = point - X[ci], np.where(wall, 0.0, point - X[jj] - _pad(contacts.image))
-        Ai = np.cross(ri[:, None, :], D)
-        Aj = np.cross(rj[:, None, :], D)
-        Bi = np.einsum("mab,mqb->mqa", inv_I[ci], Ai)
-        Bj = np.where(wall[:, :, None], 0.0, np.einsum("mab,mqb->mqa", inv_I[jj], Aj))
-        K = (inv_m[ci][:, None] * np.einsum("mqa,mqa->mq", D, D) + np.einsum("mqa,mqa->mq", Ai, Bi)
-             + np.where(wall, 0.0, inv_m[jj][:, None] * np.einsum("mqa,mqa->mq", D, D)
-                        + np.einsum("mqa,mqa->mq", Aj, Bj)))
+        Ai, Aj, Bi, Bj, K = _kernels.row_masses(ci, cj, D, ri, rj, inv_m, inv_I)
         gap = contacts.gap
         u_n = _kernels.row_velocities(ci, cj, D, Ai, Aj, v, w, 0)
         target = np.where(gap > 0, -gap / h, 0.0)
@@ -325,13 +347,17 @@ class ContactSet:
         if substeps < 1:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
         total = ContactReport()
-        for _ in range(substeps):
-            p, r = self.substep(p, lin_acc, ang_acc, dt / substeps)
-            total.substeps += 1
-            total.contacts = max(total.contacts, r.contacts)
-            total.sweeps += r.sweeps
-            total.residual, total.history = r.residual, r.history
-            total.max_overlap = max(total.max_overlap, r.max_overlap)
-            total.detect_s += r.detect_s
-            total.solve_s += r.solve_s
+        self._pair_list = (None, 0.0, None)  # the sub-steps share a pair list (_candidate_pairs)
+        try:
+            for _ in range(substeps):
+                p, r = self.substep(p, lin_acc, ang_acc, dt / substeps)
+                total.substeps += 1
+                total.contacts = max(total.contacts, r.contacts)
+                total.sweeps += r.sweeps
+                total.residual, total.history = r.residual, r.history
+                total.max_overlap = max(total.max_overlap, r.max_overlap)
+                total.detect_s += r.detect_s
+                total.solve_s += r.solve_s
+        finally:
+            self._pair_list = None
         return p, total

@@ -3,10 +3,10 @@ functionals of the flow, and their application to many flows at once (checked ag
 tests/coupling/test_fbm.py)."""
 import numpy as np
 
-from .._jit import njit
+from .._jit import njit, prange
 
 
-@njit
+@njit(parallel=True)
 def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, Jinv, psi, xq, periods):
     """``F_i = -int sigma . grad alpha_i`` and ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` as
     linear functionals of the flow, one (cut cell, particle) pair at a time.
@@ -29,13 +29,13 @@ def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, 
     r = 3 if d == 2 else 6
     wu = np.zeros((m, r, d, nl))
     wp = np.zeros((m, r, npl))
-    g = np.empty((nl, d))
-    ga = np.empty(d)
-    gdot = np.empty(nl)
-    cu = np.empty((d, d, nl))
-    cp = np.empty((d, npl))
-    rel = np.zeros(3)
-    for e in range(m):
+    for e in prange(m):  # pairs are independent: each writes its own rows
+        g = np.empty((nl, d))
+        ga = np.empty(d)
+        gdot = np.empty(nl)
+        cu = np.empty((d, d, nl))
+        cp = np.empty((d, npl))
+        rel = np.zeros(3)
         c, i = cells[e], particles[e]
         for q in range(nq):
             w = detJw[c, q]
