@@ -2,7 +2,7 @@
 
 Run:  python benchmarks/bench_particle_scaling.py [--counts 10 100 1000]
       [--couplings explicit stabilised implicit]
-      [--level 2] [--diameter 0.03] [--steps 2] [--label after] [--max-response-gb 2.0]
+      [--level 2] [--diameter 0.03] [--steps 6] [--label after] [--max-response-gb 2.0]
 
 Scene: ``sedimentation-2d`` at ``--level`` (default 2, the scene's default: 80 x 160 cells,
 141 762 unknowns) with ``particles.count`` disks of ``particles.diameter`` cm (default 0.03: the
@@ -37,6 +37,7 @@ import json
 import os
 import pstats
 import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -136,7 +137,7 @@ def table(rows: list[dict]) -> list[str]:
     rows = sorted(rows, key=lambda r: (r["label"], r["coupling"], r["count"]))
     previous = {}
     for r in rows:
-        s = r["steps"][r["measured_step"]]
+        s = r.get("median") or r["steps"][r["measured_step"]]
         key = (r["label"], r["coupling"])
         growth = ""
         if key in previous:
@@ -156,7 +157,8 @@ def write(rows: list[dict]) -> None:
     lines = ["# Cost of a step against the particle count (sedimentation-2d, fixed mesh)", "",
              "Command: `python benchmarks/bench_particle_scaling.py` (options in the rows below); 2-core "
              "machine shared with other jobs, every run under `nice -n 19`. Each row: one child process, "
-             "the last timed step (not the first from rest, not the profiled one); `outside` is the "
+             "the median of the timed steps after the first (the first from rest and the profiled one "
+             "left out; rows without a median: the last timed step); `outside` is the "
              "step's wall time less `StepReport.linear.time_s`. Runs of different versions were made one "
              "after the other, not at once.", ""]
     for label in sorted({r["label"] for r in rows}):
@@ -192,7 +194,8 @@ def main(argv=None) -> None:
                     choices=["explicit", "stabilised", "implicit"])
     ap.add_argument("--level", type=int, default=2)
     ap.add_argument("--diameter", type=float, default=0.03, help="disk diameter [cm]")
-    ap.add_argument("--steps", type=int, default=2, help="timed steps (then one profiled step)")
+    ap.add_argument("--steps", type=int, default=6, help="timed steps (then one profiled step); the table "
+                    "gives the median of all but the first")
     ap.add_argument("--label", default="current", help="version label of this run's rows")
     ap.add_argument("--note", default="", help="a note on this run (the commit, the machine's load)")
     ap.add_argument("--max-response-gb", type=float, default=2.0,
@@ -223,7 +226,11 @@ def main(argv=None) -> None:
             row = json.loads(found[-1][4:])
             row.update(label=args.label, date=str(date.today()), n_steps=args.steps, note=args.note,
                        measured_step=args.steps - 1, skipped=skipped)
-            s = row["steps"][args.steps - 1]
+            timed = row["steps"][1:args.steps] or row["steps"][:1]
+            row["median"] = {key: float(statistics.median(t[key] for t in timed)) for key in
+                             ("wall_s", "linear_s", "outside_s", "contact_s")}
+            row["median"]["flow_solves"] = timed[-1]["flow_solves"]
+            s = row["median"]
             print(f"{coupling:8s} {count:5d} disks: step {s['wall_s']:.2f} s, linear {s['linear_s']:.2f} s, "
                   f"outside {s['outside_s']:.2f} s ({s['outside_s'] / s['wall_s']:.0%}), "
                   f"peak {row['max_rss_gb']:.2f} GB", flush=True)
