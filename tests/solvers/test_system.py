@@ -11,8 +11,9 @@ from fbmflow.solvers.system import _rank_deficient
 
 def test_the_gram_prefilter_decides_as_the_svd():
     """Blocks (3 x 18, as a 2D cell's B) with planted singular values from 1e-16 to 1 times the
-    largest, around the threshold among them, and at scales from 1e-8 to 1e8: the pre-filtered
-    test flags exactly the blocks whose SVD has a singular value at most the threshold."""
+    largest, around the threshold among them, at scales from 1e-8 to 1e8, some zero or with two
+    non-zero columns only: the pre-filtered test flags exactly the blocks whose SVD has a singular
+    value at most the threshold."""
     rng = np.random.default_rng(7)
     n, m, k = 3000, 3, 18
     U = np.linalg.qr(rng.standard_normal((n, m, m)))[0]
@@ -23,8 +24,9 @@ def test_the_gram_prefilter_decides_as_the_svd():
     scale = 10.0 ** rng.uniform(-8, 8, n)
     blocks = np.einsum("cij,cj,ckj->cik", U, sv * scale[:, None], V)
     blocks[:50] = 0.0  # a cell inside a particle: no private velocity at all
+    blocks[50:300, :, 2:] = 0.0  # a cut cell with two private velocities: rank 2 at most
     for s in (1e-8, 1.0, 1e8):  # one threshold per call, as in orphan_pressure_modes
-        pick = np.flatnonzero(np.isclose(scale, s, rtol=0.9) | (np.arange(n) < 50))
+        pick = np.flatnonzero(np.isclose(scale, s, rtol=0.9) | (np.arange(n) < 300))
         threshold = 1e-10 * s
         ref = (np.linalg.svd(blocks[pick], compute_uv=False) <= threshold).any(axis=1)
         assert ref.any() and not ref.all()

@@ -52,19 +52,14 @@ class ForceFunctional:
         d, n_v, nl = space.dim, space.n_v, space.V.cell_dofs.shape[1]
         r, npl = wu.shape[1], d + 1
         self.dim, self.n_particles, self.rows_per_particle = d, int(n_particles), r
-        rows = (particle[:, None] * r + np.arange(r)[None, :]).astype(np.int64)      # (m, r)
+        order = np.argsort(particle, kind="stable")                                 # pieces by particle
+        cells, particle = cells[order], particle[order]
         nodes = space.V.cell_dofs[cells]                                            # (m, nl)
         cols_u = np.arange(d)[None, :, None] * n_v + nodes[:, None, :]              # (m, d, nl)
-        shape = (self.n_particles * r, space.n_u)
-        self.G_u = sp.csr_matrix((wu.ravel(), (np.repeat(rows.ravel(), d * nl),
-                                               np.broadcast_to(cols_u[:, None], wu.shape).ravel())),
-                                 shape=shape)
         cols_p = cells[:, None] * npl + np.arange(npl)[None, :]                     # (m, npl)
-        self.G_p = sp.csr_matrix((wp.ravel(), (np.repeat(rows.ravel(), npl),
-                                               np.broadcast_to(cols_p[:, None], wp.shape).ravel())),
-                                 shape=(self.n_particles * r, space.n_p))
-        for G in (self.G_u, self.G_p):
-            G.sum_duplicates()
+        self.G_u = _rows_by_particle(particle, self.n_particles, wu[order].reshape(len(order), r, d * nl),
+                                     cols_u.reshape(len(order), d * nl), space.n_u)
+        self.G_p = _rows_by_particle(particle, self.n_particles, wp[order], cols_p, space.n_p)
 
     def _split(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Force (..., n, dim) and torque (..., n, 3) from the rows (..., n r)."""
@@ -112,6 +107,24 @@ class ForceFunctional:
         S = np.zeros((n, r, r))
         np.add.at(S, (M.row[own] // r, M.row[own] % r, component[M.col[own]]), mu * M.data[own])
         return S
+
+
+def _rows_by_particle(particle: np.ndarray, n: int, w: np.ndarray, cols: np.ndarray,
+                      n_cols: int) -> sp.csr_matrix:
+    """CSR (n r, n_cols) whose row ``i r + q`` holds the entries ``w[e, q]`` (at ``cols[e]``) of
+    every piece ``e`` of particle ``i``: ``particle (m,)`` sorted, ``w (m, r, k)``, ``cols (m, k)``.
+    Built in place (no COO round trip); a column may repeat within a row (cells share nodes)."""
+    m, r, k = w.shape
+    count = np.bincount(particle, minlength=n)                                  # pieces per particle
+    indptr = np.zeros(n * r + 1, dtype=np.int64)
+    np.cumsum(np.repeat(count * k, r), out=indptr[1:])
+    rank = np.arange(m) - (np.cumsum(count) - count)[particle]                 # piece within its particle
+    start = indptr[:-1][particle[:, None] * r + np.arange(r)] + (rank * k)[:, None]   # (m, r)
+    dest = (start[:, :, None] + np.arange(k)).ravel()
+    data, indices = np.empty(dest.size), np.empty(dest.size, dtype=np.int64)
+    data[dest] = w.ravel()
+    indices[dest] = np.broadcast_to(cols[:, None, :], w.shape).ravel()
+    return sp.csr_matrix((data, indices, indptr), shape=(n * r, n_cols))
 
 
 def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray) -> ForceFunctional:

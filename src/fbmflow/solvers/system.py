@@ -240,17 +240,22 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
 def _rank_deficient(blocks: np.ndarray, threshold: float) -> np.ndarray:
     """Which blocks (n, m, k) have a singular value at most ``threshold``, (n,) bool.
 
-    The eigenvalues of the Gram matrices ``b b^T`` (m x m, a few times cheaper than the blocks'
-    SVD) clear most blocks: one whose smallest eigenvalue exceeds ``threshold^2 + 1e-12
-    lambda_max`` has every singular value above ``threshold`` (the eigenvalues' rounding error is
-    a few ``eps lambda_max``). The rest, the candidates, get the SVD's answer.
+    A block with fewer than ``m`` non-zero columns has rank below ``m`` (a cut cell whose free
+    velocities other cells share, or none). The eigenvalues of the other blocks' Gram matrices
+    ``b b^T`` (m x m, a few times cheaper than the blocks' SVD) clear most of them: one whose
+    smallest eigenvalue exceeds ``threshold^2 + 1e-12 lambda_max`` has every singular value above
+    ``threshold`` (the eigenvalues' rounding error is a few ``eps lambda_max``). The rest, the
+    candidates, get the SVD's answer.
     """
-    lam = np.linalg.eigvalsh(blocks @ blocks.transpose(0, 2, 1))
-    out = lam[:, 0] <= threshold**2 + 1e-12 * lam[:, -1]
-    check = np.flatnonzero(out)
-    if check.size:
-        sv = np.linalg.svd(blocks[check], compute_uv=False)
-        out[check] = (sv <= threshold).any(axis=1)
+    out = (blocks != 0.0).any(axis=1).sum(axis=1) < blocks.shape[1]
+    rest = np.flatnonzero(~out)
+    if rest.size:
+        b = blocks[rest]
+        lam = np.linalg.eigvalsh(b @ b.transpose(0, 2, 1))
+        check = rest[lam[:, 0] <= threshold**2 + 1e-12 * lam[:, -1]]
+        if check.size:
+            sv = np.linalg.svd(blocks[check], compute_uv=False)
+            out[check] = (sv <= threshold).any(axis=1)
     return out
 
 
