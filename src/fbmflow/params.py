@@ -398,7 +398,7 @@ class ContactParams(Section):
                                            "(the flow resolves larger gaps)", positive=True)
     lubrication_min_gap_cells: float = param(0.02, "gap in mesh cells at which the film force stops "
                                              "growing (surface roughness; below the range)", positive=True)
-    lubrication_resolved_cells: float = param(0.4, "gap in mesh cells down to which the flow carries the "
+    lubrication_resolved_cells: float = param(0.37, "gap in mesh cells down to which the flow carries the "
                                               "film force (fitted to Brenner's exact drag)", nonnegative=True)
 
     def __post_init__(self):

@@ -54,14 +54,24 @@ def test_correction_without_a_resolved_gap_is_the_near_contact_law_less_its_valu
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_correction_with_a_resolved_gap_adds_what_the_mesh_misses(dim):
-    """With resolved_gap s the correction is C(g) - C(sqrt(g^2 + s^2)) less its value at the
-    range: continuous (zero) at the range, positive and decreasing below it, and near contact
-    the whole near-contact law less a bounded part."""
+    """With resolved_gap s the correction is C(g) - C(g_e), g_e = (g^p + s^p)^(1/p), less its
+    value at the range: continuous (zero) at the range, positive and decreasing below it, and
+    near contact the whole near-contact law less a bounded part."""
+    from fbmflow.contact.lubrication import BLEND_EXPONENT as p
     mu, a, delta, s = 1.0, 1.0, 0.6, 0.15
     lub = Lubrication(mu, delta, 1e-5, s)
     g = np.array([1e-3, 1e-2, 0.1, 0.3, delta * (1 - 1e-9), delta, 1.0])
     c = lub.coefficient(g, np.full(g.size, a), np.full(g.size, np.inf), dim)
     assert np.all(np.diff(c[:5]) < 0) and np.all(c[:5] > 0) and c[4] < 1e-6 and np.all(c[5:] == 0)
+
+    def C(x):  # the near-contact law of a sphere at a wall (R* = a, l = a / 5), of a disk
+        return 6 * np.pi * mu * (a**2 / x + a / 5 * np.log(1 / x)) if dim == 3 else \
+            3 * np.pi / (2 * np.sqrt(2)) * mu * (a / x)**1.5
+
+    def unresolved(x):
+        return C(x) - C((x**p + s**p)**(1 / p))
+
+    assert c[2] == pytest.approx(unresolved(0.1) - unresolved(delta), rel=1e-12)
     near = 6 * np.pi * mu * a**2 / g[0] if dim == 3 else 3 * np.pi / (2 * np.sqrt(2)) * mu * (a / g[0])**1.5
     assert c[0] == pytest.approx(near, rel=0.02)
 

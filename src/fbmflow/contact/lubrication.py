@@ -11,11 +11,12 @@ Brenner 1967; Jeffrey & Onishi 1984)
 (a wall: ``R_j = inf``, ``R* = R_i``, ``l = R_i / 5``); for disks (2D, per unit length) the
 film between two cylinders gives ``C(g) = 3 pi / (2 sqrt 2) mu (R* / g)^(3/2)``. A fictitious
 boundary on a mesh of spacing ``h`` resolves the film only down to gaps of about a cell: the
-flow's film force behaves as ``C`` at the effective gap ``g_e = sqrt(g^2 + s^2)``, with ``s``
-(``resolved_gap``) a fraction of a cell: fitted to Brenner's exact drag at 6 cells per diameter,
-0.40 cells for a sphere approaching a wall and 0.40-0.45 cells for two spheres approaching each
-other, whose resolved film moves by up to 20 % with where their midplane falls between mesh
-planes (benchmarks/bench_lubrication.py). The correction adds what is missing,
+flow's film force behaves as ``C`` at the effective gap ``g_e = (g^p + s^p)^(1/p)``, with ``s``
+(``resolved_gap``) a fraction of a cell and ``p`` = :data:`BLEND_EXPONENT`: both fitted to
+Brenner's exact drag at 6 cells per diameter, of a sphere approaching a wall and of two spheres
+approaching each other, whose resolved film moves by up to 20 % with where their midplane falls
+between mesh planes (benchmarks/bench_lubrication.py; ``s`` 0.37 cells, the default of
+``contact.lubrication_resolved_cells``). The correction adds what is missing,
 
     c(g) = [C(g) - C(g_e(g))] - [C(delta) - C(g_e(delta))]   for g < delta (the range), else 0,
 
@@ -31,6 +32,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+#: exponent ``p`` of the effective gap ``(g^p + s^p)^(1/p)`` that the resolved flow's film sees
+#: (fitted with ``s`` to Brenner's drag at 6 cells per diameter: docs/validation.md, "Lubrication")
+BLEND_EXPONENT = 1.75
 
 
 @dataclass(frozen=True)
@@ -53,10 +58,10 @@ class Lubrication:
                              f"{self.resolved_gap}")
 
     def _unresolved(self, g: np.ndarray, R: np.ndarray, log_arm: np.ndarray, dim: int) -> np.ndarray:
-        """``C(g) - C(g_e)`` [N s/m], ``g_e = sqrt(g^2 + s^2)``: the film force per unit approach
+        """``C(g) - C(g_e)`` [N s/m], ``g_e = (g^p + s^p)^(1/p)``: the film force per unit approach
         speed at gap ``g`` that the flow does not carry (``g_e = delta`` where ``s`` is 0)."""
-        s = self.resolved_gap
-        g_e = np.sqrt(g**2 + s**2) if s > 0 else np.full_like(g, self.range_)
+        s, p = self.resolved_gap, BLEND_EXPONENT
+        g_e = (g**p + s**p) ** (1.0 / p) if s > 0 else np.full_like(g, self.range_)
         if dim == 3:
             return 6.0 * np.pi * self.viscosity * (R**2 * (1.0 / g - 1.0 / g_e) + log_arm * np.log(g_e / g))
         return 3.0 * np.pi / (2.0 * np.sqrt(2.0)) * self.viscosity * ((R / g)**1.5 - (R / g_e)**1.5)
