@@ -27,6 +27,7 @@ import time
 import numpy as np
 
 from fbmflow.contact import Lubrication
+from fbmflow.contact.lubrication import BLEND_EXPONENT
 from fbmflow.coupling import FixedObstacles, hydrodynamic_forces, mirror_images, node_owner
 from fbmflow.flow import NavierStokesProblem, NoSlip, Slip
 from fbmflow.mesh import StructuredMesh, graded_axis
@@ -171,7 +172,8 @@ def write(rows: list[dict], model: dict) -> None:
         "",
         "Quasi-steady Stokes drag factor lambda = F / (6 pi mu a U) of the resolved flow (sharp boundary, "
         "volume force) and with the lubrication correction (range "
-        f"{model['range']} cells, cut-off {model['min_gap']} cells, resolved gap {model['resolved']} cells) "
+        f"{model['range']} cells, cut-off {model['min_gap']} cells, resolved gap {model['resolved']} cells, "
+        f"effective gap (g^p + s^p)^(1/p) with p = {BLEND_EXPONENT}) "
         "against Brenner's (1961) series: 'rigid' "
         "is the no-slip wall at gap h, 'free' the mirror plane of two equal spheres at surface gap 2h, "
         "'pair' two fictitious spheres at surface gap 2h whose midplane lies the given cells above a mesh "
