@@ -57,25 +57,25 @@ def row_masses(ci, cj, D, ri, rj, inv_m, inv_I):
         for q in range(3):
             d = D[c, q]
             dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-            _cross(ri[c], d, Ai[c, q])
-            k = inv_m[i] * dd
-            for a in range(3):
-                b = 0.0
-                for e in range(3):
-                    b += inv_I[i, a, e] * Ai[c, q, e]
-                Bi[c, q, a] = b
-                k += Ai[c, q, a] * b
+            k = inv_m[i] * dd + _angular(ri[c], d, inv_I[i], Ai[c, q], Bi[c, q])
             if j >= 0:
-                _cross(rj[c], d, Aj[c, q])
-                k += inv_m[j] * dd
-                for a in range(3):
-                    b = 0.0
-                    for e in range(3):
-                        b += inv_I[j, a, e] * Aj[c, q, e]
-                    Bj[c, q, a] = b
-                    k += Aj[c, q, a] * b
+                k += inv_m[j] * dd + _angular(rj[c], d, inv_I[j], Aj[c, q], Bj[c, q])
             K[c, q] = k
     return Ai, Aj, Bi, Bj, K
+
+
+@njit
+def _angular(r, d, inv_I, A, B):
+    """``A = r x d`` and ``B = inv_I A`` written into ``A``, ``B`` (3,); returns ``A . B``."""
+    _cross(r, d, A)
+    k = 0.0
+    for a in range(3):
+        b = 0.0
+        for e in range(3):
+            b += inv_I[a, e] * A[e]
+        B[a] = b
+        k += A[a] * b
+    return k
 
 
 @njit
