@@ -82,7 +82,7 @@ def test_the_command_line_refuses_with_exit_2_and_one_line(scene, monkeypatch, c
 def test_the_implicit_coupling_s_responses_count_and_are_refused_with_a_remedy(monkeypatch):
     """2000 disks at sedimentation-2d's default level: 6000 responses of 2.1 M unknowns (about
     1 TB) ended in a NumPy MemoryError in the first step; now refused before it, and the
-    explicit and stabilised couplings, which keep none, are not."""
+    explicit, stabilised and Newton-Krylov couplings, which keep none, are not."""
     from fbmflow.params import CouplingParams
 
     need, _ = estimate_memory(2242, 2, "direct")
@@ -93,7 +93,7 @@ def test_the_implicit_coupling_s_responses_count_and_are_refused_with_a_remedy(m
     with pytest.raises(InsufficientMemory, match=r"implicit coupling's responses to 6 rigid-body velocity "
                                                  r"components need about .* coupling.scheme = stabilised"):
         Simulation(mesh, disks, FluidParams(), coupling=CouplingParams(scheme="implicit"))
-    for scheme in ("explicit", "stabilised"):
+    for scheme in ("explicit", "stabilised", "newton-krylov"):
         Simulation(mesh, disks, FluidParams(), coupling=CouplingParams(scheme=scheme))
     one = Particles.at_rest([Ball(0.25, 2)], 1.25, [[1.0, 4.0]])
     Simulation(mesh, one, FluidParams(), coupling=CouplingParams(scheme="implicit"))  # 3 fit

@@ -635,3 +635,24 @@ def test_a_loose_flow_solve_asks_its_linear_steps_for_no_more_than_its_reduction
     loose, tight = asked(1e-2), asked(0.0)
     assert min(loose) >= 1e-2 and max(loose) <= 0.1, loose
     assert min(tight) == pytest.approx(1e-4), tight
+
+
+def test_newton_krylov_coupling_is_one_newton_step_of_the_implicit_scheme():
+    """The light rising disk (where the explicit scheme fails): one Newton step from the current
+    velocities, solved by FGMRES, follows the implicit scheme's converged steps to 0.1 %
+    (measured 0.06 %: the Newton step's own error); FGMRES needs at most the disk's three
+    components, so a step takes at most four responses (the last one that of the answer)."""
+    implicit, _ = _rising_disk("implicit")
+    mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
+    sim = _sim(mesh, Particles.at_rest([Ball(0.25, 2)], 0.5, [[0.9, 1.5]]),
+               coupling_params=CouplingParams(scheme="newton-krylov", krylov_rtol=1e-8))
+    calls, solve = [0], sim.rigid_responses
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return solve(*args, **kwargs)
+
+    sim.rigid_responses = counted
+    krylov = np.array([sim.step(0.005).velocity[0, 1] for _ in range(8)])
+    np.testing.assert_allclose(krylov, implicit, rtol=1e-3)
+    assert calls[0] <= 4 * 8

@@ -297,23 +297,29 @@ class CouplingParams(Section):
     integrator."""
 
     scheme: str = param("implicit", "coupling: explicit (staggered), stabilised (explicit with each "
-                        "particle's own stiffness implicit), implicit (sub-iterated) or auto (implicit "
+                        "particle's own stiffness implicit), newton-krylov (one Newton step on the particle "
+                        "velocities, matrix-free), implicit (sub-iterated) or auto (implicit "
                         "while its stored flow responses fit 4 GB, else stabilised)",
                         choices=tuple(COUPLINGS) + ("auto",))
     tol: float = param(1e-6, "implicit coupling: estimated error of the particle velocities, relative",
                        positive=True, maximum=0.1)
-    max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step", minimum=1)
+    max_subiterations: int = param(20, "implicit coupling: sub-iteration limit per step (newton-krylov: "
+                                   "FGMRES iteration limit)", minimum=1)
     first_rtol: float = param(1e-2, "implicit coupling: Newton's residual reduction in each step's first "
                               "flow solve, which only seeds the iteration (the step ends on a solve to "
                               "solver.newton_rtol; a value at or below that solves the first one alike)",
                               positive=True, maximum=0.5)
-    flow_rtol: float = param(0.0, "explicit and stabilised coupling: Newton's residual reduction in the "
-                             "step's one flow solve, its linear steps asked for no more than that (0, "
-                             "or a value at or below solver.newton_rtol: solver.newton_rtol)",
+    flow_rtol: float = param(0.0, "explicit, stabilised and newton-krylov coupling: Newton's residual "
+                             "reduction in the step's one flow solve, its linear steps asked for no more "
+                             "than that (0, or a value at or below solver.newton_rtol: solver.newton_rtol)",
                              minimum=0.0, maximum=0.5)
     integrator: str = param("semi-implicit-euler", _INTEGRATOR_DOC, choices=_INTEGRATORS)
-    added_mass: float = param(1.0, "stabilised coupling: the added mass in each particle's own stiffness, "
-                              "as a multiple of a ball's potential-flow value (rho_f V for a disk, "
+    krylov_rtol: float = param(1e-2, "newton-krylov coupling: FGMRES's residual reduction on the particles' "
+                               "Newton equation (each iteration one linear solve; max_subiterations caps "
+                               "them)", positive=True, maximum=0.5)
+    added_mass: float = param(1.0, "stabilised and newton-krylov coupling: the added mass in each "
+                              "particle's own stiffness (newton-krylov: its preconditioner), as a "
+                              "multiple of a ball's potential-flow value (rho_f V for a disk, "
                               "rho_f V / 2 for a sphere); larger damps more, the steady state stays",
                               minimum=0.0)
 

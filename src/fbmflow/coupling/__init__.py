@@ -17,6 +17,7 @@ from .schemes import (
     CoupledFlow,
     ExplicitCoupling,
     ImplicitCoupling,
+    NewtonKrylovCoupling,
     StabilisedCoupling,
     make_coupling,
 )
@@ -26,4 +27,5 @@ __all__ = ["node_owner", "rigid_body_constraints", "rigid_liftings", "cut_cells"
            "mirror_images", "TestFunctionForces", "SurfaceForces", "supports_surface_force", "FixedObstacles",
            "SharpBoundary", "sharp_boundary", "supports_sharp_boundary", "FORCE_ESTIMATORS", "VolumeForce",
            "TestFunctionForce", "SurfaceForce", "make_force_estimator", "COUPLINGS", "CoupledFlow",
-           "ExplicitCoupling", "StabilisedCoupling", "ImplicitCoupling", "make_coupling"]
+           "ExplicitCoupling", "StabilisedCoupling", "NewtonKrylovCoupling", "ImplicitCoupling",
+           "make_coupling"]

@@ -11,14 +11,20 @@ by name in :data:`COUPLINGS` (the parameter ``coupling.scheme``).
   and drag matrix from the flow's linear response to unit rigid motions; removes the added-mass
   instability at the price of one linear response per rigid degree of freedom (3 per disk, 6 per
   sphere, back-substitutions with the last factorisation) and two to three flow solves per step.
+* ``stabilised``: the explicit step with each particle's own added mass and drag implicit (a
+  virtual mass); no responses.
+* ``newton-krylov``: one flow solve and the implicit scheme's first Newton step on the particle
+  velocities, solved matrix-free by FGMRES: one linear response per Krylov iteration, however
+  many particles; takes the particles' pull on each other through the fluid, which the
+  stabilised scheme misses in dense suspensions.
 
 A scheme is made from the coupling parameters (``tol``, ``max_subiterations``, ``first_rtol``,
-``flow_rtol``: :class:`~fbmflow.params.CouplingParams`) and the Newton tolerance of the flow solves; its
-``advance(sim, dt)`` returns a :class:`CoupledFlow`. ``sim`` offers (see
-:class:`~fbmflow.simulation.Simulation`): ``particles``, ``gravity``, ``flow``,
+``flow_rtol``, ``added_mass``, ``krylov_rtol``: :class:`~fbmflow.params.CouplingParams`) and the
+Newton tolerance of the flow solves; its ``advance(sim, dt)`` returns a :class:`CoupledFlow`. ``sim`` offers
+(see :class:`~fbmflow.simulation.Simulation`): ``particles``, ``gravity``, ``flow``,
 ``flow_and_forces(dt, velocities=None, guess=None, rtol=None, linear_rtol=None)``,
 ``integrate(force, torque, dt, contact=True)``, ``velocity_gain(dt)`` and
-``rigid_responses(x, free, dt)``.
+``rigid_responses(x, free, dt, motions=None)``.
 """
 from __future__ import annotations
 
@@ -28,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..particles import pack_velocities, symmetric_motion, unpack_velocities
-from ..solvers import ConvergenceError
+from ..solvers import ConvergenceError, fgmres
 
 log = logging.getLogger(__name__)
 
@@ -139,6 +145,98 @@ class StabilisedCoupling:
         torque = torque.copy()
         torque[:, 3 - (r - d):] += f[:, d:]
         return CoupledFlow(x, reports, force + f[:, :d], torque, increment=step)
+
+
+class NewtonKrylovCoupling:
+    """One Newton step of the implicit scheme's fixed point from the current velocities, its
+    linear system solved matrix-free by flexible GMRES (see :meth:`advance`).
+
+    Parameters
+    ----------
+    params : :class:`~fbmflow.params.CouplingParams` (``krylov_rtol``, ``max_subiterations``,
+        ``added_mass``, ``flow_rtol``)
+    newton_rtol : float
+        The solver's Newton residual reduction; ``params.flow_rtol`` above it replaces it in the
+        step's flow solve (:func:`flow_rtol`).
+    """
+
+    name = "newton-krylov"
+
+    def __init__(self, params, newton_rtol: float | None = None):
+        self.rtol = float(params.krylov_rtol)
+        self.max_iterations = int(params.max_subiterations)
+        self.added_mass = float(params.added_mass)
+        self.flow_rtol = flow_rtol(params, newton_rtol)
+
+    @staticmethod
+    def stored_responses(particles, symmetry) -> int:
+        """Flow fields the scheme keeps per step besides the flow: none (its Krylov basis holds
+        particle velocities; each response is used and dropped)."""
+        return 0
+
+    def advance(self, sim, dt: float) -> CoupledFlow:
+        """Solve the flow constrained by the current velocities ``v``; its forces ``f`` give the
+        explicit update ``Phi(v)``. The new velocities ``v + y`` solve the implicit scheme's
+        Newton equation from ``v``,
+
+            (I - G S) y = Phi(v) - v,
+
+        ``S = d f / d v`` the flow's force response to the particles' rigid motions (added mass,
+        drag and every particle's pull on the others through the fluid), ``G = d v / d f`` their
+        gain. FGMRES (:func:`~fbmflow.solvers.fgmres`) solves it to ``krylov_rtol`` in at most
+        ``max_subiterations`` iterations, each applying ``S`` to one combined motion: one linear
+        solve with the step's Newton linearisation
+        (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever the number of
+        particles; the right preconditioner is the stabilised scheme's per-particle
+        ``(I - G_i S_i)^-1`` (:meth:`~fbmflow.simulation.Simulation.own_stiffness`). The flow
+        and the forces then follow ``y`` linearly, through the response to ``y`` itself (the
+        last product FGMRES forms), without a second flow solve.
+
+        Where the particles pull on each other strongly through the fluid (close neighbours in a
+        dense suspension) the per-particle stiffness of :class:`StabilisedCoupling` misses those
+        couplings and its steps grow; this scheme takes them all, at the cost of the Krylov
+        iterations' linear solves (measured: docs/validation.md, "Many particles"). Contact is
+        left out of the map, as in :class:`ImplicitCoupling`."""
+        p = sim.particles
+        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
+        if p.fixed.all():
+            return CoupledFlow(x, reports, force, torque)
+        v = pack_velocities(p)
+        new = sim.integrate(force, torque, dt, contact=False)
+        gain = sim.velocity_gain(dt)
+        r, d = gain.shape[1], p.dim
+        free = np.zeros((p.n, r), dtype=bool)
+        free[~p.fixed] = symmetric_motion(d, sim.symmetry)
+        S = sim.own_stiffness(x, free, dt, self.added_mass)
+        own = np.linalg.inv(np.eye(r) - np.einsum("nab,nbc->nac", gain, S))   # (n, r, r)
+        last = {}
+
+        def apply(y: np.ndarray) -> np.ndarray:  # (I - G S) y, keeping the response of y
+            if not y.any():
+                last.update(dX=np.zeros(len(x)), dF=np.zeros((p.n, d)), dT=np.zeros((p.n, 3)))
+                return y.copy()
+            dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None])
+            last.update(dX=dX[0], dF=dF[0], dT=dT[0])
+            f = np.concatenate([dF[0], dT[0][:, 2:] if d == 2 else dT[0]], axis=1)
+            return y - np.einsum("nab,nb->na", gain, f)[free]
+
+        def precondition(q: np.ndarray) -> np.ndarray:
+            full = np.zeros((p.n, r))
+            full[free] = q
+            return np.einsum("nab,nb->na", own, full)[free]
+
+        res = (pack_velocities(new) - v)[free]
+        y, residuals, iterations = fgmres(apply, precondition, res, np.zeros_like(res), self.rtol,
+                                          self.max_iterations)
+        log.debug("Newton-Krylov coupling: %d iterations, residual %.2e of %.2e", iterations,
+                  residuals[-1], residuals[0])
+        if residuals[-1] > self.rtol * residuals[0]:
+            raise ConvergenceError(f"Newton-Krylov coupling: FGMRES reduced the residual only "
+                                   f"{residuals[0] / max(residuals[-1], 1e-300):.3g} times in {iterations} "
+                                   f"iterations (coupling.krylov_rtol = {self.rtol:g}); raise "
+                                   "coupling.max_subiterations or reduce the time step")
+        # fgmres's last product is its answer's: the flow and the forces follow y through it
+        return CoupledFlow(x + last["dX"], reports, force + last["dF"], torque + last["dT"])
 
 
 def flow_rtol(params, newton_rtol: float | None) -> float | None:
@@ -259,7 +357,8 @@ class ImplicitCoupling:
 
 
 #: coupling schemes by name (the parameter ``coupling.scheme``)
-COUPLINGS = {cls.name: cls for cls in (ExplicitCoupling, StabilisedCoupling, ImplicitCoupling)}
+COUPLINGS = {cls.name: cls for cls in (ExplicitCoupling, StabilisedCoupling, NewtonKrylovCoupling,
+                                        ImplicitCoupling)}
 
 
 def make_coupling(params, newton_rtol: float):
