@@ -1,8 +1,8 @@
 """The coupling schemes against each other (issue 29, item 4): what the stabilised scheme's one
 flow solve per step costs in accuracy against the implicit scheme, and what it saves.
 
-Run:  python benchmarks/bench_coupling.py [--cases light glowinski sedimentation-1 sedimentation-2]
-      [--schemes implicit stabilised explicit]
+Run:  python benchmarks/bench_coupling.py [--cases light glowinski sedimentation-1 sedimentation-2
+      suspension-dense] [--schemes implicit stabilised newton-krylov explicit]
 
 Cases (scene defaults but for the keys named; every case runs its schemes one after the other in
 this process, after an untimed warm-up step, so that the time ratios compare like with like):
@@ -12,7 +12,10 @@ this process, after an untimed warm-up step, so that the time ratios compare lik
 * ``glowinski``: ``glowinski-free-fall`` at level 1 (density ratio 1.25), 100 steps (0.5 s, the
   terminal velocity reached);
 * ``sedimentation-1``, ``sedimentation-2``: ``sedimentation-2d`` (100 disks, hard contact) at
-  levels 1 and 2 (2 and 4 cells per diameter), 40 steps (0.2 s).
+  levels 1 and 2 (2 and 4 cells per diameter), 40 steps (0.2 s);
+* ``suspension-dense``: ``suspension-2d`` with 24 disks at area fraction 0.3 at level 2 (4 cells
+  per diameter, repulsion), 20 steps of the scene's 10 ms (0.2 s), where close neighbours pull on
+  each other through the fluid.
 
 Per scheme: steps done (a scheme that fails says where), flow solves, wall time and its ratio to
 the implicit scheme's, and the mean vertical particle velocity's deviation from the implicit
@@ -36,15 +39,18 @@ from fbmflow.solvers import ConvergenceError
 #: the Newton tolerances the recorded sedimentation rows were measured with (before the scene's
 #: own defaults became 1e-6 / 1e-3)
 TIGHT = {"solver": {"newton_rtol": 1e-10, "linear_rtol": 1e-8}}
-CASES = {"light": ("glowinski-free-fall", 1, {"particle": {"density": 0.5}}, 20),
-         "glowinski": ("glowinski-free-fall", 1, {}, 100),
-         "sedimentation-1": ("sedimentation-2d", 1, TIGHT, 40),
-         "sedimentation-2": ("sedimentation-2d", 2, TIGHT, 40)}
+#: case: scene, level, settings, steps, dt [s]
+CASES = {"light": ("glowinski-free-fall", 1, {"particle": {"density": 0.5}}, 20, 0.005),
+         "glowinski": ("glowinski-free-fall", 1, {}, 100, 0.005),
+         "sedimentation-1": ("sedimentation-2d", 1, TIGHT, 40, 0.005),
+         "sedimentation-2": ("sedimentation-2d", 2, TIGHT, 40, 0.005),
+         "suspension-dense": ("suspension-2d", 2, {"particles": {"count": 24, "volume_fraction": 0.3}}, 20,
+                              0.01)}
 SKIP = 5  # steps from rest left out of the second deviation
 
 
-def series(scene_name: str, level: int, settings: dict, scheme: str, steps: int) -> dict:
-    """Run ``steps`` steps with ``coupling.scheme = scheme``: the mean vertical velocity after
+def series(scene_name: str, level: int, settings: dict, scheme: str, steps: int, dt: float) -> dict:
+    """Run ``steps`` steps of ``dt`` with ``coupling.scheme = scheme``: the mean vertical velocity after
     each, the flow solves, the wall time and where it failed ('' if not)."""
     scene = get_scene(scene_name)
     data = {**settings, "coupling": {"scheme": scheme}, "time": {"t_end": 10.0}}
@@ -53,7 +59,7 @@ def series(scene_name: str, level: int, settings: dict, scheme: str, steps: int)
     start = time.perf_counter()
     try:
         for _ in range(steps):
-            report = sim.step(0.005)
+            report = sim.step(dt)
             solves += report.flow_solves
             v.append(float(sim.particles.velocity[:, -1].mean()))
     except ConvergenceError as error:
@@ -72,9 +78,9 @@ def deviation(v: list, ref: list, start: int = 0) -> float | None:
 
 
 def run_case(case: str, schemes: list[str]) -> list[dict]:
-    scene, level, settings, steps = CASES[case]
-    series(scene, level, settings, schemes[0], 1)  # Numba kernels loaded, first-call costs paid
-    runs = {s: series(scene, level, settings, s, steps) for s in schemes}
+    scene, level, settings, steps, dt = CASES[case]
+    series(scene, level, settings, schemes[0], 1, dt)  # Numba kernels loaded, first-call costs paid
+    runs = {s: series(scene, level, settings, s, steps, dt) for s in schemes}
     ref = runs.get("implicit")
     rows = []
     for scheme, r in runs.items():
@@ -101,8 +107,9 @@ def table(rows: list[dict]) -> str:
              "(benchmarks/bench_coupling.py)",
              "",
              "Each case runs its schemes one after the other in one process (the JIT warm-up excluded), "
-             "dt = 5 ms. Deviation: of the mean vertical particle velocity from the implicit scheme's, "
-             "relative to its largest value; 'from step 6' leaves out the first five steps from rest. "
+             "dt = 5 ms (suspension-dense: 10 ms). Deviation: of the mean vertical particle velocity from "
+             "the implicit scheme's, relative to its largest value; 'from step 6' leaves out the first five "
+             "steps from rest. "
              "Speed-up: the implicit scheme's wall time per step over the scheme's.",
              "",
              "| case | scene | level | particles | unknowns | scheme | steps | flow solves | wall [s] "
@@ -127,7 +134,8 @@ def same(a: dict, b: dict) -> bool:
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    parser.add_argument("--schemes", nargs="+", default=["implicit", "stabilised", "explicit"])
+    parser.add_argument("--schemes", nargs="+", default=["implicit", "stabilised", "newton-krylov",
+                                                                  "explicit"])
     args = parser.parse_args()
     logging.getLogger("fbmflow").setLevel(logging.ERROR)
     rows = []

@@ -431,13 +431,15 @@ class Simulation:
         (n, r, r) float64."""
         return velocity_gain(self.particles, dt, self.integrator, history=self._last_force is not None)
 
-    def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float, motions: np.ndarray | None = None):
+    def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float, motions: np.ndarray | None = None,
+                        rtol: float | None = None):
         """The flow's linear response to a unit rigid motion of every free component and its
         force: ``free (n, r)`` bool selects the ``k`` generalised velocity components; returns
         ``dX (k, n_dofs)``, ``dF (k, n, dim)`` and ``dT (k, n, 3)`` about the flow ``x`` solved
         last (:meth:`~fbmflow.flow.NavierStokesProblem.lifting_response`). With ``motions
         (m, k)``, the responses to those ``m`` combinations of the unit motions instead (one
-        linear solve each): ``dX (m, n_dofs)``, ``dF (m, n, dim)``, ``dT (m, n, 3)``."""
+        linear solve each, to ``rtol`` where the linear solver takes one): ``dX (m, n_dofs)``,
+        ``dF (m, n, dim)``, ``dT (m, n, 3)``."""
         p, space = self.particles, self.flow.space
         owner = self._owner(space.V)
         sharp = self._sharp(space.V)
@@ -446,7 +448,7 @@ class Simulation:
         if motions is not None:
             W = sp.csc_matrix(W @ motions.T)
             row_liftings = None if row_liftings is None else sp.csc_matrix(row_liftings @ motions.T)
-        dX = self.flow.lifting_response(x, W, row_liftings)
+        dX = self.flow.lifting_response(x, W, row_liftings, rtol)
         dF, dT = self._response_forces(owner, dX, dt, about=x)
         return dX, dF, dT
 

@@ -185,7 +185,8 @@ class NewtonKrylovCoupling:
         drag and every particle's pull on the others through the fluid), ``G = d v / d f`` their
         gain. FGMRES (:func:`~fbmflow.solvers.fgmres`) solves it to ``krylov_rtol`` in at most
         ``max_subiterations`` iterations, each applying ``S`` to one combined motion: one linear
-        solve with the step's Newton linearisation
+        solve with the step's Newton linearisation, to the same ``krylov_rtol`` where the linear
+        solver takes a target (multigrid)
         (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever the number of
         particles; the right preconditioner is the stabilised scheme's per-particle
         ``(I - G_i S_i)^-1`` (:meth:`~fbmflow.simulation.Simulation.own_stiffness`). The flow
@@ -215,7 +216,7 @@ class NewtonKrylovCoupling:
             if not y.any():
                 last.update(dX=np.zeros(len(x)), dF=np.zeros((p.n, d)), dT=np.zeros((p.n, 3)))
                 return y.copy()
-            dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None])
+            dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None], rtol=self.rtol)
             last.update(dX=dX[0], dF=dF[0], dT=dT[0])
             f = np.concatenate([dF[0], dT[0][:, 2:] if d == 2 else dT[0]], axis=1)
             return y - np.einsum("nab,nb->na", gain, f)[free]

@@ -424,7 +424,8 @@ class NavierStokesProblem:
         if forget is not None:
             forget()
 
-    def lifting_response(self, x: np.ndarray, liftings, row_liftings=None) -> np.ndarray:
+    def lifting_response(self, x: np.ndarray, liftings, row_liftings=None,
+                         rtol: float | None = None) -> np.ndarray:
         """How the solution of the last :meth:`solve` responds to changed constraint values.
 
         ``liftings (dim * n_v, k)`` (dense or sparse) are velocity fields, one per column, that
@@ -437,7 +438,9 @@ class NavierStokesProblem:
         Newton step is reused (a Jacobian one iteration old, good enough for the coupling
         iteration it serves). ``row_liftings (dim * n_v, k)`` (dense or sparse): how the values
         ``g`` of the row constraints change with each lifting, on their DOFs; the response then
-        keeps ``C dx = dg`` there. Returns (k, n_dofs) float64.
+        keeps ``C dx = dg`` there. ``rtol``: the linear solves' residual reduction where the
+        solver takes one (default the Newton steps', ``newton.linear_rtol``). Returns (k, n_dofs)
+        float64.
         """
         m, a, con, solve, system = self._linearisation
         W = sp.csc_matrix(liftings)  # (n_u, k)
@@ -451,9 +454,9 @@ class NavierStokesProblem:
             Ju[con.rows.dofs] = scale[:, None] * (con.rows.matrix @ Wd - dg)
         Jp = self._continuity(W, con, self.orphans(con))
         if getattr(solve, "multiple_rhs", False):
-            du, dp, _ = self._linear_solve(solve, -Ju, -Jp)
+            du, dp, _ = self._linear_solve(solve, -Ju, -Jp, rtol)
         else:
-            cols = [self._linear_solve(solve, -Ju[:, k], -Jp[:, k])[:2] for k in range(W.shape[1])]
+            cols = [self._linear_solve(solve, -Ju[:, k], -Jp[:, k], rtol)[:2] for k in range(W.shape[1])]
             du, dp = np.column_stack([c[0] for c in cols]), np.column_stack([c[1] for c in cols])
         return np.vstack([Wd + du, dp]).T
 
