@@ -830,7 +830,8 @@ def check_memory(n_unknowns: int, dim: int, linear_solver, responses: int = 0) -
             f"the implicit coupling's responses to {responses} rigid-body velocity components need about "
             f"{stored / 1e9:.1f} GB for {n_unknowns} unknowns, and {words} {need / 1e9:.1f} GB: more "
             f"than the {have / 1e9:.1f} GB available; use fewer particles, a coarser mesh (a lower --level) "
-            "or coupling.scheme = stabilised (one flow solve per step, no responses kept)")
+            "or coupling.scheme = stabilised (one flow solve per step, no responses kept) or newton-krylov "
+            "(the same, with a few linear responses per step; for dense suspensions)")
     need += stored
     if need > have:
         remedy = "a coarser mesh (a lower --level)"
