@@ -426,6 +426,14 @@ class Simulation:
         new, self._contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
         return new
 
+    def repulsion_stiffness(self) -> sp.csr_matrix | None:
+        """The repulsive forces' change with the positions at the start of the step,
+        ``(n dim, n dim)`` (:meth:`~fbmflow.contact.Repulsion.stiffness`); None when the repulsion
+        is off."""
+        if self.repulsion is None:
+            return None
+        return self.repulsion.stiffness(self.particles, self.gravity, self.flow.rho)
+
     def velocity_gain(self, dt: float) -> np.ndarray:
         """``d v_new / d f`` of :meth:`integrate` over ``dt`` (:func:`~fbmflow.particles.velocity_gain`),
         (n, r, r) float64."""
