@@ -210,13 +210,13 @@ class NewtonKrylovCoupling:
         if p.fixed.all():
             return CoupledFlow(x, reports, force, torque)
         v = pack_velocities(p)
-        new = sim.integrate(force, torque, dt, contact=False)
         gain = sim.velocity_gain(dt)
         r, d = gain.shape[1], p.dim
         free = np.zeros((p.n, r), dtype=bool)
         free[~p.fixed] = symmetric_motion(d, sim.symmetry)
         S = sim.own_stiffness(x, free, dt, self.added_mass)
         K = sim.repulsion_stiffness()
+        push = np.zeros_like(force)
         if K is not None:  # the repulsion at the step's end, F(X + dt v') ~ F(X) + dt K v'
             K = dt * K
             blocks = K.tobsr(blocksize=(d, d))
@@ -224,7 +224,8 @@ class NewtonKrylovCoupling:
             on = blocks.indices == row
             both = free[row[on], :d, None] & free[row[on], None, :d]
             S[row[on], :d, :d] += np.where(both, blocks.data[on], 0.0)
-            new = sim.integrate(force + (K @ v[:, :d].ravel()).reshape(p.n, d), torque, dt, contact=False)
+            push = (K @ v[:, :d].ravel()).reshape(p.n, d)
+        new = sim.integrate(force + push, torque, dt, contact=False)
         own = np.linalg.inv(np.eye(r) - np.einsum("nab,nbc->nac", gain, S))   # (n, r, r)
         last = {}
 
