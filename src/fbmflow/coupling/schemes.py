@@ -147,32 +147,21 @@ class StabilisedCoupling:
         return CoupledFlow(x, reports, force + f[:, :d], torque, increment=step)
 
 
-class NewtonKrylovCoupling:
-    """One Newton step of the implicit scheme's fixed point from the current velocities, its
-    linear system solved matrix-free by flexible GMRES (see :meth:`advance`).
-
-    Parameters
-    ----------
-    params : :class:`~fbmflow.params.CouplingParams` (``krylov_rtol``, ``max_subiterations``,
-        ``added_mass``, ``flow_rtol``)
-    newton_rtol : float
-        The solver's Newton residual reduction; ``params.flow_rtol`` above it replaces it in the
-        step's flow solve (:func:`flow_rtol`).
+class NewtonKrylovCoupling(StabilisedCoupling):
+    """The stabilised scheme's step with every particle's pull on the others taken too: one
+    Newton step of the implicit scheme's fixed point from the current velocities, its linear
+    system solved matrix-free by flexible GMRES, the stabilised scheme's per-particle stiffness
+    its preconditioner (see :meth:`advance`). The parameters as :class:`StabilisedCoupling`'s,
+    and ``params.krylov_rtol`` and ``params.max_subiterations`` (FGMRES's residual reduction and
+    iteration limit). No flow fields are kept: each response is used and dropped.
     """
 
     name = "newton-krylov"
 
     def __init__(self, params, newton_rtol: float | None = None):
+        super().__init__(params, newton_rtol)
         self.rtol = float(params.krylov_rtol)
         self.max_iterations = int(params.max_subiterations)
-        self.added_mass = float(params.added_mass)
-        self.flow_rtol = flow_rtol(params, newton_rtol)
-
-    @staticmethod
-    def stored_responses(particles, symmetry) -> int:
-        """Flow fields the scheme keeps per step besides the flow: none (its Krylov basis holds
-        particle velocities; each response is used and dropped)."""
-        return 0
 
     def advance(self, sim, dt: float) -> CoupledFlow:
         """Solve the flow constrained by the current velocities ``v``; its forces ``f`` give the
