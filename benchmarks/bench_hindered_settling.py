@@ -1,0 +1,200 @@
+"""Hindered settling of random suspensions from an ensemble of frozen configurations (issue 29,
+item 3), extrapolated in the particle count against Richardson & Zaki.
+
+Run:  python benchmarks/bench_hindered_settling.py [--counts 8 24] [--seeds 0 1 2] [--level 2]
+      [--fraction 0.2] [--steps 3] [--min-gap 0.02] [--set KEY=VALUE ...]
+
+In Stokes flow the mean settling velocity of a suspension is an average over its configurations
+(Ladd 1990): each configuration settles at the velocity its particles' mobilities give, set up
+within a few viscous times. So instead of one long run, ``suspension-3d`` is run for ``--steps``
+steps (0.01 s each; a settling distance of about 0.1 d) from ``--seeds`` independent random
+placements (gaps of at least ``--min-gap`` diameters, repulsion off, so that the configurations
+are those of hard spheres placed at random and no pair force acts), and the settling velocity
+relative to the mixture is averaged over the steps after the first (the flow's start-up).
+
+A periodic box of ``N`` particles misses the fluctuations longer than the box, which hinder the
+settling by about ``1.76 S(0) (phi / N)^(1/3) U_0`` (the Hasimoto coefficient times the
+structure factor at zero wave number, ``S(0) = (1 - phi)^4 / (1 + 2 phi)^2`` for hard spheres;
+Ladd 1997). The ratio to Richardson–Zaki (``richardson_zaki`` of the scene: Schiller–Naumann
+terminal velocity, Garside & Al-Dibouni's exponent) is therefore fitted as
+``r(N) = r_inf - c N^(-1/3)`` over the counts run, and ``r_inf`` is the infinite suspension's.
+
+Results: ``benchmarks/results/hindered_settling.md``, ``.json`` and ``.png``.
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from fbmbench.common import (
+    RESULTS,
+    RunFailed,
+    merge_row,
+    parse_settings,
+    provenance,
+    run_scene,
+    warm_up,
+    write_text,
+)
+
+from fbmflow.particles import Ball
+from fbmflow.scenes.suspension import sangani_acrivos_velocity
+
+NAME = "hindered_settling"
+HASIMOTO = 1.7601
+
+
+def structure_factor(phi: float) -> float:
+    """Percus–Yevick structure factor of hard spheres at zero wave number."""
+    return (1.0 - phi) ** 4 / (1.0 + 2.0 * phi) ** 2
+
+
+def array_velocity(params: dict, phi: float) -> float:
+    """Settling velocity of the simple cubic array at ``phi`` (Stokes flow, Sangani & Acrivos)."""
+    pp, fl = params["particles"], params["fluid"]
+    weight = (pp["density"] - fl["density"]) * Ball(pp["diameter"] / 2, 3).volume * fl["gravity"]
+    return sangani_acrivos_velocity(3, phi, weight, fl["viscosity"], pp["diameter"])
+
+
+def run(count: int, seed: int, level: int, fraction: float, steps: int, min_gap: float,
+        extra: dict) -> dict:
+    settings = {"particles.count": count, "particles.seed": seed, "particles.volume_fraction": fraction,
+                "particles.min_gap": min_gap, "repulsion.enabled": False, "time.dt": 0.01,
+                "time.t_end": 0.01 * steps, **extra}
+    row = {"count": count, "seed": seed, "level": level, "fraction": fraction, "min_gap": min_gap,
+           "steps": steps, "settings": settings, **provenance()}
+    try:
+        s = run_scene("suspension-3d", level, settings)
+    except RunFailed as error:
+        return {**row, "failure": str(error)}
+    q = s["quantities"]
+    series = np.array(q["settling_velocity"][2:])  # steps 2, 3, ...: past the start-up
+    return {**row, "failure": "", "volume_fraction": q["volume_fraction"],
+            "cells_per_diameter": q["cells_per_diameter"], "n_dofs": s["n_dofs"], "wall_s": s["wall_s"],
+            "settling": float(series.mean()), "series": q["settling_velocity"],
+            "richardson_zaki": q["richardson_zaki"], "terminal_velocity": q["terminal_velocity"],
+            "ratio": float(series.mean()) / q["richardson_zaki"], "max_overlap": q["max_overlap"],
+            "array": array_velocity(s["params"], q["volume_fraction"])}
+
+
+def groups(rows: list[dict]) -> dict:
+    """Rows that ran, by (level, fraction, min_gap, repulsion on) and then count."""
+    out: dict = {}
+    for r in rows:
+        if not r["failure"]:
+            key = r["level"], r["fraction"], r["min_gap"], repulsion(r)
+            out.setdefault(key, {}).setdefault(r["count"], []).append(r)
+    return out
+
+
+def repulsion(row: dict) -> str:
+    return "on" if row["settings"]["repulsion.enabled"] else "off"
+
+
+def extrapolate(by_count: dict) -> tuple[float, float] | None:
+    """``(r_inf, c)`` of the least-squares fit ``r = r_inf - c N^(-1/3)`` to the ensemble means
+    (each weighted by its number of configurations); None with fewer than two counts."""
+    if len(by_count) < 2:
+        return None
+    x = np.array([n ** (-1 / 3) for n in by_count])
+    y = np.array([np.mean([r["ratio"] for r in rs]) for rs in by_count.values()])
+    w = np.sqrt([len(rs) for rs in by_count.values()])
+    A = np.column_stack([np.ones_like(x), -x]) * w[:, None]
+    r_inf, c = np.linalg.lstsq(A, y * w, rcond=None)[0]
+    return float(r_inf), float(c)
+
+
+def write(rows: list[dict]) -> None:
+    lines = ["# Hindered settling from frozen random configurations (hindered_settling)", "",
+             "`suspension-3d` (d = 0.1 cm, rho_s = 1.5, viscosity 0.2 g/(cm s), Re_t 0.6), spheres placed "
+             "at random with repulsion off, run for a few steps of 0.01 s; the settling velocity relative "
+             "to the mixture averaged over the steps after the first, over Richardson-Zaki V_t (1 - phi)^n "
+             "(V_t: Schiller-Naumann, n: Garside & Al-Dibouni at Re_t) at the box's own fraction. "
+             "Newton-Krylov coupling; wall time without the JIT warm-up, 2-core machine. Reproduce: "
+             "`python benchmarks/bench_hindered_settling.py --counts N --seeds S --level L --fraction PHI "
+             "--min-gap G`.", "",
+             "| spheres | seed | level | cells/d | phi (box) | min gap / d | repulsion | unknowns | steps | "
+             "wall s | settling cm/s | Richardson-Zaki cm/s | ratio | array cm/s | max overlap / r | "
+             "failure | measured |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r["level"], r["fraction"], r["min_gap"], r["count"], r["seed"])):
+        head = f"| {r['count']} | {r['seed']} | {r['level']} |"
+        if r["failure"]:
+            lines.append(f"{head} | {r['fraction']} | {r['min_gap']} | {repulsion(r)} | | {r['steps']} "
+                         f"| | | | | | | {r['failure']} | {r['date']} {r['commit']} |")
+            continue
+        lines.append(f"{head} {r['cells_per_diameter']:.0f} | {r['volume_fraction']:.4f} | {r['min_gap']} | "
+                     f"{repulsion(r)} | {r['n_dofs']} | {r['steps']} | {r['wall_s']:.0f} | "
+                     f"{r['settling']:.4g} | {r['richardson_zaki']:.4g} | {r['ratio']:.3f} | "
+                     f"{r['array']:.4g} | {r['max_overlap']:.2g} | – | {r['date']} {r['commit']} |")
+    lines += ["", "Ensemble means (ratio to Richardson-Zaki; +- the standard error over the seeds) and the "
+              "fit r(N) = r_inf - c N^(-1/3). 'Ladd' is the finite-size hindrance "
+              f"{HASIMOTO} S(0) (phi/N)^(1/3) U_0 / V_RZ expected from the box (S(0) of hard spheres, "
+              "U_0 = V_t).", "",
+              "| level | phi | min gap / d | repulsion | spheres | configurations | ratio | "
+              "Ladd's finite-size term | fit r_inf | fit c |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for (level, fraction, gap, rep), by_count in sorted(groups(rows).items()):
+        fit = extrapolate(by_count)
+        for n, rs in sorted(by_count.items()):
+            ratios = np.array([r["ratio"] for r in rs])
+            err = ratios.std(ddof=1) / np.sqrt(len(ratios)) if len(ratios) > 1 else float("nan")
+            phi = float(np.mean([r["volume_fraction"] for r in rs]))
+            ladd = HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * rs[0]["terminal_velocity"] \
+                / rs[0]["richardson_zaki"]
+            fits = f"{fit[0]:.3f} | {fit[1]:.3f}" if fit else " | "
+            lines.append(f"| {level} | {fraction} | {gap} | {rep} | {n} | {len(rs)} | {ratios.mean():.3f} +- "
+                         f"{err:.3f} | {ladd:.3f} | {fits} |")
+    write_text(RESULTS / f"{NAME}.md", "\n".join(lines) + "\n")
+    plot(rows)
+
+
+def plot(rows: list[dict]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for k, ((level, fraction, gap, rep), by_count) in enumerate(sorted(groups(rows).items())):
+        label = f"phi {fraction}, {2 ** level} cells/d, gap {gap} d, repulsion {rep}"
+        for n, rs in by_count.items():
+            ax.plot([n ** (-1 / 3)] * len(rs), [r["ratio"] for r in rs], "o", ms=3, alpha=0.5, color=f"C{k}")
+        fit = extrapolate(by_count)
+        if fit:
+            x = np.linspace(0.0, max(n ** (-1 / 3) for n in by_count), 20)
+            ax.plot(x, fit[0] - fit[1] * x, "-", color=f"C{k}", label=f"{label}: fit, r_inf = {fit[0]:.2f}")
+    ax.axhline(1.0, color="k", lw=0.8, label="Richardson-Zaki")
+    ax.axhspan(0.9, 1.1, color="k", alpha=0.08, label="10 %")
+    ax.set_xlabel("N^(-1/3)")
+    ax.set_ylabel("settling velocity / Richardson-Zaki")
+    ax.set_xlim(left=0.0)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(RESULTS / f"{NAME}.png", dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--counts", type=int, nargs="+", default=[8, 24])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--level", type=int, default=2, help="2^L cells per diameter")
+    ap.add_argument("--fraction", type=float, default=0.2)
+    ap.add_argument("--steps", type=int, default=3, help="steps of 0.01 s per configuration (at least 3)")
+    ap.add_argument("--min-gap", type=float, default=0.02, help="smallest gap at the start, in diameters")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
+    args = ap.parse_args(argv)
+    if args.steps < 3:
+        ap.error("--steps must be at least 3 (the first step is the flow's start-up)")
+    extra = {"coupling.scheme": "newton-krylov", **parse_settings(args.set)}
+    warm_up("suspension-3d", **{"particles.count": 1, "time.t_end": 0.02, "time.dt": 0.01})
+    for count in args.counts:
+        for seed in args.seeds:
+            row = run(count, seed, args.level, args.fraction, args.steps, args.min_gap, extra)
+            print({k: v for k, v in row.items() if k not in ("settings", "series")}, flush=True)
+            write(merge_row(NAME, row, lambda a, b: (a["count"], a["seed"], a["level"], a["settings"]) ==
+                            (b["count"], b["seed"], b["level"], b["settings"])))
+
+
+if __name__ == "__main__":
+    main()
