@@ -56,11 +56,11 @@ def array_velocity(params: dict, phi: float) -> float:
     return sangani_acrivos_velocity(3, phi, weight, fl["viscosity"], pp["diameter"])
 
 
-def run(count: int, seed: int, level: int, fraction: float, steps: int, min_gap: float,
+def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: int, min_gap: float,
         extra: dict) -> dict:
     settings = {"particles.count": count, "particles.seed": seed, "particles.volume_fraction": fraction,
-                "particles.min_gap": min_gap, "repulsion.enabled": False, "time.dt": 0.01,
-                "time.t_end": 0.01 * steps, **extra}
+                "particles.min_gap": min_gap, "repulsion.enabled": False, "time.dt": dt,
+                "time.t_end": dt * steps, **extra}
     row = {"count": count, "seed": seed, "level": level, "fraction": fraction, "min_gap": min_gap,
            "steps": steps, "settings": settings, **provenance()}
     try:
@@ -68,7 +68,7 @@ def run(count: int, seed: int, level: int, fraction: float, steps: int, min_gap:
     except RunFailed as error:
         return {**row, "failure": str(error)}
     q = s["quantities"]
-    series = np.array(q["settling_velocity"][2:])  # steps 2, 3, ...: past the start-up
+    series = np.array(q["settling_velocity"][min(2, steps):])  # past the start-up (one long step: itself)
     return {**row, "failure": "", "volume_fraction": q["volume_fraction"],
             "cells_per_diameter": q["cells_per_diameter"], "n_dofs": s["n_dofs"], "wall_s": s["wall_s"],
             "settling": float(series.mean()), "series": q["settling_velocity"],
@@ -78,13 +78,15 @@ def run(count: int, seed: int, level: int, fraction: float, steps: int, min_gap:
 
 
 def groups(rows: list[dict]) -> dict:
-    """Rows that ran, by (level, fraction, min_gap, repulsion on) and then count."""
-    out: dict = {}
+    """Configuration ratios of the rows that ran, by (level, fraction, min_gap, repulsion on, dt), then
+    count: one ratio per seed (rows of one seed with other solver settings are averaged)."""
+    seeds: dict = {}
     for r in rows:
         if not r["failure"]:
-            key = r["level"], r["fraction"], r["min_gap"], repulsion(r)
-            out.setdefault(key, {}).setdefault(r["count"], []).append(r)
-    return out
+            key = r["level"], r["fraction"], r["min_gap"], repulsion(r), r["settings"]["time.dt"]
+            seeds.setdefault(key, {}).setdefault(r["count"], {}).setdefault(r["seed"], []).append(r)
+    return {key: {n: [(float(np.mean([r["ratio"] for r in rs])), rs[0]) for rs in by_seed.values()]
+                  for n, by_seed in by_count.items()} for key, by_count in seeds.items()}
 
 
 def repulsion(row: dict) -> str:
@@ -97,7 +99,7 @@ def extrapolate(by_count: dict) -> tuple[float, float] | None:
     if len(by_count) < 2:
         return None
     x = np.array([n ** (-1 / 3) for n in by_count])
-    y = np.array([np.mean([r["ratio"] for r in rs]) for rs in by_count.values()])
+    y = np.array([np.mean([ratio for ratio, _ in rs]) for rs in by_count.values()])
     w = np.sqrt([len(rs) for rs in by_count.values()])
     A = np.column_stack([np.ones_like(x), -x]) * w[:, None]
     r_inf, c = np.linalg.lstsq(A, y * w, rcond=None)[0]
@@ -131,19 +133,20 @@ def write(rows: list[dict]) -> None:
               "fit r(N) = r_inf - c N^(-1/3). 'Ladd' is the finite-size hindrance "
               f"{HASIMOTO} S(0) (phi/N)^(1/3) U_0 / V_RZ expected from the box (S(0) of hard spheres, "
               "U_0 = V_t).", "",
-              "| level | phi | min gap / d | repulsion | spheres | configurations | ratio | "
-              "Ladd's finite-size term | fit r_inf | fit c |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for (level, fraction, gap, rep), by_count in sorted(groups(rows).items()):
+              "| level | phi | min gap / d | repulsion | dt s | spheres | configurations | ratio | "
+              "Ladd's finite-size term | fit r_inf | fit c |", "|---" * 11 + "|"]
+    for (level, fraction, gap, rep, dt), by_count in sorted(groups(rows).items()):
         fit = extrapolate(by_count)
         for n, rs in sorted(by_count.items()):
-            ratios = np.array([r["ratio"] for r in rs])
-            err = ratios.std(ddof=1) / np.sqrt(len(ratios)) if len(ratios) > 1 else float("nan")
-            phi = float(np.mean([r["volume_fraction"] for r in rs]))
-            ladd = HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * rs[0]["terminal_velocity"] \
-                / rs[0]["richardson_zaki"]
+            ratios = np.array([ratio for ratio, _ in rs])
+            err = f" +- {ratios.std(ddof=1) / np.sqrt(len(ratios)):.3f}" if len(ratios) > 1 else ""
+            r = rs[0][1]
+            phi = r["volume_fraction"]
+            ladd = HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * r["terminal_velocity"] \
+                / r["richardson_zaki"]
             fits = f"{fit[0]:.3f} | {fit[1]:.3f}" if fit else " | "
-            lines.append(f"| {level} | {fraction} | {gap} | {rep} | {n} | {len(rs)} | {ratios.mean():.3f} +- "
-                         f"{err:.3f} | {ladd:.3f} | {fits} |")
+            lines.append(f"| {level} | {fraction} | {gap} | {rep} | {dt} | {n} | {len(rs)} | "
+                         f"{ratios.mean():.3f}{err} | {ladd:.3f} | {fits} |")
     write_text(RESULTS / f"{NAME}.md", "\n".join(lines) + "\n")
     plot(rows)
 
@@ -155,10 +158,11 @@ def plot(rows: list[dict]) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    for k, ((level, fraction, gap, rep), by_count) in enumerate(sorted(groups(rows).items())):
-        label = f"phi {fraction}, {2 ** level} cells/d, gap {gap} d, repulsion {rep}"
+    for k, ((level, fraction, gap, rep, dt), by_count) in enumerate(sorted(groups(rows).items())):
+        label = f"phi {fraction}, {2 ** level} cells/d, gap {gap} d, repulsion {rep}, dt {dt} s"
         for n, rs in by_count.items():
-            ax.plot([n ** (-1 / 3)] * len(rs), [r["ratio"] for r in rs], "o", ms=3, alpha=0.5, color=f"C{k}")
+            ax.plot([n ** (-1 / 3)] * len(rs), [ratio for ratio, _ in rs], "o", ms=3, alpha=0.5,
+                    color=f"C{k}")
         fit = extrapolate(by_count)
         if fit:
             x = np.linspace(0.0, max(n ** (-1 / 3) for n in by_count), 20)
@@ -180,17 +184,21 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--level", type=int, default=2, help="2^L cells per diameter")
     ap.add_argument("--fraction", type=float, default=0.2)
-    ap.add_argument("--steps", type=int, default=3, help="steps of 0.01 s per configuration (at least 3)")
+    ap.add_argument("--dt", type=float, default=0.01, help="time step [s]")
+    ap.add_argument("--steps", type=int, default=3,
+                    help="steps per configuration: at least 3 (the first is the flow's start-up), or one "
+                         "long step (backward Euler then gives the configuration's steady settling)")
     ap.add_argument("--min-gap", type=float, default=0.02, help="smallest gap at the start, in diameters")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
     args = ap.parse_args(argv)
-    if args.steps < 3:
-        ap.error("--steps must be at least 3 (the first step is the flow's start-up)")
-    extra = {"coupling.scheme": "newton-krylov", **parse_settings(args.set)}
+    if args.steps == 2:
+        ap.error("--steps must be 1 or at least 3 (the first step is the flow's start-up)")
+    scheme = "implicit" if args.steps == 1 else "newton-krylov"
+    extra = {"coupling.scheme": scheme, **parse_settings(args.set)}
     warm_up("suspension-3d", **{"particles.count": 1, "time.t_end": 0.02, "time.dt": 0.01})
     for count in args.counts:
         for seed in args.seeds:
-            row = run(count, seed, args.level, args.fraction, args.steps, args.min_gap, extra)
+            row = run(count, seed, args.level, args.fraction, args.dt, args.steps, args.min_gap, extra)
             print({k: v for k, v in row.items() if k not in ("settings", "series")}, flush=True)
             write(merge_row(NAME, row, lambda a, b: (a["count"], a["seed"], a["level"], a["settings"]) ==
                             (b["count"], b["seed"], b["level"], b["settings"])))
