@@ -176,7 +176,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         times the smaller of ``|Phi(v) - v|`` and the velocities' size (:func:`relative_scale`:
         the residual is an error of the new velocities) in at most ``max_subiterations``
         iterations, each applying ``S`` to one combined motion: one linear
-        solve with the step's Newton linearisation, to the same ``krylov_rtol`` where the linear
+        solve with the step's Newton linearisation, to the same reduction where the linear
         solver takes a target (multigrid)
         (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever the number of
         particles; the right preconditioner is the stabilised scheme's per-particle
@@ -225,10 +225,16 @@ class NewtonKrylovCoupling(StabilisedCoupling):
             out[free] = y
             return out
 
+        def precondition(q: np.ndarray) -> np.ndarray:
+            return np.einsum("nab,nb->na", own, full(q))[free]
+
+        res = (pack_velocities(new) - v)[free]
+        rtol = self.rtol * relative_scale(v[free] + precondition(res), res)
+
         def apply(y: np.ndarray) -> np.ndarray:  # (I - G (S + dt K)) y, keeping the response of y
             f = np.zeros((p.n, r))
             if y.any():
-                dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None], rtol=self.rtol)
+                dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None], rtol=rtol)
                 last.update(dX=dX[0], dF=dF[0], dT=dT[0])
                 f = np.concatenate([dF[0], dT[0][:, 2:] if d == 2 else dT[0]], axis=1)
             else:
@@ -237,11 +243,6 @@ class NewtonKrylovCoupling(StabilisedCoupling):
                 f[:, :d] += (K @ full(y)[:, :d].ravel()).reshape(p.n, d)
             return y - np.einsum("nab,nb->na", gain, f)[free]
 
-        def precondition(q: np.ndarray) -> np.ndarray:
-            return np.einsum("nab,nb->na", own, full(q))[free]
-
-        res = (pack_velocities(new) - v)[free]
-        rtol = self.rtol * relative_scale(v[free] + precondition(res), res)
         y, residuals, iterations = fgmres(apply, precondition, res, np.zeros_like(res), rtol,
                                           self.max_iterations)
         log.debug("Newton-Krylov coupling: %d iterations, residual %.2e of %.2e", iterations,
