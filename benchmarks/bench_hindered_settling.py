@@ -39,9 +39,6 @@ from fbmbench.common import (
     write_text,
 )
 
-from fbmflow.particles import Ball
-from fbmflow.scenes.suspension import sangani_acrivos_velocity
-
 NAME = "hindered_settling"
 HASIMOTO = 1.7601
 
@@ -49,13 +46,6 @@ HASIMOTO = 1.7601
 def structure_factor(phi: float) -> float:
     """Percus–Yevick structure factor of hard spheres at zero wave number."""
     return (1.0 - phi) ** 4 / (1.0 + 2.0 * phi) ** 2
-
-
-def array_velocity(params: dict, phi: float) -> float:
-    """Settling velocity of the simple cubic array at ``phi`` (Stokes flow, Sangani & Acrivos)."""
-    pp, fl = params["particles"], params["fluid"]
-    weight = (pp["density"] - fl["density"]) * Ball(pp["diameter"] / 2, 3).volume * fl["gravity"]
-    return sangani_acrivos_velocity(3, phi, weight, fl["viscosity"], pp["diameter"])
 
 
 def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: int, min_gap: float,
@@ -76,7 +66,7 @@ def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: in
             "settling": float(series.mean()), "series": q["settling_velocity"],
             "richardson_zaki": q["richardson_zaki"], "terminal_velocity": q["terminal_velocity"],
             "ratio": float(series.mean()) / q["richardson_zaki"], "max_overlap": q["max_overlap"],
-            "array": array_velocity(s["params"], q["volume_fraction"])}
+            "array": q["array_velocity"]}
 
 
 def groups(rows: list[dict]) -> dict:

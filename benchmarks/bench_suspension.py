@@ -32,9 +32,6 @@ from fbmbench.common import (
     write_text,
 )
 
-from fbmflow.particles import Ball
-from fbmflow.scenes.suspension import sangani_acrivos_velocity
-
 ARRAY = {"particles.count": 1, "fluid.viscosity": 1.0, "time.t_end": 0.6, "time.dt": 0.02}
 CASES = {"array-2d": ("suspension-2d", ARRAY, "array_velocity"),
          "array-3d": ("suspension-3d", ARRAY, "array_velocity"),
@@ -58,12 +55,7 @@ def run(case: str, level: int, fraction: float, extra: dict) -> dict:
     for key in ("terminal_velocity", "terminal_reynolds", "rz_exponent"):
         if key in q:
             out[key] = q[key]
-    p = s["params"]
-    dim = 2 if scene.endswith("2d") else 3
-    pp, fl = p["particles"], p["fluid"]
-    weight = (pp["density"] - fl["density"]) * Ball(pp["diameter"] / 2, dim).volume * fl["gravity"]
-    phi = q["volume_fraction"]
-    out["array"] = sangani_acrivos_velocity(dim, phi, weight, fl["viscosity"], pp["diameter"])
+    out["array"] = q["array_velocity"]
     return out
 
 

@@ -24,8 +24,9 @@ radius, nearest images); ``mean_settling_velocity`` (average over the second hal
 ``volume_fraction`` (of the box as built), ``cells_per_diameter``, ``box``, ``max_overlap``,
 ``final_positions``, and the references:
 
-* one particle (a square or simple cubic array, Stokes flow): ``array_velocity``, the settling
-  velocity of a periodic array from Sangani & Acrivos (1982),
+* ``array_velocity``: the settling velocity of the square or simple cubic array at the same
+  fraction (exact for one particle per box; an ordered suspension settles slower than a random
+  one), Stokes flow, from Sangani & Acrivos (1982),
   ``F / (4 pi mu U) = 1 / (-ln(c) / 2 - 0.738 + c - 0.887 c^2 + 2.038 c^3)`` for disks and
   ``F / (3 pi mu d U) = 1 / (1 - 1.7601 c^(1/3) + c - 1.5593 c^2 + 3.9799 c^(8/3) - 3.0734 c^(10/3))``
   for spheres, ``F`` the particle's weight in the fluid and ``U`` the settling velocity relative
@@ -192,8 +193,7 @@ class _Suspension(ParticleScene):
              "mixture_velocity": series["mixture_velocity"], "overlap": series["overlap"],
              "final_positions": sim.particles.position.tolist()}
         weight = (pp.density - fl.density) * volume * fl.gravity
-        if pp.count == 1:
-            q["array_velocity"] = sangani_acrivos_velocity(self.dim, phi, weight, fl.viscosity, pp.diameter)
+        q["array_velocity"] = sangani_acrivos_velocity(self.dim, phi, weight, fl.viscosity, pp.diameter)
         if self.dim == 3:
             vt, re = terminal_velocity(pp.diameter, pp.density, fl.density, fl.viscosity, fl.gravity)
             n = garside_al_dibouni(re)
