@@ -48,6 +48,14 @@ def structure_factor(phi: float) -> float:
     return (1.0 - phi) ** 4 / (1.0 + 2.0 * phi) ** 2
 
 
+def ladd(row: dict, n: int) -> float:
+    """Ladd's finite-size hindrance of ``n`` particles at the row's fraction, over its
+    Richardson–Zaki velocity (``U_0`` = the terminal velocity)."""
+    phi = row["volume_fraction"]
+    return HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * row["terminal_velocity"] \
+        / row["richardson_zaki"]
+
+
 def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: int, min_gap: float,
         extra: dict) -> dict:
     settings = {"particles.count": count, "particles.seed": seed, "particles.volume_fraction": fraction,
@@ -132,13 +140,10 @@ def write(rows: list[dict]) -> None:
         for n, rs in sorted(by_count.items()):
             ratios = np.array([ratio for ratio, _ in rs])
             err = f" +- {ratios.std(ddof=1) / np.sqrt(len(ratios)):.3f}" if len(ratios) > 1 else ""
-            r = rs[0][1]
-            phi = r["volume_fraction"]
-            ladd = HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * r["terminal_velocity"] \
-                / r["richardson_zaki"]
+            term = ladd(rs[0][1], n)
             fits = f"{fit[0]:.3f} | {fit[1]:.3f}" if fit else " | "
             lines.append(f"| {level} | {fraction} | {gap} | {rep} | {dt} | {n} | {len(rs)} | "
-                         f"{ratios.mean():.3f}{err} | {ladd:.3f} | {fits} |")
+                         f"{ratios.mean():.3f}{err} | {term:.3f} | {fits} |")
     write_text(RESULTS / f"{NAME}.md", "\n".join(lines) + "\n")
     plot(rows)
 
@@ -158,6 +163,12 @@ def plot(rows: list[dict]) -> None:
         fit = extrapolate(by_count)
         if fit:
             x = np.linspace(0.0, max(n ** (-1 / 3) for n in by_count), 20)
+            n0 = min(by_count)
+            r = by_count[n0][0][1]
+            slope = ladd(r, n0) / n0 ** (-1 / 3)  # Ladd's law through the smallest count's mean
+            mean0 = np.mean([ratio for ratio, _ in by_count[n0]])
+            ax.plot(x, mean0 + slope * (n0 ** (-1 / 3) - x), ":", color=f"C{k}",
+                    label=f"{label}: Ladd's law through N = {n0}")
             ax.plot(x, fit[0] - fit[1] * x, "-", color=f"C{k}", label=f"{label}: fit, r_inf = {fit[0]:.2f}")
     ax.axhline(1.0, color="k", lw=0.8, label="Richardson-Zaki")
     ax.axhspan(0.9, 1.1, color="k", alpha=0.08, label="10 %")
