@@ -175,11 +175,10 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         gain. FGMRES (:func:`~fbmflow.solvers.fgmres`) solves it to a residual of ``krylov_rtol``
         times the smaller of ``|Phi(v) - v|`` and the velocities' size (:func:`relative_scale`:
         the residual is an error of the new velocities) in at most ``max_subiterations``
-        iterations, each applying ``S`` to one combined motion: one linear
-        solve with the step's Newton linearisation, to the same reduction where the linear
-        solver takes a target (multigrid)
-        (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever the number of
-        particles; the right preconditioner is the stabilised scheme's per-particle
+        iterations, each applying ``S`` to one combined motion: one linear solve with the step's
+        Newton linearisation, to the same reduction where the linear solver takes a target
+        (multigrid) (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever the
+        number of particles; the right preconditioner is the stabilised scheme's per-particle
         ``(I - G_i S_i)^-1`` (:meth:`~fbmflow.simulation.Simulation.own_stiffness`). The flow
         and the forces then follow ``y`` linearly, through the response to ``y`` itself (the
         last product FGMRES forms), without a second flow solve.
@@ -266,10 +265,9 @@ def relative_scale(estimate: np.ndarray, residual: np.ndarray, floor: float = 1e
 
     The particles leave the step at ``v + y + r``, ``r`` FGMRES's residual, so ``r`` is an error
     of the velocities themselves; it must be small against the velocities (``estimate``: the
-    stabilised scheme's answer), not only against the explicit update's error ``Phi(v) - v``. Where
-    the step is long against the particles' response time (a start from rest, a large ``dt``) that
-    error is many times the velocities: one step of 0.1 s from rest, 8 spheres settling at
-    0.32 cm/s, starts from a residual of about 30 cm/s."""
+    stabilised scheme's answer), not only against the explicit update's error ``Phi(v) - v``,
+    which over a step long against the particles' response time (a start from rest, a large
+    ``dt``) is many times the velocities (docs/method.md, "Coupling")."""
     size = float(np.linalg.norm(residual))
     if size == 0.0:
         return 1.0
