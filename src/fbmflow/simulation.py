@@ -129,6 +129,12 @@ class Simulation:
         of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
         stays on the planes, and the planes are no walls for contact and repulsion. Gravity must
         lie in the planes.
+    frozen : bool
+        Hold the particles' positions and orientations: their velocities and the flow still
+        evolve, about a fixed configuration. Steps then tend to the configuration's quasi-steady
+        mobility problem (the settling velocities of one frozen configuration, as in
+        hindered-settling ensembles, Ladd 1990); contact and the repulsion act with the fixed
+        positions.
 
     Raises
     ------
@@ -143,7 +149,7 @@ class Simulation:
                  coupling: CouplingParams = CouplingParams(),
                  fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
                  contact: ContactParams | None = None, repulsion: RepulsionParams | None = None,
-                 symmetry: tuple = ()):
+                 symmetry: tuple = (), frozen: bool = False):
         for name, value, cls in (("particles", particles, Particles), ("fluid", fluid, FluidParams),
                                  ("time", time, TimeParams), ("solver", solver, SolverParams),
                                  ("coupling", coupling, CouplingParams),
@@ -167,6 +173,7 @@ class Simulation:
         self.estimator.check(particles.shapes, sharp)
         self.fluid, self.time, self.fbm = fluid, time, fbm
         self.symmetry = tuple(symmetry)
+        self.frozen = bool(frozen)
         self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)
         _check_symmetry(mesh, particles, self.gravity, self.symmetry)
         _check_placement(mesh, particles, self.symmetry)
@@ -429,8 +436,8 @@ class Simulation:
     def repulsion_stiffness(self) -> sp.csr_matrix | None:
         """The repulsive forces' change with the positions at the start of the step,
         ``(n dim, n dim)`` (:meth:`~fbmflow.contact.Repulsion.stiffness`); None when the repulsion
-        is off."""
-        if self.repulsion is None:
+        is off or the particles are frozen (their positions do not change)."""
+        if self.repulsion is None or self.frozen:
             return None
         return self.repulsion.stiffness(self.particles, self.gravity, self.flow.rho)
 
@@ -552,6 +559,8 @@ class Simulation:
         x, reports, force, torque = solved.x, solved.reports, solved.force, solved.torque
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(x))):
             raise ConvergenceError(f"{where}: non-finite state")
+        if self.frozen:
+            new.position, new.orientation = self.particles.position.copy(), self.particles.orientation.copy()
         sharp = self._sharp(self.flow.space.V)  # of the positions the flow was solved with
         self._warn_if_fast(new.position - self.particles.position, dt)
         new.position = _wrap(self.flow.mesh, new.position)

@@ -108,10 +108,11 @@ class ParticleScene(SimulationScene):
 
     def build(self, params, level: int) -> Setup:
         place = self.layout(params, level)
+        frozen = getattr(getattr(params, "particles", None), "frozen", False)  # (suspensions)
         sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary,
                          time=self.time(params), solver=params.solver, coupling=params.coupling,
                          fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
-                         symmetry=place.symmetry)
+                         symmetry=place.symmetry, frozen=frozen)
         self._check_contact_skin(sim, level)
         return Setup(sim, sim.dt, sim.n_steps)
 

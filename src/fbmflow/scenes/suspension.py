@@ -70,6 +70,8 @@ class SuspensionParticles(Section):
     density: float = param(1.5, "particle density", "g/cm^3", positive=True)
     seed: int = param(0, "seed of the random placement", minimum=0)
     min_gap: float = param(0.1, "smallest gap between particles at the start, in diameters", minimum=0.0)
+    frozen: bool = param(False, "hold the particles in place while their velocities and the flow evolve: "
+                                "the settling of one frozen configuration (hindered-settling ensembles)")
 
 
 SphereSuspension = derive(SuspensionParticles, "SphereSuspension", "The particles.", count=8)
