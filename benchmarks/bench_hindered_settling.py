@@ -1,5 +1,6 @@
 """Hindered settling of random suspensions from an ensemble of frozen configurations (issue 29,
-item 3), extrapolated in the particle count against Richardson & Zaki.
+item 3), carried to an unbounded suspension with a far-field reference and compared with
+Richardson & Zaki.
 
 Run:  python benchmarks/bench_hindered_settling.py [--counts 8 20] [--seeds 0 1 2] [--level 2]
       [--fraction 0.2] [--dt 0.1] [--steps 3] [--min-gap 0.02] [--moving] [--set KEY=VALUE ...]
@@ -7,27 +8,35 @@ Run:  python benchmarks/bench_hindered_settling.py [--counts 8 20] [--seeds 0 1 
 At small Reynolds numbers the mean settling velocity of a suspension is an average over its
 configurations (Ladd 1990), each settling at the velocity its particles' mobilities give. So
 instead of one long run, ``suspension-3d`` is run from ``--seeds`` independent random placements
-(gaps of at least ``--min-gap`` diameters, repulsion off: the configurations of hard spheres
-placed at random, with no pair force) held in place (``particles.frozen``) for ``--steps`` steps
-of ``--dt`` = 0.1 s from rest, and the settling velocity is the mean over the steps after the
-first. A backward-Euler step of ``dt`` screens the flow beyond ``sqrt(nu dt)`` (1.4 d here): the
-box's longest wave, of length ``L``, reaches ``(2 pi / L)^2 nu dt / (1 + (2 pi / L)^2 nu dt)`` of its
-steady amplitude per step (0.91 for 8 spheres at 0.2, 0.78 for 40), so one step from rest reads
-the configuration's settling 4-5 % low; steps 2 and 3 agree to 0.5 %. ``--moving`` lets the
-particles move (the one-step protocol of the first ensembles, ``--steps 1``).
+(gaps of at least ``--min-gap`` diameters, repulsion off: hard spheres placed at random, with no
+pair force) held in place (``particles.frozen``) for ``--steps`` steps of ``--dt`` = 0.1 s from
+rest, and the settling velocity is the mean over the steps after the first. A backward-Euler step
+of ``dt`` screens the flow beyond ``sqrt(nu dt)`` (1.4 d here): the box's longest wave, of length
+``L``, reaches ``k^2 nu dt / (1 + k^2 nu dt)`` of its steady amplitude per step (``k = 2 pi / L``;
+0.91 for 8 spheres at 0.2, 0.78 for 40), so the first step reads low and the later ones settle.
+``--moving`` lets the particles move (the protocol of the first ensembles, with ``--steps 1``).
 
-A periodic box of ``N`` particles misses the fluctuations longer than the box, which hinder the
-settling by about ``1.76 S(0) (phi / N)^(1/3) U_0`` (the Hasimoto coefficient times the
-structure factor at zero wave number, ``S(0) = (1 - phi)^4 / (1 + 2 phi)^2`` for hard spheres;
-Ladd 1997). The ratio to Richardson–Zaki (``richardson_zaki`` of the scene: Schiller–Naumann
-terminal velocity, Garside & Al-Dibouni's exponent) is therefore fitted as
-``r(N) = r_inf - c N^(-1/3)`` over the counts run, and ``r_inf`` is the infinite suspension's.
+A periodic box of ``N`` particles lacks the density fluctuations longer than the box, and settles
+slower than an unbounded suspension (Brady & Durlofsky 1988, Ladd 1990). For every configuration
+the bench computes the mean settling velocity of the same spheres at the Rotne–Prager–Yamakawa
+level by Ewald sums (:mod:`fbmbench.ewald_rpy`: the far field exact, no near field), ``R_N``, and
+that model's limit for an unbounded random suspension at the same fraction, ``R_inf``
+(:func:`far_field_law`). The far field carries the box's effect and the flow solve the near
+field, so each configuration gives two estimates of the unbounded suspension's ratio to
+Richardson–Zaki (control variates: their scatter over the configurations is that of
+``ratio / R_N`` and of ``ratio - R_N U_0 / V_RZ``, well below that of ``ratio``): *scaled*,
+``ratio * R_inf / R_N`` (the box's deficit in proportion to the mobility, as through an effective
+medium), and *shifted*, ``ratio + (R_inf - R_N) U_0 / V_RZ`` (the deficit as the far field gives
+it, in units of the Stokes velocity ``U_0``). They bracket the answer.
 
-Results: ``benchmarks/results/hindered_settling.md``, ``.json`` and ``.png``.
+Results: ``benchmarks/results/hindered_settling.md``, ``.json``, ``.png`` and
+``hindered_settling_far_field.json`` (the limits ``R_inf``, computed once per fraction).
 """
 from __future__ import annotations
 
 import argparse
+import json
+import math
 
 import numpy as np
 from fbmbench.common import (
@@ -40,22 +49,12 @@ from fbmbench.common import (
     warm_up,
     write_text,
 )
+from fbmbench.ewald_rpy import mean_settling
+
+from fbmflow.scenes.suspension import SphereSuspension, SuspensionFluid, random_positions
 
 NAME = "hindered_settling"
-HASIMOTO = 1.7601
-
-
-def structure_factor(phi: float) -> float:
-    """Percus–Yevick structure factor of hard spheres at zero wave number."""
-    return (1.0 - phi) ** 4 / (1.0 + 2.0 * phi) ** 2
-
-
-def ladd(row: dict, n: int) -> float:
-    """Ladd's finite-size hindrance of ``n`` particles at the row's fraction, over its
-    Richardson–Zaki velocity (``U_0`` = the terminal velocity)."""
-    phi = row["volume_fraction"]
-    return HASIMOTO * structure_factor(phi) * (phi / n) ** (1 / 3) * row["terminal_velocity"] \
-        / row["richardson_zaki"]
+LIMIT_ENSEMBLES = ((125, 32), (343, 16), (1000, 8))  # (spheres, configurations) behind R_inf
 
 
 def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: int, min_gap: float,
@@ -71,26 +70,90 @@ def run(count: int, seed: int, level: int, fraction: float, dt: float, steps: in
         return {**row, "failure": str(error)}
     q = s["quantities"]
     series = np.array(q["settling_velocity"][min(2, steps):])  # past the first step (one step: itself)
-    return {**row, "failure": "", "volume_fraction": q["volume_fraction"],
+    pp, fl = s["params"]["particles"], s["params"]["fluid"]
+    stokes = (pp["density"] - fl["density"]) * fl["gravity"] * pp["diameter"] ** 2 / (18.0 * fl["viscosity"])
+    return {**row, "failure": "", "volume_fraction": q["volume_fraction"], "stokes_velocity": stokes,
             "cells_per_diameter": q["cells_per_diameter"], "n_dofs": s["n_dofs"], "wall_s": s["wall_s"],
             "settling": float(series.mean()), "series": q["settling_velocity"],
             "richardson_zaki": q["richardson_zaki"], "terminal_velocity": q["terminal_velocity"],
             "ratio": float(series.mean()) / q["richardson_zaki"], "max_overlap": q["max_overlap"],
-            "array": q["array_velocity"]}
+            "array": q["array_velocity"], "diameter": pp["diameter"]}
+
+
+def diameter(row: dict) -> float:
+    return row.get("diameter", SphereSuspension().diameter)
+
+
+def stokes_velocity(row: dict) -> float:
+    """One sphere's Stokes velocity ``U_0`` [cm/s] (rows measured before it was stored: the scene's
+    defaults)."""
+    if "stokes_velocity" in row:
+        return row["stokes_velocity"]
+    pp, fl = SphereSuspension(), SuspensionFluid()
+    return (pp.density - fl.density) * fl.gravity * pp.diameter**2 / (18.0 * fl.viscosity)
+
+
+def far_field(row: dict) -> float:
+    """``R_N``: the mean settling velocity of the row's configuration (the scene's placement,
+    recomputed) at the RPY level, over the Stokes velocity of one sphere."""
+    d, n = diameter(row), row["count"]
+    side = (n * math.pi / 6.0 * d**3 / row["volume_fraction"]) ** (1.0 / 3.0)  # the box as built
+    X = random_positions(n, d, np.full(3, side), row["min_gap"] * d, row["seed"])
+    return mean_settling(X, side, d / 2)
+
+
+def far_field_law(phi: float, min_gap: float) -> dict:
+    """The RPY mean settling velocity of random suspensions at ``phi`` (placed as the scene places,
+    gaps of ``min_gap`` diameters) against their size, ``R(N) = R_inf - c N^(-1/3)``, fitted to the
+    ensembles :data:`LIMIT_ENSEMBLES` (weighted by their standard errors): ``{"limit": R_inf,
+    "se": its standard error, "slope": c, "ensembles": [...]}``; computed once and kept in
+    ``hindered_settling_far_field.json``."""
+    path = RESULTS / f"{NAME}_far_field.json"
+    cache = json.loads(path.read_text()) if path.is_file() else {}
+    key = f"{phi:.6f} {min_gap:g}"
+    made = [[e["count"], e["configurations"]] for e in cache.get(key, {}).get("ensembles", [])]
+    if made != [list(e) for e in LIMIT_ENSEMBLES]:  # not computed yet, or from other ensembles
+        d = SphereSuspension().diameter
+        x, y, se = [], [], []
+        for n, seeds in LIMIT_ENSEMBLES:
+            side = (n * math.pi / 6.0 * d**3 / phi) ** (1.0 / 3.0)
+            v = [mean_settling(random_positions(n, d, np.full(3, side), min_gap * d, s), side, d / 2)
+                 for s in range(seeds)]
+            x.append(n ** (-1 / 3))
+            y.append(float(np.mean(v)))
+            se.append(float(np.std(v, ddof=1) / math.sqrt(seeds)))
+        w = 1.0 / np.array(se)
+        A = np.column_stack([np.ones(len(x)), -np.array(x)]) * w[:, None]
+        coef, *_ = np.linalg.lstsq(A, np.array(y) * w, rcond=None)
+        cov = np.linalg.inv(A.T @ A)
+        cache[key] = {"limit": float(coef[0]), "se": float(math.sqrt(cov[0, 0])), "slope": float(coef[1]),
+                      "ensembles": [{"count": n, "configurations": k, "mean": m, "se": e}
+                                    for (n, k), m, e in zip(LIMIT_ENSEMBLES, y, se)]}
+        write_text(path, json.dumps(cache, indent=1))
+    return cache[key]
 
 
 def groups(rows: list[dict]) -> dict:
-    """Configuration ratios of the rows that ran, by (level, fraction, min_gap, repulsion on, dt, steps,
-    protocol), then count: one ratio per seed (rows of one seed with other solver settings are
-    averaged)."""
+    """The rows that ran, by (level, fraction, min_gap, repulsion on, dt, steps, protocol), then
+    count: one ``(ratio, R_N, scaled estimate, shifted estimate, row)`` per seed (rows of one seed
+    with other solver settings are averaged)."""
     seeds: dict = {}
     for r in rows:
         if not r["failure"]:
             key = (r["level"], r["fraction"], r["min_gap"], repulsion(r), r["settings"]["time.dt"],
                    r["steps"], protocol(r))
             seeds.setdefault(key, {}).setdefault(r["count"], {}).setdefault(r["seed"], []).append(r)
-    return {key: {n: [(float(np.mean([r["ratio"] for r in rs])), rs[0]) for rs in by_seed.values()]
-                  for n, by_seed in by_count.items()} for key, by_count in seeds.items()}
+    out: dict = {}
+    for key, by_count in seeds.items():
+        for n, by_seed in by_count.items():
+            for rs in by_seed.values():
+                r = rs[0]
+                ratio, rpy = float(np.mean([x["ratio"] for x in rs])), far_field(r)
+                limit = far_field_law(r["volume_fraction"], r["min_gap"])["limit"]
+                shift = (limit - rpy) * stokes_velocity(r) / r["richardson_zaki"]
+                estimates = (ratio, rpy, ratio * limit / rpy, ratio + shift, r)
+                out.setdefault(key, {}).setdefault(n, []).append(estimates)
+    return out
 
 
 def repulsion(row: dict) -> str:
@@ -101,49 +164,27 @@ def protocol(row: dict) -> str:
     return "frozen" if row["settings"].get("particles.frozen") else "moving"
 
 
-def extrapolate(by_count: dict) -> tuple[float, float] | None:
-    """``(r_inf, c)`` of the least-squares fit ``r = r_inf - c N^(-1/3)`` to the ensemble means
-    (each weighted by its number of configurations); None with fewer than two counts."""
-    if len(by_count) < 2:
-        return None
-    x = np.array([n ** (-1 / 3) for n in by_count])
-    y = np.array([np.mean([ratio for ratio, _ in rs]) for rs in by_count.values()])
-    w = np.sqrt([len(rs) for rs in by_count.values()])
-    A = np.column_stack([np.ones_like(x), -x]) * w[:, None]
-    r_inf, c = np.linalg.lstsq(A, y * w, rcond=None)[0]
-    return float(r_inf), float(c)
-
-
-def corrected(by_count: dict) -> tuple[float, float, float]:
-    """Ladd's law with its own slope, fitted to every configuration: ``(r_inf, its standard error,
-    chi^2 per degree of freedom of the ensemble means about the law)``. ``r_inf`` is the mean of
-    the configurations' ``ratio + ladd``; chi^2 compares each count's mean of it with ``r_inf``
-    in units of its standard error (the configurations' scatter pooled over the counts), so a
-    value well above 1 says the counts do not follow the law."""
-    values = {n: np.array([ratio + ladd(row, n) for ratio, row in rs]) for n, rs in by_count.items()}
-    every = np.concatenate(list(values.values()))
-    r_inf = float(every.mean())
-    spread = np.concatenate([v - v.mean() for v in values.values()])
-    dof = len(every) - len(values)
-    sd = float(np.sqrt(spread @ spread / dof)) if dof > 0 else float("nan")
-    chi2 = sum(len(v) * (v.mean() - r_inf) ** 2 for v in values.values()) / sd ** 2
-    return r_inf, sd / np.sqrt(len(every)), float(chi2 / max(len(values) - 1, 1))
+def mean_se(values) -> str:
+    v = np.asarray(values, dtype=float)
+    return f"{v.mean():.3f} +- {v.std(ddof=1) / math.sqrt(len(v)):.3f}" if len(v) > 1 else f"{v.mean():.3f}"
 
 
 def write(rows: list[dict]) -> None:
+    by_group = groups(rows)
     lines = ["# Hindered settling from frozen random configurations (hindered_settling)", "",
              "`suspension-3d` (d = 0.1 cm, rho_s = 1.5, viscosity 0.2 g/(cm s), Re_t 0.6), spheres placed "
              "at random with repulsion off, held in place ('frozen': the mean over steps 2, 3, ... of dt "
              "from rest) or moving (the earlier protocols: one step of dt from rest, or the mean over steps "
              "2, 3, ... of 0.01 s). Settling velocity relative to the mixture, and "
              "its ratio to Richardson-Zaki V_t (1 - phi)^n (V_t: Schiller-Naumann, n: Garside & "
-             "Al-Dibouni at Re_t) at the box's own fraction. Wall time without the JIT warm-up, 2-core "
-             "machine. Reproduce: `python benchmarks/bench_hindered_settling.py --counts N --seeds S "
-             "--fraction PHI [--set coupling.scheme=implicit] [--set solver.linear=multigrid]`.", "",
+             "Al-Dibouni at Re_t) at the box's own fraction. R_N: the same configuration's mean settling "
+             "velocity at the Rotne-Prager-Yamakawa level (Ewald sums, Stokes flow), over one sphere's "
+             "Stokes velocity. Wall time without the JIT warm-up, 2-core machine. Reproduce: "
+             "`python benchmarks/bench_hindered_settling.py --counts N --seeds S --fraction PHI "
+             "[--set solver.linear=multigrid]`.", "",
              "| spheres | seed | level | cells/d | phi (box) | min gap / d | repulsion | unknowns | "
              "steps x dt | particles | coupling | wall s | settling cm/s | Richardson-Zaki cm/s | ratio | "
-             "array cm/s | "
-             "max overlap / r | failure | measured |", "|---" * 19 + "|"]
+             "R_N | array cm/s | max overlap / r | failure | measured |", "|---" * 20 + "|"]
     for r in sorted(rows, key=lambda r: (r["level"], r["fraction"], r["min_gap"], r["count"], r["seed"])):
         st = r["settings"]
         head = (f"| {r['count']} | {r['seed']} | {r['level']} | {r.get('cells_per_diameter', 0):.0f} | "
@@ -151,63 +192,62 @@ def write(rows: list[dict]) -> None:
                 f"{r.get('n_dofs', '')} | {r['steps']} x {st['time.dt']} | {protocol(r)} | "
                 f"{st['coupling.scheme']} |")
         if r["failure"]:
-            lines.append(f"{head} | | | | | | | {r['failure']} | {r['date']} {r['commit']} |")
+            lines.append(f"{head} | | | | | | | | {r['failure']} | {r['date']} {r['commit']} |")
             continue
         lines.append(f"{head} {r['wall_s']:.0f} | {r['settling']:.4g} | {r['richardson_zaki']:.4g} | "
-                     f"{r['ratio']:.3f} | {r['array']:.4g} | {r['max_overlap']:.2g} | – | "
+                     f"{r['ratio']:.3f} | {far_field(r):.4f} | {r['array']:.4g} | {r['max_overlap']:.2g} | "
+                     "– | "
                      f"{r['date']} {r['commit']} |")
-    lines += ["", "Ensemble means (ratio to Richardson-Zaki; +- the standard error over the seeds) and the "
-              "fit r(N) = r_inf - c N^(-1/3). 'Ladd' is the finite-size hindrance "
-              f"{HASIMOTO} S(0) (phi/N)^(1/3) U_0 / V_RZ expected from the box (S(0) of hard spheres, "
-              "U_0 = V_t).", "",
+    lines += ["", "Ensembles: the ratio to Richardson-Zaki (mean +- standard error over the configurations), "
+              "the far-field model's R_N and its limit R_inf for an unbounded suspension at the box's "
+              "fraction (+- its standard error; hindered_settling_far_field.json), and the unbounded "
+              "suspension's ratio estimated as the mean of ratio * R_inf / R_N (scaled) and of "
+              "ratio + (R_inf - R_N) U_0 / V_RZ (shifted); their +- is the configurations' scatter only.", "",
               "| level | phi | min gap / d | repulsion | steps x dt s | particles | spheres | "
-              "configurations | ratio | "
-              "Ladd's finite-size term | ratio + Ladd | fit r_inf | fit c | Ladd's law r_inf | "
-              "chi^2 / dof |", "|---" * 15 + "|"]
-    for (level, fraction, gap, rep, dt, steps, how), by_count in sorted(groups(rows).items()):
-        fit = extrapolate(by_count)
-        law = corrected(by_count)
+              "configurations | ratio | R_N | R_inf | ratio / R_N | unbounded, scaled | unbounded, shifted |",
+              "|---" * 14 + "|"]
+    for (level, fraction, gap, rep, dt, steps, how), by_count in sorted(by_group.items()):
         for n, rs in sorted(by_count.items()):
-            ratios = np.array([ratio for ratio, _ in rs])
-            err = f" +- {ratios.std(ddof=1) / np.sqrt(len(ratios)):.3f}" if len(ratios) > 1 else ""
-            term = np.mean([ladd(row, n) for _, row in rs])
-            fits = f"{fit[0]:.3f} | {fit[1]:.3f}" if fit else " | "
-            laws = f"{law[0]:.3f} +- {law[1]:.3f} | {law[2]:.2f}" if fit and np.isfinite(law[1]) else " | "
+            ratio, rpy, scaled, shifted, rows_ = (list(c) for c in zip(*rs))
+            law = far_field_law(rows_[0]["volume_fraction"], gap)
             lines.append(f"| {level} | {fraction} | {gap} | {rep} | {steps} x {dt} | {how} | {n} | "
                          f"{len(rs)} | "
-                         f"{ratios.mean():.3f}{err} | {term:.3f} | {ratios.mean() + term:.3f} | {fits} | "
-                         f"{laws} |")
+                         f"{mean_se(ratio)} | {np.mean(rpy):.4f} | {law['limit']:.4f} +- {law['se']:.4f} | "
+                         f"{mean_se(np.array(ratio) / np.array(rpy))} | {mean_se(scaled)} | "
+                         f"{mean_se(shifted)} |")
     write_text(RESULTS / f"{NAME}.md", "\n".join(lines) + "\n")
-    plot(rows)
+    plot(by_group)
 
 
-def plot(rows: list[dict]) -> None:
+def plot(by_group: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    chosen = {key: by_count for key, by_count in groups(rows).items() if key[-1] == "frozen"}
+    chosen = {key: by_count for key, by_count in by_group.items() if key[-1] == "frozen"}
     for k, ((level, fraction, gap, rep, dt, steps, how), by_count) in enumerate(sorted(chosen.items())):
-        label = f"phi {fraction}, {2 ** level} cells/d, {steps} x {dt} s"
+        label = f"phi {fraction}, {2 ** level} cells/d"
         for n, rs in by_count.items():
-            ax.plot([n ** (-1 / 3)] * len(rs), [ratio for ratio, _ in rs], "o", ms=3, alpha=0.5,
+            ax.plot([n ** (-1 / 3)] * len(rs), [ratio for ratio, *_ in rs], "o", ms=3, alpha=0.5,
                     color=f"C{k}")
-        fit = extrapolate(by_count)
-        if fit:
-            x = np.linspace(0.0, max(n ** (-1 / 3) for n in by_count), 20)
-            n0 = min(by_count)
-            slope = ladd(by_count[n0][0][1], n0) / n0 ** (-1 / 3)
-            law = corrected(by_count)
-            ax.plot(x, law[0] - slope * x, ":", color=f"C{k}",
-                    label=f"{label}: Ladd's law, r_inf = {law[0]:.2f}")
-            ax.plot(x, fit[0] - fit[1] * x, "-", color=f"C{k}", label=f"{label}: fit, r_inf = {fit[0]:.2f}")
+            ax.plot([n ** (-1 / 3)], [np.mean([ratio for ratio, *_ in rs])], "s", ms=6, color=f"C{k}")
+        scaled = np.mean([c[2] for rs in by_count.values() for c in rs])
+        shifted = np.mean([c[3] for rs in by_count.values() for c in rs])
+        ax.plot([0.0, 0.0], [scaled, shifted], "*-", ms=9, color=f"C{k}",
+                label=f"{label}: unbounded {scaled:.2f} (scaled) to {shifted:.2f} (shifted)")
+        # the far-field model's finite-size law, scaled through the configurations
+        scale = np.mean([c[0] / c[1] for rs in by_count.values() for c in rs])
+        law = far_field_law(fraction, gap)
+        x = np.linspace(0.0, 0.55, 20)
+        ax.plot(x, scale * (law["limit"] - law["slope"] * x), ":", color=f"C{k}",
+                label=f"{label}: far field (RPY) x {scale:.2f}")
     ax.axhline(1.0, color="k", lw=0.8, label="Richardson-Zaki")
     ax.axhspan(0.9, 1.1, color="k", alpha=0.08, label="10 %")
     ax.set_xlabel("N^(-1/3)")
     ax.set_ylabel("settling velocity / Richardson-Zaki")
-    ax.set_xlim(left=0.0)
+    ax.set_xlim(left=-0.01)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(RESULTS / f"{NAME}.png", dpi=120)
@@ -216,7 +256,7 @@ def plot(rows: list[dict]) -> None:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--counts", type=int, nargs="+", default=[8, 24])
+    ap.add_argument("--counts", type=int, nargs="+", default=[8, 20])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--level", type=int, default=2, help="2^L cells per diameter")
     ap.add_argument("--fraction", type=float, default=0.2)
@@ -224,7 +264,7 @@ def main(argv=None):
     ap.add_argument("--moving", action="store_true", help="let the particles move during the steps")
     ap.add_argument("--steps", type=int, default=3,
                     help="steps per configuration: at least 3 (the first is the flow's start-up), or one "
-                         "long step (backward Euler then gives the configuration's steady settling)")
+                         "long step (the earlier protocol)")
     ap.add_argument("--min-gap", type=float, default=0.02, help="smallest gap at the start, in diameters")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="more scene settings")
     args = ap.parse_args(argv)
