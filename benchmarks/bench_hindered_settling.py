@@ -134,14 +134,14 @@ def far_field_law(phi: float, min_gap: float) -> dict:
 
 
 def groups(rows: list[dict]) -> dict:
-    """The rows that ran, by (level, fraction, min_gap, repulsion on, dt, steps, protocol), then
+    """The rows that ran, by (level, fraction, min_gap, repulsion on, dt, steps, protocol, viscosity), then
     count: one ``(ratio, R_N, scaled estimate, shifted estimate, row)`` per seed (rows of one seed
     with other solver settings are averaged)."""
     seeds: dict = {}
     for r in rows:
         if not r["failure"]:
             key = (r["level"], r["fraction"], r["min_gap"], repulsion(r), r["settings"]["time.dt"],
-                   r["steps"], protocol(r))
+                   r["steps"], protocol(r), viscosity(r))
             seeds.setdefault(key, {}).setdefault(r["count"], {}).setdefault(r["seed"], []).append(r)
     out: dict = {}
     for key, by_count in seeds.items():
@@ -160,6 +160,10 @@ def repulsion(row: dict) -> str:
     return "on" if row["settings"]["repulsion.enabled"] else "off"
 
 
+def viscosity(row: dict) -> float:
+    return float(row["settings"].get("fluid.viscosity", SuspensionFluid().viscosity))
+
+
 def protocol(row: dict) -> str:
     return "frozen" if row["settings"].get("particles.frozen") else "moving"
 
@@ -172,8 +176,8 @@ def mean_se(values) -> str:
 def write(rows: list[dict]) -> None:
     by_group = groups(rows)
     lines = ["# Hindered settling from frozen random configurations (hindered_settling)", "",
-             "`suspension-3d` (d = 0.1 cm, rho_s = 1.5, viscosity 0.2 g/(cm s), Re_t 0.6), spheres placed "
-             "at random with repulsion off, held in place ('frozen': the mean over steps 2, 3, ... of dt "
+             "`suspension-3d` (d = 0.1 cm, rho_s = 1.5, viscosity 0.2 g/(cm s), Re_t 0.6; at viscosity 1, "
+             "Re_t 0.03), spheres placed at random with repulsion off, held in place ('frozen': the mean over steps 2, 3, ... of dt "
              "from rest) or moving (the earlier protocols: one step of dt from rest, or the mean over steps "
              "2, 3, ... of 0.01 s). Settling velocity relative to the mixture, and "
              "its ratio to Richardson-Zaki V_t (1 - phi)^n (V_t: Schiller-Naumann, n: Garside & "
@@ -203,14 +207,14 @@ def write(rows: list[dict]) -> None:
               "fraction (+- its standard error; hindered_settling_far_field.json), and the unbounded "
               "suspension's ratio estimated as the mean of ratio * R_inf / R_N (scaled) and of "
               "ratio + (R_inf - R_N) U_0 / V_RZ (shifted); their +- is the configurations' scatter only.", "",
-              "| level | phi | min gap / d | repulsion | steps x dt s | particles | spheres | "
+              "| level | phi | viscosity | min gap / d | repulsion | steps x dt s | particles | spheres | "
               "configurations | ratio | R_N | R_inf | ratio / R_N | unbounded, scaled | unbounded, shifted |",
-              "|---" * 14 + "|"]
-    for (level, fraction, gap, rep, dt, steps, how), by_count in sorted(by_group.items()):
+              "|---" * 15 + "|"]
+    for (level, fraction, gap, rep, dt, steps, how, mu), by_count in sorted(by_group.items()):
         for n, rs in sorted(by_count.items()):
             ratio, rpy, scaled, shifted, rows_ = (list(c) for c in zip(*rs))
             law = far_field_law(rows_[0]["volume_fraction"], gap)
-            lines.append(f"| {level} | {fraction} | {gap} | {rep} | {steps} x {dt} | {how} | {n} | "
+            lines.append(f"| {level} | {fraction} | {mu:g} | {gap} | {rep} | {steps} x {dt} | {how} | {n} | "
                          f"{len(rs)} | "
                          f"{mean_se(ratio)} | {np.mean(rpy):.4f} | {law['limit']:.4f} +- {law['se']:.4f} | "
                          f"{mean_se(np.array(ratio) / np.array(rpy))} | {mean_se(scaled)} | "
@@ -226,9 +230,9 @@ def plot(by_group: dict) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    chosen = {key: by_count for key, by_count in by_group.items() if key[-1] == "frozen"}
-    for k, ((level, fraction, gap, rep, dt, steps, how), by_count) in enumerate(sorted(chosen.items())):
-        label = f"phi {fraction}, {2 ** level} cells/d"
+    chosen = {key: by_count for key, by_count in by_group.items() if key[-2] == "frozen"}
+    for k, ((level, fraction, gap, rep, dt, steps, how, mu), by_count) in enumerate(sorted(chosen.items())):
+        label = f"phi {fraction}, {2 ** level} cells/d, viscosity {mu:g}"
         for n, rs in by_count.items():
             ax.plot([n ** (-1 / 3)] * len(rs), [ratio for ratio, *_ in rs], "o", ms=3, alpha=0.5,
                     color=f"C{k}")
