@@ -177,7 +177,8 @@ def write(rows: list[dict]) -> None:
     by_group = groups(rows)
     lines = ["# Hindered settling from frozen random configurations (hindered_settling)", "",
              "`suspension-3d` (d = 0.1 cm, rho_s = 1.5, viscosity 0.2 g/(cm s), Re_t 0.6; at viscosity 1, "
-             "Re_t 0.03), spheres placed at random with repulsion off, held in place ('frozen': the mean over steps 2, 3, ... of dt "
+             "Re_t 0.03), spheres placed at random with repulsion off, held in place ('frozen': the mean "
+             "over steps 2, 3, ... of dt "
              "from rest) or moving (the earlier protocols: one step of dt from rest, or the mean over steps "
              "2, 3, ... of 0.01 s). Settling velocity relative to the mixture, and "
              "its ratio to Richardson-Zaki V_t (1 - phi)^n (V_t: Schiller-Naumann, n: Garside & "
