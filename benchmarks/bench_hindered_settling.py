@@ -238,6 +238,7 @@ def plot(by_group: dict) -> None:
             ax.plot([n ** (-1 / 3)] * len(rs), [ratio for ratio, *_ in rs], "o", ms=3, alpha=0.5,
                     color=f"C{k}")
             ax.plot([n ** (-1 / 3)], [np.mean([ratio for ratio, *_ in rs])], "s", ms=6, color=f"C{k}")
+            ax.plot([n ** (-1 / 3) - 0.01] * len(rs), [c[2] for c in rs], "x", ms=4, alpha=0.6, color=f"C{k}")
         scaled = np.mean([c[2] for rs in by_count.values() for c in rs])
         shifted = np.mean([c[3] for rs in by_count.values() for c in rs])
         ax.plot([0.0, 0.0], [scaled, shifted], "*-", ms=9, color=f"C{k}",
@@ -247,10 +248,10 @@ def plot(by_group: dict) -> None:
         law = far_field_law(fraction, gap)
         x = np.linspace(0.0, 0.55, 20)
         ax.plot(x, scale * (law["limit"] - law["slope"] * x), ":", color=f"C{k}",
-                label=f"{label}: far field (RPY) x {scale:.2f}")
+                label=f"{label}: far-field law R(N) x mean of ratio / R_N ({scale:.2f})")
     ax.axhline(1.0, color="k", lw=0.8, label="Richardson-Zaki")
     ax.axhspan(0.9, 1.1, color="k", alpha=0.08, label="10 %")
-    ax.set_xlabel("N^(-1/3)")
+    ax.set_xlabel("N^(-1/3)  (o: configurations, x: each scaled to N = infinity, square: mean)")
     ax.set_ylabel("settling velocity / Richardson-Zaki")
     ax.set_xlim(left=-0.01)
     ax.legend(fontsize=7)
@@ -275,8 +276,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.steps == 2:
         ap.error("--steps must be 1 or at least 3 (the first step is the flow's start-up)")
-    extra = {"coupling.scheme": "newton-krylov", **({"particles.frozen": False} if args.moving else {}),
-             **parse_settings(args.set)}
+    extra = {"coupling.scheme": "newton-krylov", "coupling.max_subiterations": 40,  # (FGMRES's limit)
+             **({"particles.frozen": False} if args.moving else {}), **parse_settings(args.set)}
     warm_up("suspension-3d", **{"particles.count": 1, "time.t_end": 0.02, "time.dt": 0.01})
     for count in args.counts:
         for seed in args.seeds:
