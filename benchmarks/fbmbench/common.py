@@ -16,6 +16,7 @@ commands or sessions), and the tables and plots are redrawn from all rows.
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import math
 import os
@@ -63,9 +64,13 @@ def cli_value(value) -> str:
 
 
 def slug(scene: str, level: int, settings: dict) -> str:
-    """A folder name for one run: scene, level and the settings in order."""
+    """A folder name for one run: scene, level and the settings in order; past 200 characters
+    (file systems allow 255) the settings' part is cut and a hash of the whole name added."""
     parts = [scene, f"level{level}"] + [f"{k}={cli_value(v)}" for k, v in sorted(settings.items())]
-    return "-".join(p.replace("/", "_") for p in parts)
+    name = "-".join(p.replace("/", "_") for p in parts)
+    if len(name) <= 200:
+        return name
+    return f"{name[:183]}-{hashlib.sha1(name.encode()).hexdigest()[:16]}"
 
 
 def monitored(cmd: list[str], record=None) -> tuple[int, list[list[float]], float]:
