@@ -108,7 +108,7 @@ class ParticleScene(SimulationScene):
 
     def build(self, params, level: int) -> Setup:
         place = self.layout(params, level)
-        frozen = getattr(getattr(params, "particles", None), "frozen", False)  # (suspensions)
+        frozen = getattr(getattr(params, "particles", None), "frozen", False)  # suspension scenes only
         sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary,
                          time=self.time(params), solver=params.solver, coupling=params.coupling,
                          fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
