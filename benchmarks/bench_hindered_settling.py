@@ -22,15 +22,17 @@ the bench computes the mean settling velocity of the same spheres at the Rotne�
 level by Ewald sums (:mod:`fbmbench.ewald_rpy`: the far field exact, no near field), ``R_N``, and
 that model's limit for an unbounded random suspension at the same fraction, ``R_inf``
 (:func:`far_field_law`). The far field carries the box's effect and the flow solve the near
-field, so each configuration gives two estimates of the unbounded suspension's ratio to
-Richardson–Zaki (control variates: their scatter over the configurations is that of
-``ratio / R_N`` and of ``ratio - R_N U_0 / V_RZ``, well below that of ``ratio``): *scaled*,
-``ratio * R_inf / R_N`` (the box's deficit in proportion to the mobility, as through an effective
-medium), and *shifted*, ``ratio + (R_inf - R_N) U_0 / V_RZ`` (the deficit as the far field gives
-it, in units of the Stokes velocity ``U_0``), and *screened*, the shifted deficit divided by the
-suspension's relative viscosity ``1 + 2.5 phi + 5.2 phi^2`` (Batchelor & Green 1972): the box's
-longest waves move through the suspension, not through the fluid, which the far-field model
-(pure fluid between point-like spheres) misses.
+field, so each configuration gives three estimates of the unbounded suspension's ratio to
+Richardson–Zaki, all control variates (R_N follows the configuration, so their scatter is well
+below that of ``ratio``):
+
+* *scaled*, ``ratio * R_inf / R_N``: the box's deficit in proportion to the mobility;
+* *shifted*, ``ratio + (R_inf - R_N) U_0 / V_RZ``: the deficit as the far field gives it, in
+  units of the Stokes velocity ``U_0``;
+* *screened*, the shifted deficit divided by the suspension's relative viscosity
+  ``1 + 2.5 phi + 5.2 phi^2`` (Batchelor & Green 1972): the box's longest waves move through the
+  suspension, not through the fluid, which the far-field model (pure fluid between point-like
+  spheres) misses. The one of the three that does not depend on N (docs/validation.md).
 
 Results: ``benchmarks/results/hindered_settling.md``, ``.json``, ``.png`` and
 ``hindered_settling_far_field.json`` (the limits ``R_inf``, computed once per fraction).
