@@ -40,6 +40,7 @@ Results: ``benchmarks/results/hindered_settling.md``, ``.json``, ``.png`` and
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 
@@ -104,13 +105,18 @@ def stokes_velocity(row: dict) -> float:
     return (pp.density - fl.density) * fl.gravity * pp.diameter**2 / (18.0 * fl.viscosity)
 
 
+@functools.lru_cache(maxsize=None)
+def placed_far_field(n: int, d: float, phi: float, min_gap: float, seed: int) -> float:
+    """The RPY mean settling velocity (over one sphere's Stokes velocity) of ``n`` spheres of
+    diameter ``d`` placed as the scene places them (seed ``seed``, gaps of ``min_gap`` diameters)
+    in the periodic cube that they fill to ``phi``."""
+    side = (n * math.pi / 6.0 * d**3 / phi) ** (1.0 / 3.0)
+    return mean_settling(random_positions(n, d, np.full(3, side), min_gap * d, seed), side, d / 2)
+
+
 def far_field(row: dict) -> float:
-    """``R_N``: the mean settling velocity of the row's configuration (the scene's placement,
-    recomputed) at the RPY level, over the Stokes velocity of one sphere."""
-    d, n = diameter(row), row["count"]
-    side = (n * math.pi / 6.0 * d**3 / row["volume_fraction"]) ** (1.0 / 3.0)  # the box as built
-    X = random_positions(n, d, np.full(3, side), row["min_gap"] * d, row["seed"])
-    return mean_settling(X, side, d / 2)
+    """``R_N``: :func:`placed_far_field` of the row's configuration, in its box as built."""
+    return placed_far_field(row["count"], diameter(row), row["volume_fraction"], row["min_gap"], row["seed"])
 
 
 def far_field_law(phi: float, min_gap: float) -> dict:
@@ -127,9 +133,7 @@ def far_field_law(phi: float, min_gap: float) -> dict:
         d = SphereSuspension().diameter
         x, y, se = [], [], []
         for n, seeds in LIMIT_ENSEMBLES:
-            side = (n * math.pi / 6.0 * d**3 / phi) ** (1.0 / 3.0)
-            v = [mean_settling(random_positions(n, d, np.full(3, side), min_gap * d, s), side, d / 2)
-                 for s in range(seeds)]
+            v = [placed_far_field(n, d, phi, min_gap, s) for s in range(seeds)]
             x.append(n ** (-1 / 3))
             y.append(float(np.mean(v)))
             se.append(float(np.std(v, ddof=1) / math.sqrt(seeds)))
