@@ -30,9 +30,12 @@ BACKEND_NAMES = {"superlu": "SuperLU", "pardiso": "PARDISO"}  # for reports
 #: against 1.5 s SuperLU; 53 000: 11.0-11.4 against 14.3-14.4 s; 165 000: 31-37 against 90-99 s.
 PARDISO_MIN_UNKNOWNS_2D = 40_000
 # PARDISO settings (1-based keys): own parameters, METIS ordering, no internal refinement (ours
-# is cheaper: MKL's 2 steps made every solve 4x slower), pivot perturbation 1e-13, scaling,
-# weighted matching; shift of the zero diagonal (relative)
-PARDISO_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 1, 13: 1}
+# is cheaper: MKL's 2 steps made every solve 4x slower), pivot perturbation 1e-13, scaling, no
+# weighted matching (with it, MKL's default for unsymmetric matrices, the Jacobians of 3D
+# periodic suspensions had perturbed pivots, first solves 1e-5 to 1e3 off and solves ending in
+# FGMRES; other scenes solve the same, as fast or faster: docs/validation.md); shift of the
+# zero diagonal (relative)
+PARDISO_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 1, 13: 0}
 REGULARISE = 1e-12
 ROUNDOFF = 1e2 * np.finfo(float).eps  # attainable relative accuracy of a residual K x - b
 
@@ -183,8 +186,8 @@ def _ones(P: sp.csr_matrix) -> sp.csr_matrix:
 class PardisoAnalysis:
     """PARDISO factorisations that share one symbolic analysis while their pattern allows.
 
-    PARDISO's analysis (phase 11: nested-dissection ordering, symbolic factorisation, scaling
-    and weighted matching) is about 40 % of a factorisation of the ten-cate Jacobians (level 0,
+    PARDISO's analysis (phase 11: nested-dissection ordering, symbolic factorisation and
+    scaling) is about 40 % of a factorisation of the ten-cate Jacobians (level 0,
     54 468 unknowns, 8.7 M non-zeros: analysis and factorisation 2.8 s, factorisation alone
     1.5-1.7 s). A matrix whose entries all lie in the *reserved pattern* of the last analysis is
     only factorised numerically (phase 22) with that analysis. The reserved pattern is the union
@@ -334,7 +337,7 @@ def _free_solvers(solvers: list) -> None:
 
 def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, accept: float = 1e-8,
              analysis: PardisoAnalysis | None = None, reserve=None):
-    """MKL PARDISO (real unsymmetric, METIS ordering, scaling and weighted matching) of ``K``
+    """MKL PARDISO (real unsymmetric, METIS ordering, scaling, no weighted matching) of ``K``
     with its zero diagonal entries (the pressure block) shifted by ``-1e-12 max|diag K|``: on the
     unshifted saddle point PARDISO perturbs tiny pivots (5-18 of them in the 3D FBM Jacobians
     measured), after which refinement converges slowly or not at all (first-solve residuals from
