@@ -32,9 +32,9 @@ PARDISO_MIN_UNKNOWNS_2D = 40_000
 # PARDISO settings (1-based keys): own parameters, METIS ordering, no internal refinement (ours
 # is cheaper: MKL's 2 steps made every solve 4x slower), pivot perturbation 1e-13, scaling, no
 # weighted matching (with it, MKL's default for unsymmetric matrices, the Jacobians of 3D
-# periodic suspensions had perturbed pivots, first solves 1e-5 to 1e3 off and solves ending in
-# FGMRES; other scenes solve the same, as fast or faster: docs/validation.md); shift of the
-# zero diagonal (relative)
+# periodic suspensions had perturbed pivots, refinement stalled and solves ended in FGMRES; other
+# scenes solve the same, as fast or faster: docs/validation.md); shift of the zero diagonal
+# (relative)
 PARDISO_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 1, 13: 0}
 REGULARISE = 1e-12
 ROUNDOFF = 1e2 * np.finfo(float).eps  # attainable relative accuracy of a residual K x - b
