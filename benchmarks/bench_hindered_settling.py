@@ -35,7 +35,9 @@ below that of ``ratio``):
   spheres) misses. The one of the three that does not depend on N (docs/validation.md).
 
 Results: ``benchmarks/results/hindered_settling.md``, ``.json``, ``.png`` and
-``hindered_settling_far_field.json`` (the limits ``R_inf``, computed once per fraction).
+``hindered_settling_far_field.json`` (the limits ``R_inf``, computed once per fraction). An
+independent Stokes solver on the same configurations, with its own box-size law:
+``bench_hindered_settling_sd.py``.
 """
 from __future__ import annotations
 
