@@ -59,6 +59,8 @@ def box_side(count: int, fraction: float, level: int, d: float) -> float:
 
 
 def run(root: Path, count: int, seed: int, fraction: float, level: int, min_gap: float) -> dict:
+    """One configuration (``count`` spheres placed as the scene places them with ``seed``; one
+    sphere: the simple cubic array) in Stokesian dynamics: its row for the results file."""
     d = SphereSuspension().diameter
     side = box_side(count, fraction, level, d)
     X = np.full((1, 3), side / 2) if count == 1 else random_positions(count, d, np.full(3, side),
@@ -72,6 +74,7 @@ def run(root: Path, count: int, seed: int, fraction: float, level: int, min_gap:
 
 
 def mean_se(v) -> tuple[float, float]:
+    """Mean and standard error of the mean (nan for one value)."""
     v = np.asarray(v, dtype=float)
     return float(v.mean()), float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else float("nan")
 
@@ -105,11 +108,11 @@ def array_velocity(phi: float) -> float:
     return sangani_acrivos_velocity(3, phi, 3.0 * math.pi, 1.0, 1.0)
 
 
-def at_fraction(box: float, nominal: float) -> float:
-    """How much faster a suspension at the box's fraction ``box`` settles than at ``nominal``:
-    ``((1 - box) / (1 - nominal))^n``, Richardson–Zaki's exponent in Stokes flow (n = 5.1; the
+def at_fraction(actual: float, nominal: float) -> float:
+    """How much faster a suspension at the box's fraction ``actual`` settles than at ``nominal``:
+    ``((1 - actual) / (1 - nominal))^n``, Richardson–Zaki's exponent in Stokes flow (n = 5.1; the
     boxes built on the mesh hold the fraction to 3 %)."""
-    return ((1.0 - box) / (1.0 - nominal)) ** garside_al_dibouni(0.0)
+    return ((1.0 - actual) / (1.0 - nominal)) ** garside_al_dibouni(0.0)
 
 
 def flow_rows() -> list[dict]:
@@ -137,6 +140,7 @@ def stokes_velocity(row: dict) -> float:
 
 
 def write(rows: list[dict]) -> None:
+    """Redraw ``hindered_settling_sd.md`` from all rows and the flow runs' rows."""
     lines = [f"# Stokesian-dynamics reference for hindered settling ({NAME})", "",
              "Townsend's Stokesian dynamics (github.com/Pecnut/stokesian-dynamics, commit "
              f"{stokesian.COMMIT[:7]}; far field to the stresslet, exact two-sphere lubrication), the "
@@ -181,7 +185,9 @@ def write(rows: list[dict]) -> None:
               "(`bench_hindered_settling.py`, over U_0 at its viscosity) against Stokesian dynamics', "
               "and the flow solver's ratio to Richardson-Zaki carried to an unbounded suspension by "
               "Stokesian dynamics' own size law (SD-scaled: ratio * U_inf / U_N, U_inf taken from phi "
-              "to the box's fraction by (1 - phi)^5.1).", "",
+              "to the box's fraction by (1 - phi)^5.1; +- the configurations' scatter and U_inf's "
+              "standard error). At viscosity 0.2 the flow runs carry their inertia (Re_t 0.6): "
+              "1 % slower in units of U_0 than in Stokes flow.", "",
               "| level | phi | viscosity | spheres | configurations | flow / SD | ratio to RZ (box) | "
               "unbounded, SD-scaled |", "|---" * 8 + "|"]
     sd = {(r["count"], r["seed"], r["level"], r["fraction"], r["min_gap"]): r for r in rows}
@@ -200,15 +206,19 @@ def write(rows: list[dict]) -> None:
                   for f, ref in pairs] if law else []
         m, se = mean_se(q)
         rm, rse = mean_se(ratio)
-        cell = f"{mean_se(scaled)[0]:.3f} +- {mean_se(scaled)[1]:.3f}" if scaled else "–"
+        cell = "–"
+        if scaled:  # the configurations' scatter and U_inf's standard error, in quadrature
+            sm, sse = mean_se(scaled)
+            cell = f"{sm:.3f} +- {sm * math.hypot(sse / sm, law['se'] / law['limit']):.3f}"
         lines.append(f"| {level} | {phi} | {mu:g} | {n} | {len(pairs)} | {m:.3f} +- {se:.3f} | "
                      f"{rm:.3f} +- {rse:.3f} | {cell} |")
     lines += ["", "The paired ratio against the box's size, where it is measured at two counts or more "
-              "(boxes within 0.01 of the nominal fraction), fitted as `q_inf - b N^(-1/3)`: the flow "
-              "solver's own size law relative to Stokesian dynamics'. Its limit times Stokesian "
-              "dynamics' U_inf over Richardson-Zaki (at the nominal fraction, in U_0) is a third "
-              "estimate for an unbounded suspension.", "",
-              "| level | phi | viscosity | spheres | q_inf | b | SD's U_inf / RZ | unbounded, paired |",
+              "(boxes within 0.01 of the nominal fraction), fitted as `q_inf - b N^(-1/3)` (two counts: "
+              "the line through them): the flow solver's own size law relative to Stokesian "
+              "dynamics'. Its limit times Stokesian dynamics' U_inf over Richardson-Zaki (at the "
+              "nominal fraction, in U_0) is a third estimate for an unbounded suspension.", "",
+              "| level | phi | viscosity | spheres | q_inf | b | SD's U_inf / the flow runs' RZ | "
+              "unbounded, paired |",
               "|---" * 8 + "|"]
     trends: dict = {}
     for (level, phi, mu, n), pairs in groups.items():
@@ -221,10 +231,11 @@ def write(rows: list[dict]) -> None:
             continue
         f = groups[(level, phi, mu, pts[0][0])][0][0]
         rz = f["terminal_velocity"] / stokes_velocity(f) * (1.0 - phi) ** rz_exponent(f)
+        est = fit["limit"] * law["limit"] / rz
+        err = est * math.hypot(fit["se"] / fit["limit"], law["se"] / law["limit"])
         lines.append(f"| {level} | {phi} | {mu:g} | {', '.join(str(p[0]) for p in sorted(pts))} | "
                      f"{fit['limit']:.3f} +- {fit['se']:.3f} | {fit['slope']:.3f} | "
-                     f"{law['limit'] / rz:.3f} | "
-                     f"{fit['limit'] * law['limit'] / rz:.3f} |")
+                     f"{law['limit'] / rz:.3f} | {est:.3f} +- {err:.3f} |")
     write_text(RESULTS / f"{NAME}.md", "\n".join(lines) + "\n")
 
 
@@ -251,7 +262,7 @@ def main(argv=None):
     cases = [(1, 0)] if args.array else [(n, s) for n in args.counts for s in args.seeds]
     for count, seed in cases:
         row = run(root, count, seed, args.fraction, args.level, args.min_gap)
-        print({k: v for k, v in row.items()}, flush=True)
+        print(row, flush=True)
         write(merge_row(NAME, row, lambda a, b: all(a[k] == b[k] for k in
                                                     ("count", "seed", "fraction", "level", "min_gap"))))
 

@@ -17,7 +17,6 @@ measured here: ``benchmarks/results/hindered_settling_sd.md``).
 
 from __future__ import annotations
 
-import glob
 import math
 import os
 import shutil
@@ -29,6 +28,7 @@ import numpy as np
 
 COMMIT = "6b9117d1601c5e50dfea0475fd4f10d53447174a"
 SETUP = 99
+DT = 1.0  # the one Euler step's length (a radius moves U / U_0 / (6 pi) in it)
 
 _POSITIONS = '''    if n == 99:  # fbmbench: spheres of radius 1 at the centres in the file SD_CONFIG
         import os
@@ -65,7 +65,7 @@ def _insert(path: Path, anchor: str, text: str) -> None:
     source = path.read_text()
     if "fbmbench" in source:
         return
-    if source.count(anchor) < 1:
+    if anchor not in source:
         raise RuntimeError(f"{path}: '{anchor.strip()}' not found; is the checkout at commit {COMMIT}?")
     path.write_text(source.replace(anchor, text, 1))
 
@@ -89,33 +89,28 @@ def prepare(source: str | os.PathLike, work: str | os.PathLike) -> Path:
     return root
 
 
-def away_from_faces(X: np.ndarray, box: float) -> np.ndarray:
-    """The centres ``X (n, 3)`` translated along the diagonal (and wrapped) so that the one nearest
-    to a face of the cube ``[0, box)^3`` is as far from it as 40 trial shifts allow. Townsend's
-    periodic code returns nonsense (velocities of order 10 U_0) with a centre a small fraction of a
-    radius from a face; a translation leaves the periodic Stokes problem unchanged."""
-    shifts = np.arange(40) / 40.0 * box
-    worst = [np.abs(np.mod(X + t, box) - box / 2).max() for t in shifts]
-    return np.mod(X + shifts[int(np.argmin(worst))], box)
-
-
 def settling_velocities(root: Path, X: np.ndarray, box: float, a: float) -> np.ndarray:
     """Settling velocity of each sphere (radius ``a``, centres ``X (n, 3)`` in the periodic cube of
     side ``box``, each pushed by the same force along ``-z``) over one sphere's Stokes velocity
-    ``F / (6 pi mu a)``; (n,) float64, positive downwards. One Euler step of the solver."""
-    X = away_from_faces(np.asarray(X, dtype=float), box) / a  # radius 1
+    ``F / (6 pi mu a)``; (n,) float64, positive downwards. One Euler step of :data:`DT` with force
+    1, viscosity 1 and radius 1 (so ``U_0 = 1 / (6 pi)``); the solver wraps the centres back into
+    the box after the step, which is undone here."""
+    X = np.mod(np.asarray(X, dtype=float), box) / a  # radius 1
     side = box / a
-    config = root / "output" / "fbmbench-config.npz"
-    config.parent.mkdir(exist_ok=True)
-    for old in glob.glob(str(root / "output" / "*-fbmbench-*.npz")):
-        os.remove(old)
+    out = root / "output"
+    out.mkdir(exist_ok=True)
+    config = out / "fbmbench-config.npz"
+    for old in out.glob(f"*-s{SETUP}-i{SETUP}-*.npz"):
+        old.unlink()
     np.savez(config, positions=X - side / 2, lower=[-side / 2] * 3, upper=[side / 2] * 3)
-    done = subprocess.run([sys.executable, "run_simulation.py", str(SETUP), str(SETUP), "1", "1", "fte"],
+    done = subprocess.run([sys.executable, "run_simulation.py", str(SETUP), str(SETUP), str(DT), "1", "fte"],
                           cwd=root, env=dict(os.environ, SD_CONFIG=str(config)), capture_output=True,
                           text=True)
-    found = [f for f in glob.glob(str(root / "output" / "*-fbmbench-*.npz")) if "temp" not in f]
-    if done.returncode or not found:
+    found = [f for f in out.glob(f"*-s{SETUP}-i{SETUP}-*.npz") if "temp" not in f.name.lower()]
+    if done.returncode or len(found) != 1:
         raise RuntimeError(f"Stokesian dynamics failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
     with np.load(found[0]) as data:
         centres = data["centres"]
-    return -(centres[1] - centres[0])[:, 2] * 6.0 * math.pi  # step 1, force 1, mu 1, radius 1
+    dz = centres[1, :, 2] - centres[0, :, 2]
+    dz = np.mod(dz + side / 2, side) - side / 2  # across the periodic faces
+    return -dz / DT * 6.0 * math.pi
