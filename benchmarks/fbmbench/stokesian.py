@@ -62,6 +62,7 @@ _INPUTS = '''    elif n == 99:  # fbmbench: a unit force along -z on every spher
 
 
 def _insert(path: Path, anchor: str, text: str) -> None:
+    """Put ``text`` in place of the first ``anchor`` of the file ``path``, unless it is there."""
     source = path.read_text()
     if "fbmbench" in source:
         return
