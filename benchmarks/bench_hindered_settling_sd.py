@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_hindered_settling import stokes_velocity
 from fbmbench import stokesian
 from fbmbench.common import RESULTS, RUNS, merge_row, provenance, write_text
 
@@ -127,16 +128,6 @@ def flow_rows() -> list[dict]:
             continue
         out.append({**r, "u": r["settling"] / stokes_velocity(r)})
     return out
-
-
-def stokes_velocity(row: dict) -> float:
-    """One sphere's Stokes velocity U_0 [cm/s] of a flow run (rows measured before it was stored:
-    the scene's defaults and the row's viscosity)."""
-    if "stokes_velocity" in row:
-        return row["stokes_velocity"]
-    pp, fl = SphereSuspension(), SuspensionFluid()
-    mu = row["settings"].get("fluid.viscosity", fl.viscosity)
-    return (pp.density - fl.density) * fl.gravity * pp.diameter**2 / (18.0 * mu)
 
 
 def write(rows: list[dict]) -> None:
