@@ -32,7 +32,7 @@ import time
 import numpy as np
 from fbmbench.common import RESULTS, merge_row, provenance, write_text
 
-from fbmflow.params import from_dict
+from fbmflow.config import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.solvers import ConvergenceError
 

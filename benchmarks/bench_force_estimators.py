@@ -40,9 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fbmflow.config import from_dict
 from fbmflow.coupling import TestFunctionForces, mirror_images
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict
 from fbmflow.scenes.tencate import TenCate, TenCateParams
 
 RESULTS = Path(__file__).parent / "results"
@@ -94,7 +94,7 @@ class MovingTestFunction(TestFunctionForces):
 
 def whole(force: np.ndarray, sim) -> float:
     """Vertical component of the whole sphere's force (mirror images of the quarter)."""
-    return float(mirror_images(force, np.zeros((len(force), 3)), sim.symmetry)[0][0, 2])
+    return float(mirror_images(force, np.zeros((len(force), 3)), sim.system.symmetry)[0][0, 2])
 
 
 def main():
@@ -115,7 +115,7 @@ def main():
     x0 = sim.x.copy()
     row = {"case": params.fluid.case, "level": meta["level"], "t": sim.t,
            "cells_per_diameter": pp.diameter / h, "velocity": float(-p0.velocity[0, 2]), "net_weight": weight,
-           "volume": float(sim._forces(sim.owner(), x0, setup.dt)[0][0, 2]),  # whole sphere
+           "volume": float(sim.system.forces(x0, setup.dt)[0][0, 2]),  # whole sphere
            "dynamics": float(state["last_force"][0, 2]), "bands": []}
     tested = [MovingTestFunction(space, p0.position, p0.shapes, a * h, b * h) for a, b in BANDS]
     for (a, b), T in zip(BANDS, tested):

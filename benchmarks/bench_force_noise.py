@@ -36,6 +36,7 @@ from fbmflow.coupling import (
 from fbmflow.flow import NavierStokesProblem, NoSlip, Slip
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.particles import Ball
+from fbmflow.solvers import DirectSolver
 
 RESULTS = Path(__file__).parent / "results"
 HALF = {2: 3.0, 3: 1.5}  # half-width of the box in diameters (2D: 6 d x 6 d; 3D quarter: 3 x 1.5 x 1.5 d)
@@ -89,7 +90,7 @@ def drag_samples(dim: int, cells_per_d: int, shifts: int, graded: bool = False, 
                 return rigid
             return sharp_boundary(flow.space, owner, centre, [shape]).constraints(rigid, U, omega)
 
-        flow = NavierStokesProblem(mesh, 1.0, bc, convection=False, linear_solver="direct",
+        flow = NavierStokesProblem(mesh, 1.0, bc, convection=False, linear_solver=DirectSolver(),
                                    extra_constraints=constraints)
         t0 = time.perf_counter()
         x, _ = flow.solve_steady()

@@ -20,7 +20,7 @@ import argparse
 
 from fbmbench import lubrication
 
-from fbmflow.params import ContactParams
+from fbmflow.contact.settings import ContactParams
 
 
 def main(argv=None):

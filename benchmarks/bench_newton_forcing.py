@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fbmflow.config import from_dict
 from fbmflow.flow.levels import NewtonBlock
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.solvers import newton
 

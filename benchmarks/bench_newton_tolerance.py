@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from fbmflow.params import from_dict
+from fbmflow.config import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.sedimentation import max_overlap
 

@@ -66,7 +66,7 @@ def one(count: int, coupling: str, level: int, diameter: float, steps: int) -> d
     """Time ``steps`` steps and profile one more of ``count`` disks; the row of the results."""
     import numpy as np
 
-    from fbmflow.params import from_dict
+    from fbmflow.config import from_dict
     from fbmflow.scenes import get_scene
 
     scene = get_scene(SCENE)

@@ -26,8 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from fbmflow.config import from_dict, parse_value, set_dotted
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict, parse_value, set_dotted
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.base import RunFiles
 from fbmflow.solvers import DirectSolver

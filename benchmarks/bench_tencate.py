@@ -42,7 +42,7 @@ def main(argv=None):
     from fbmbench import tencate
     from fbmbench.common import load_rows
 
-    from fbmflow.params import parse_value
+    from fbmflow.config import parse_value
 
     settings = {}
     for item in args.set:

@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 from fbmbench.common import RESULTS, provenance
 
+from fbmflow.config import from_dict
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.data import tencate2002
 

@@ -47,6 +47,7 @@ from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.particles import Ball
 from fbmflow.scenes.data import tencate2002
 from fbmflow.scenes.tencate import CASES
+from fbmflow.solvers import DirectSolver
 
 RESULTS = Path(__file__).parent / "results"
 D, RHO_S, G = 0.015, 1120.0, 9.81
@@ -76,7 +77,7 @@ class SteadyDrag:
     def __call__(self, U: float) -> tuple[dict, int]:
         wall = Dirichlet((0.0, 0.0, U))
         bcs = {"zmin": wall, "xmax": wall, "ymax": wall, "xmin": Slip(), "ymin": Slip(), "zmax": DoNothing()}
-        problem = NavierStokesProblem(self.mesh, self.mu, bcs, density=self.rho, linear_solver="direct",
+        problem = NavierStokesProblem(self.mesh, self.mu, bcs, density=self.rho, linear_solver=DirectSolver(),
                                       extra_constraints=self.obstacle)
         x, report = problem.solve_steady()
         self.n_dofs = problem.n_dofs

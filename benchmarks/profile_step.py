@@ -22,8 +22,8 @@ import pstats
 import time
 from pathlib import Path
 
+from fbmflow.config import from_dict
 from fbmflow.io import load_checkpoint
-from fbmflow.params import from_dict
 from fbmflow.scenes import get_scene
 
 

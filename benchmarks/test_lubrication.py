@@ -12,7 +12,7 @@ import pytest
 from fbmbench import lubrication
 from fbmbench.common import bound
 
-from fbmflow.params import ContactParams
+from fbmflow.contact.settings import ContactParams
 
 DEFAULTS = ContactParams()
 MODEL = {"range": DEFAULTS.lubrication_range_cells, "min_gap": DEFAULTS.lubrication_min_gap_cells,

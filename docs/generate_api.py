@@ -9,7 +9,7 @@ import re
 from pathlib import Path
 
 import fbmflow
-from fbmflow.params import Section, describe
+from fbmflow.config import Section, describe
 
 #: the order of the page: (heading, introduction, names); every name of fbmflow.__all__ once
 GROUPS = [

@@ -4,7 +4,7 @@ Run:  python docs/generate_parameters.py
 """
 from pathlib import Path
 
-from fbmflow.params import describe
+from fbmflow.config import describe
 from fbmflow.scenes import SCENES
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import fbmflow as fb
-from fbmflow.params import derive, tree
+from fbmflow.config import derive, tree
 
 
 def test_sections_check_their_values_when_made():
@@ -86,3 +86,22 @@ def test_a_wrong_section_type_names_the_fix():
     with pytest.raises(TypeError, match="fluid must be a FluidParams, got dict; make it with FluidParams"):
         fb.Simulation(fb.StructuredMesh.box((4, 4)),
                       fb.Particles.at_rest([fb.Ball(0.2, 2)], 1.5, [[0.5, 0.5]]), {"viscosity": 0.1})
+
+
+def test_the_time_schemes_are_the_parameter_choices():
+    """``params`` sits below the flow package and names the schemes itself: they must agree."""
+    from fbmflow.params import SCHEMES
+
+    assert SCHEMES == tuple(fb.TIME_SCHEMES)
+
+
+@pytest.mark.parametrize("old, new", [("mg_cycle", "solver.multigrid.cycle"),
+                                      ("mg_smoothing_steps", "solver.multigrid.pre_smooth and "
+                                                             "solver.multigrid.post_smooth")])
+def test_a_renamed_key_names_its_new_name(old, new):
+    from fbmflow.scenes import load_scene
+
+    with pytest.raises(fb.ParamError, match=f"parameter 'solver.{old}' was renamed; use {new}"):
+        load_scene("cavity-2d", 0, [f"solver.{old}=2"])
+    _, params, _ = load_scene("cavity-2d", 0, ["solver.multigrid.cycle=W"])
+    assert params.solver.multigrid.cycle == "W"

@@ -7,7 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fbmflow.cli import main
-from fbmflow.params import ParamError, to_dict
+from fbmflow.config import ParamError, to_dict
 from fbmflow.scenes import SCENES, load_scene
 
 # real section and key names, so that the fuzzer reaches the value checks, plus random ones

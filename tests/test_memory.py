@@ -4,29 +4,41 @@ import logging
 
 import pytest
 
-import fbmflow.simulation as simulation
+import fbmflow.solvers.choice as choice
 from fbmflow.cli import main
 from fbmflow.mesh import StructuredMesh
-from fbmflow.params import FluidParams, SolverParams
+from fbmflow.params import FluidParams
 from fbmflow.particles import Ball, Particles
-from fbmflow.simulation import InsufficientMemory, Simulation, available_memory, estimate_memory
+from fbmflow.simulation import Simulation
+from fbmflow.solvers.choice import InsufficientMemory, available_memory, estimate_memory
+from fbmflow.solvers.settings import SolverParams
 
 #: peak resident sets of whole runs (two or three steps, or a steady solve) [GB]: (unknowns, dim,
-#: solver, measured)
-MEASURED = [(17_106, 2, "direct", 0.33), (52_818, 2, "direct", 0.55), (164_946, 2, "direct", 1.30),
-            (544_674, 2, "direct", 3.60), (164_946, 2, "multigrid", 0.81), (32_707, 3, "direct", 1.22),
-            (64_547, 3, "direct", 2.0), (278_739, 3, "direct", 10.3), (64_547, 3, "multigrid", 0.8),
-            (278_739, 3, "multigrid", 1.44), (486_979, 3, "multigrid", 3.4), (2_012_403, 3, "multigrid", 8.9)]
+#: engine, measured)
+MEASURED = [(17_106, 2, "superlu", 0.33), (52_818, 2, "pardiso", 0.55), (164_946, 2, "pardiso", 1.30),
+            (544_674, 2, "pardiso", 3.60), (164_946, 2, "multigrid", 0.81), (32_707, 3, "pardiso", 1.22),
+            (32_707, 3, "superlu", 0.91), (64_547, 3, "pardiso", 2.0), (278_739, 3, "pardiso", 10.3),
+            (64_547, 3, "multigrid", 0.8), (278_739, 3, "multigrid", 1.44), (486_979, 3, "multigrid", 3.4),
+            (2_012_403, 3, "multigrid", 8.9)]
 
 
-@pytest.mark.parametrize("n, dim, solver, measured", MEASURED)
-def test_the_estimate_is_conservative_but_not_wild(n, dim, solver, measured, monkeypatch):
-    """Against the runs it was fitted to (PARDISO installed): above the measured peak, by less
-    than 70 %."""
-    monkeypatch.setattr(simulation, "pardiso_available", lambda: True)
-    need, words = estimate_memory(n, dim, solver)
+@pytest.mark.parametrize("n, dim, engine, measured", MEASURED)
+def test_the_estimate_is_conservative_but_not_wild(n, dim, engine, measured):
+    """Against the runs it was fitted to: above the measured peak, by less than 70 %."""
+    need, words = estimate_memory(n, dim, engine)
     assert measured * 1e9 <= need <= 1.7 * measured * 1e9, (need / 1e9, words)
-    assert words == ("multigrid" if solver == "multigrid" else "the direct solver (PARDISO)") or n < 40_000
+    assert words == choice.ENGINE_NAMES[engine]
+
+
+@pytest.mark.parametrize("installed", [True, False])
+def test_the_direct_solver_is_estimated_with_the_backend_it_would_take(installed, monkeypatch):
+    """``"direct"`` is PARDISO where installed (for 3D and large 2D systems), else SuperLU."""
+    from fbmflow.solvers import direct
+
+    monkeypatch.setattr(direct, "pardiso_available", lambda: installed)
+    engine = "pardiso" if installed else "superlu"
+    assert estimate_memory(64_547, 3, "direct") == estimate_memory(64_547, 3, engine)
+    assert estimate_memory(64_547, 3, direct.DirectSolver()) == estimate_memory(64_547, 3, engine)
 
 
 def test_available_memory_reads_meminfo_and_gives_none_without_it(tmp_path):
@@ -46,7 +58,7 @@ def _disk_sim(solver="direct"):
 
 def test_a_run_larger_than_the_available_memory_is_refused(monkeypatch):
     """Before: a MemoryError traceback from the factorisation, or the out-of-memory killer."""
-    monkeypatch.setattr(simulation, "available_memory", lambda: 1e8)
+    monkeypatch.setattr(choice, "available_memory", lambda: 1e8)
     with pytest.raises(InsufficientMemory, match=r"the direct solver \(SuperLU\) needs about 0\.4 GB for "
                                                  r"2242 unknowns \(2D\), more than the 0\.1 GB available; "
                                                  r"use a coarser mesh \(a lower --level\) or solver.linear = "
@@ -59,12 +71,12 @@ def test_a_run_larger_than_the_available_memory_is_refused(monkeypatch):
 
 def test_a_run_above_half_the_available_memory_warns(monkeypatch, caplog):
     need, _ = estimate_memory(2242, 2, "direct")
-    monkeypatch.setattr(simulation, "available_memory", lambda: 1.5 * need)
+    monkeypatch.setattr(choice, "available_memory", lambda: 1.5 * need)
     with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
         _disk_sim()
     assert any("more than half of the" in r.getMessage() for r in caplog.records)
     caplog.clear()
-    monkeypatch.setattr(simulation, "available_memory", lambda: 3.0 * need)
+    monkeypatch.setattr(choice, "available_memory", lambda: 3.0 * need)
     with caplog.at_level(logging.WARNING, logger="fbmflow.simulation"):
         _disk_sim()
     assert not caplog.records
@@ -73,7 +85,7 @@ def test_a_run_above_half_the_available_memory_warns(monkeypatch, caplog):
 @pytest.mark.parametrize("scene", ["glowinski-free-fall", "cavity-2d"])
 def test_the_command_line_refuses_with_exit_2_and_one_line(scene, monkeypatch, capsys, tmp_path):
     """Time-dependent and steady scenes alike, before the first solve."""
-    monkeypatch.setattr(simulation, "available_memory", lambda: 1e8)
+    monkeypatch.setattr(choice, "available_memory", lambda: 1e8)
     assert main(["run", scene, "--level", "0", "--out", str(tmp_path), "--quiet", "--no-plot"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "GB available; use a coarser mesh (a lower --level)" in err[0], err
@@ -83,11 +95,11 @@ def test_the_implicit_coupling_s_responses_count_and_are_refused_with_a_remedy(m
     """2000 disks at sedimentation-2d's default level: 6000 responses of 2.1 M unknowns (about
     1 TB) ended in a NumPy MemoryError in the first step; now refused before it, and the
     explicit, stabilised and Newton-Krylov couplings, which keep none, are not."""
-    from fbmflow.params import CouplingParams
+    from fbmflow.coupling.settings import CouplingParams
 
     need, _ = estimate_memory(2242, 2, "direct")
-    three = simulation.RESPONSE_BYTES * 2242 * 3  # one disk's responses
-    monkeypatch.setattr(simulation, "available_memory", lambda: need + 1.5 * three)
+    three = choice.RESPONSE_BYTES * 2242 * 3  # one disk's responses
+    monkeypatch.setattr(choice, "available_memory", lambda: need + 1.5 * three)
     mesh = StructuredMesh.box((8, 24), upper=(2.0, 6.0))
     disks = Particles.at_rest([Ball(0.25, 2)] * 2, 1.25, [[0.5, 4.0], [1.5, 4.0]])
     with pytest.raises(InsufficientMemory, match=r"implicit coupling's responses to 6 rigid-body velocity "

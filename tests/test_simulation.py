@@ -2,21 +2,16 @@
 import numpy as np
 import pytest
 
+from fbmflow.config import ParamError, from_dict
+from fbmflow.contact.settings import ContactParams
+from fbmflow.coupling.settings import CouplingParams, FictitiousBoundaryParams
 from fbmflow.flow import NoSlip, Slip
 from fbmflow.mesh import StructuredMesh
-from fbmflow.params import (
-    ContactParams,
-    CouplingParams,
-    FictitiousBoundaryParams,
-    FluidParams,
-    ParamError,
-    SolverParams,
-    TimeParams,
-    from_dict,
-)
+from fbmflow.params import FluidParams, TimeParams
 from fbmflow.particles import Ball, Particles
 from fbmflow.scenes import get_scene
 from fbmflow.simulation import Simulation
+from fbmflow.solvers.settings import SolverParams
 
 
 def _sim(mesh, particles, viscosity=0.1, gravity=980.0, coupling="explicit", fbm="nodes", force="volume",
@@ -180,17 +175,18 @@ def test_stabilised_coupling_keeps_a_light_disk_stable_where_the_explicit_one_is
     np.testing.assert_allclose(stabilised[1:], implicit[1:], rtol=0.15)
     assert abs(stabilised[-1] / implicit[-1] - 1.0) < 0.08
     # no contact here: the scheme's increment is the whole change of the last step
-    assert sim.last_increment[0, 1] == pytest.approx(stabilised[-1] - stabilised[-2])
+    assert sim.coupling.last_increment[0, 1] == pytest.approx(stabilised[-1] - stabilised[-2])
 
 
 def test_auto_coupling_is_implicit_while_its_responses_fit(monkeypatch):
-    from fbmflow import simulation
+    from fbmflow.coupling import schemes
+    from fbmflow.solvers import choice
 
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
     disk = Particles.at_rest([Ball(0.25, 2)], 1.5, [[0.9, 1.5]])
     params = CouplingParams(scheme="auto")
     assert _sim(mesh, disk, coupling_params=params).coupling.name == "implicit"
-    monkeypatch.setattr(simulation, "AUTO_RESPONSE_BYTES", 3 * simulation.RESPONSE_BYTES * 100.0)
+    monkeypatch.setattr(schemes, "AUTO_RESPONSE_BYTES", 3 * choice.RESPONSE_BYTES * 100.0)
     assert _sim(mesh, disk, coupling_params=params).coupling.name == "stabilised"
 
 
@@ -236,8 +232,8 @@ def test_coupling_takes_its_last_step_without_a_flow_solve_and_keeps_its_toleran
     sim.set_state(before)
     state = sim.particles.copy()
     state.velocity[:], state.angular_velocity[:] = v, w
-    x_again, _, force, torque = sim.flow_and_forces(dt, velocities=state)
-    again = sim.integrate(force, torque, dt)
+    x_again, _, force, torque = sim.system.flow_and_forces(dt, velocities=state)
+    again = sim.system.integrate(force, torque, dt)
     n_u = sim.flow.space.n_u  # the fluid velocity, to the tolerance in the particle's velocity scale
     assert np.abs(x[:n_u] - x_again[:n_u]).max() <= 1e-6 * np.abs(v).max()
     assert np.abs(v - again.velocity).max() <= 1e-6 * np.abs(v).max()
@@ -320,9 +316,9 @@ def test_auto_solver_of_3d_particle_scenes(monkeypatch, scene_name, pardiso, lev
     the sharp boundary, for ten-cate from level 0 (measured at level 0: 7.8 s per step against
     PARDISO's 11.8 s, alternating in one process), PARDISO for the small sedimentation-3d
     systems solved to 1e-8."""
-    import fbmflow.simulation
-    monkeypatch.setattr(fbmflow.simulation, "pardiso_available", lambda: pardiso)
-    monkeypatch.setattr(fbmflow.simulation, "available_memory", lambda: None)  # the choice, not the machine
+    from fbmflow.solvers import choice, direct
+    monkeypatch.setattr(direct, "pardiso_available", lambda: pardiso)
+    monkeypatch.setattr(choice, "available_memory", lambda: None)  # the choice, not the machine
     scene = get_scene(scene_name)
     sim = scene.build(from_dict(scene.Params, {}), level).sim
     assert sim.flow.linear_solver.name == expected
@@ -475,7 +471,7 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
         p[:, 2] = k * (space.Q.centre[:, 1] - c) * space.Q.scale[:, 1]
         u = np.zeros(space.n_u)
         u[space.n_v:] = space.V.coordinates[:, 0] ** 2  # a shear with a viscous force
-        F, _ = sim._forces(sim.owner(), np.concatenate([u, p.ravel()]), dt)
+        F, _ = sim.system.forces(np.concatenate([u, p.ravel()]), dt)
         behind = np.array([[1.0, 1.0 - lag * dt * U]])
         if force == "surface":
             expected = (2 * 0.1 - k * (behind[0, 1] - c)) * disk.volume  # viscous mu lap u_y = 2 mu
@@ -490,27 +486,17 @@ def test_pressure_force_is_taken_where_the_step_s_pressure_belongs(scheme, lag):
         np.testing.assert_allclose(F[0], parts[0], rtol=1e-12, atol=1e-12)
 
 
-def test_a_failing_multigrid_solve_stops_the_step_with_a_remedy(tmp_path, monkeypatch):
+def test_a_failing_multigrid_solve_stops_the_step_with_a_remedy(tmp_path):
     """A multigrid solve that misses its target raises (it used to hand Newton an inexact step in
     silence); the run names the step and time, suggests the direct solver, and leaves the last
     good state on disk."""
-    import dataclasses
-
-    from fbmflow.params import SolverParams
     from fbmflow.scenes.registry import run_scene
     from fbmflow.solvers import ConvergenceError
 
-    real = SolverParams.linear_solver
-
-    def one_iteration(self):  # one FGMRES step cannot reach 1e-12
-        mg = real(self)
-        mg.settings = dataclasses.replace(mg.settings, max_iterations=1)
-        return mg
-
-    monkeypatch.setattr(SolverParams, "linear_solver", one_iteration)
     scene = get_scene("glowinski-free-fall")
     params = from_dict(scene.Params, {"time": {"dt": 0.005, "t_end": 0.01}, "fbm": {"boundary": "sharp"},
-                                      "solver": {"linear": "multigrid", "linear_rtol": 1e-12}})
+                                      "solver": {"linear": "multigrid", "linear_rtol": 1e-12,
+                                                 "multigrid": {"max_iterations": 1}}})  # cannot reach 1e-12
     with pytest.raises(ConvergenceError, match=r"step 1 \(t = 0 -> 0\.005\).*multigrid.*direct"):
         run_scene(scene, params, 0, tmp_path / "run", plot=False)
     assert (tmp_path / "run" / "checkpoint.h5").is_file()
@@ -538,7 +524,7 @@ def test_placement_allows_touching_walls_and_each_other_and_symmetry_planes():
     half = Particles.at_rest([Ball(0.1, 2)], 1.5, [[0.0, 1.0]])  # centred on the mirror plane x = 0
     bc = {t: NoSlip() for t in mesh.tags}
     bc["xmin"] = Slip()
-    assert _sim(mesh, half, boundary=bc, symmetry=(0,)).symmetry == (0,)
+    assert _sim(mesh, half, boundary=bc, symmetry=(0,)).system.symmetry == (0,)
 
 
 def test_a_scene_placed_through_a_wall_exits_2_with_one_line(capsys, tmp_path):
@@ -663,13 +649,13 @@ def test_newton_krylov_coupling_is_one_newton_step_of_the_implicit_scheme():
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
     sim = _sim(mesh, Particles.at_rest([Ball(0.25, 2)], 0.5, [[0.9, 1.5]]),
                coupling_params=CouplingParams(scheme="newton-krylov", krylov_rtol=1e-8))
-    calls, solve = [0], sim.rigid_responses
+    calls, solve = [0], sim.system.rigid_responses
 
     def counted(*args, **kwargs):
         calls[0] += 1
         return solve(*args, **kwargs)
 
-    sim.rigid_responses = counted
+    sim.system.rigid_responses = counted
     krylov = np.array([sim.step(0.005).velocity[0, 1] for _ in range(8)])
     np.testing.assert_allclose(krylov, implicit, rtol=1e-3)
     assert calls[0] <= 4 * 8

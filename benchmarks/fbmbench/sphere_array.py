@@ -47,6 +47,7 @@ from fbmflow.fem.quadrature import gauss_tensor
 from fbmflow.flow import NavierStokesProblem, Slip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
+from fbmflow.solvers import DirectSolver
 
 from .common import (
     BENCHMARKS,
@@ -89,7 +90,7 @@ def solve(cells: int) -> dict:
         {tag: Slip() for tag in ("xmin", "xmax", "ymin", "ymax")},
         body_force=body_force,
         convection=False,
-        linear_solver="direct",
+        linear_solver=DirectSolver(),
         extra_constraints=FixedObstacles([ball], centre, "sharp"),
     )
     x, _ = problem.solve_steady()

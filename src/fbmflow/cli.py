@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from . import __version__
-from .params import ParamError
+from .config import ParamError
 from .solvers import ConvergenceError
 
 log = logging.getLogger("fbmflow")

@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
+from fbmflow.config import ParamError
 from fbmflow.contact import Lubrication
-from fbmflow.params import ContactParams, ParamError
+from fbmflow.contact.settings import ContactParams
 from fbmflow.scenes.data.brenner1961 import drag_factor
 
 

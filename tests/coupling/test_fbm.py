@@ -7,6 +7,7 @@ from fbmflow.coupling import cut_cells, hydrodynamic_forces, node_owner, rigid_b
 from fbmflow.fem import FlowSpace
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball, Box, Ellipsoid, Particles, TriangulatedSurface
+from fbmflow.solvers import DirectSolver
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -153,7 +154,7 @@ def test_force_of_a_pressure_gradient_is_buoyancy(dim):
 
 
 def test_dfg_2d1_drag_converges_in_the_level():
-    from fbmflow.params import from_dict
+    from fbmflow.config import from_dict
     from fbmflow.scenes import get_scene
     scene = get_scene("dfg-2d-1")
     params = from_dict(scene.Params, {"solver": {"linear": "direct"}})
@@ -166,7 +167,7 @@ def test_dfg_3d1z_coarse_level_solves_from_rest():
     """The 3D channel on its graded mesh at 2 cells/D: Newton (from the Stokes flow) converges
     and the drag is within 6 % of the reference (5.1 % measured; 2.3 % at 8 cells/D in
     benchmarks/results/dfg-3d-1z.md). From rest the line search failed here."""
-    from fbmflow.params import from_dict
+    from fbmflow.config import from_dict
     from fbmflow.scenes import get_scene
     scene = get_scene("dfg-3d-1z")
     result = scene.run(from_dict(scene.Params, {"solver": {"linear": "direct"}}), 1)
@@ -191,7 +192,7 @@ def test_particle_within_a_cell_of_a_wall_of_a_closed_box_still_solves(gap_cells
         return rigid_body_constraints(V, node_owner(V, centre, [Ball(0.2, 2)]), centre, U, np.zeros(1))
 
     flow = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
-                               linear_solver="direct", extra_constraints=constraints)
+                               linear_solver=DirectSolver(), extra_constraints=constraints)
     con = flow.constraints(0.0)
     orphans = flow.orphans(con)
     assert orphans is not None  # some cells lost their continuity equations
@@ -221,7 +222,7 @@ def test_orphaned_pressure_modes_span_the_null_space(centre, radius):
                                       np.zeros((1, 3)))
 
     bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
-    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
+    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver(), extra_constraints=obstacle)
     con = flow.constraints(0.0)
     BT = con.constrain_divergence(flow.BT).tocsr()
     P = orphan_pressure_modes(BT, 4)
@@ -333,7 +334,8 @@ def test_surface_force_of_exact_fields_is_the_divergence_theorem(dim):
 
 def test_surface_force_is_for_balls_with_the_sharp_boundary():
     from fbmflow.coupling import SurfaceForces
-    from fbmflow.params import FictitiousBoundaryParams, FluidParams
+    from fbmflow.coupling.settings import FictitiousBoundaryParams
+    from fbmflow.params import FluidParams
     from fbmflow.simulation import Simulation
     space = FlowSpace(StructuredMesh.box((4, 4)))
     with pytest.raises(ValueError, match="balls"):

@@ -209,8 +209,10 @@ def test_mirror_images_of_many_flows_are_those_of_each():
 def test_lifting_response_forces_are_the_forces_of_each_response(scheme, force):
     """The implicit coupling's response forces, all responses at once (``evaluate_many``), equal
     the force of each response taken alone, with the pressure's part lagged (Crank–Nicolson)."""
-    from fbmflow.params import CouplingParams, FictitiousBoundaryParams, FluidParams, SolverParams, TimeParams
+    from fbmflow.coupling.settings import CouplingParams, FictitiousBoundaryParams
+    from fbmflow.params import FluidParams, TimeParams
     from fbmflow.simulation import Simulation
+    from fbmflow.solvers.settings import SolverParams
 
     mesh = StructuredMesh.box((12, 12))
     particles = Particles.at_rest([Ball(0.12, 2)] * 3, 1.5, [[0.3, 0.6], [0.65, 0.55], [0.5, 0.25]])
@@ -221,12 +223,12 @@ def test_lifting_response_forces_are_the_forces_of_each_response(scheme, force):
     sim.step(0.01)
     sim.particles.velocity[:] = [[0.1, -0.2], [0.0, -0.1], [-0.05, 0.0]]  # a lagged pressure rule
     dt = 0.01
-    x, _, _, _ = sim.flow_and_forces(dt)
+    x, _, _, _ = sim.system.flow_and_forces(dt)
     free = np.ones((3, 3), dtype=bool)
-    dX, dF, dT = sim.rigid_responses(x, free, dt)
+    dX, dF, dT = sim.system.rigid_responses(x, free, dt)
     assert dX.shape[0] == 9 and dF.shape == (9, 3, 2) and dT.shape == (9, 3, 3)
     for k in range(len(dX)):
-        f, t = sim._forces(sim.owner(), dX[k], dt, about=x)
+        f, t = sim.system.forces(dX[k], dt, about=x)
         np.testing.assert_allclose(dF[k], f, rtol=1e-10, atol=1e-12 * np.abs(dF).max())
         np.testing.assert_allclose(dT[k], t, rtol=1e-10, atol=1e-12 * np.abs(dT).max())
     assert np.abs(dF).max() > 0

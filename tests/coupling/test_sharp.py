@@ -13,6 +13,7 @@ from fbmflow.fem.constraints import RowConstraints
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball, Box, Cylinder
+from fbmflow.solvers import DirectSolver
 
 RNG = np.random.default_rng(7)
 
@@ -167,7 +168,7 @@ def _cylinder_flow(level, boundary, convection=True):
     mesh = scene.mesh(level)
     bcs = {"xmin": Dirichlet(scene.inflow(0.3)), "xmax": DoNothing(), "ymin": NoSlip(), "ymax": NoSlip()}
     obstacle = FixedObstacles([scene.cylinder()], scene.centre[None, :], boundary)
-    return NavierStokesProblem(mesh, 1e-3, bcs, linear_solver="direct", extra_constraints=obstacle,
+    return NavierStokesProblem(mesh, 1e-3, bcs, linear_solver=DirectSolver(), extra_constraints=obstacle,
                                convection=convection)
 
 
@@ -218,7 +219,7 @@ def test_channel_over_a_flat_face_is_far_more_accurate_than_the_nodal_boundary()
             problem = NavierStokesProblem(mesh, 1.0, {"ymin": NoSlip(), "ymax": NoSlip()}, convection=False,
                                           body_force=lambda x, t: np.column_stack([np.ones(len(x)),
                                                                                    0 * x[:, 0]]),
-                                          linear_solver="direct",
+                                          linear_solver=DirectSolver(),
                                           extra_constraints=FixedObstacles([box], centres, boundary))
             x, _ = problem.solve_steady()
             u, _ = problem.split(x)
@@ -236,9 +237,11 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
     derivative of the solved flow (central differences), in a closed box, where the sharp
     boundary's continuity rows make the pressure border's left null vector unknown and the
     direct solver solves the bordered system exactly (balancing alone was 2-35 % off)."""
-    from fbmflow.params import CouplingParams, FictitiousBoundaryParams, FluidParams, SolverParams, TimeParams
+    from fbmflow.coupling.settings import CouplingParams, FictitiousBoundaryParams
+    from fbmflow.params import FluidParams, TimeParams
     from fbmflow.particles import Particles
     from fbmflow.simulation import Simulation
+    from fbmflow.solvers.settings import SolverParams
 
     mesh = StructuredMesh.box((8, 12), upper=(2.0, 3.0))
     sim = Simulation(mesh, Particles.at_rest([Ball(0.3, 2)], 1.5, [[1.03, 1.51]]),
@@ -252,10 +255,10 @@ def test_lifting_response_in_a_closed_box_matches_finite_differences():
     def flow(vy):
         state = p.copy()
         state.velocity = p.velocity + [0.0, vy]
-        return sim.flow_and_forces(0.01, velocities=state)[0]
+        return sim.system.flow_and_forces(0.01, velocities=state)[0]
 
     x0 = flow(0.0)
     free = np.array([[False, True, False]])
-    dX = sim.rigid_responses(x0, free, 0.01)[0][0]
+    dX = sim.system.rigid_responses(x0, free, 0.01)[0][0]
     fd = (flow(1e-4) - flow(-1e-4)) / 2e-4
     assert np.abs(dX - fd).max() < 1e-7 * np.abs(fd).max()

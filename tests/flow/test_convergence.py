@@ -10,6 +10,7 @@ from mms import Manufactured2D, Manufactured3D, body_force, fitted_order
 from fbmflow.fem.functions import error_norms
 from fbmflow.flow import Dirichlet, NavierStokesProblem
 from fbmflow.mesh import StructuredMesh
+from fbmflow.solvers import DirectSolver
 
 
 def deform(mesh: StructuredMesh, amplitude: float = 0.06) -> StructuredMesh:
@@ -30,7 +31,7 @@ def convergence(sol, cells, convection, deformed=False, mu=1.0, rho=1.0):
         bc = {t: Dirichlet(lambda x, t: sol.u(x)) for t in mesh.tags}
         prob = NavierStokesProblem(mesh, mu, bc, density=rho,
                                    body_force=body_force(sol, mu, rho, convection), convection=convection,
-                                   linear_solver="direct")
+                                   linear_solver=DirectSolver())
         x, report = prob.solve_steady()
         u, p = prob.split(x)
         e = error_norms(prob.space, u.ravel(), p, sol.u, sol.grad, sol.p)

@@ -55,7 +55,7 @@ def test_nonpositive_dt_rejected(problem):
 
 
 def test_energy_decays_at_the_exact_rate():
-    from fbmflow.params import from_dict
+    from fbmflow.config import from_dict
     scene = TaylorGreen2D()
     params = from_dict(scene.Params, {"time": {"dt": 0.05, "t_end": 0.25}})
     q = scene.run(params, 2).quantities

@@ -3,8 +3,8 @@ import logging
 
 import pytest
 
-import fbmflow.simulation as simulation
-from fbmflow.params import from_dict
+import fbmflow.solvers.choice as choice
+from fbmflow.config import from_dict
 from fbmflow.scenes import SCENES, get_scene
 from fbmflow.scenes.base import SimulationScene
 from fbmflow.scenes.builder import STANDARD_SECTIONS, ParticleScene
@@ -16,7 +16,7 @@ PARTICLE_SCENES = [name for name, scene in SCENES.items() if isinstance(scene, S
 def test_every_particle_scene_is_built_by_the_builder_from_its_sections(name, monkeypatch):
     """The scheme, estimator, integrator, time scheme, step count and time step come from the
     parameter sections alone; every standard section is there."""
-    monkeypatch.setattr(simulation, "available_memory", lambda: None)
+    monkeypatch.setattr(choice, "available_memory", lambda: None)
     scene = get_scene(name)
     assert isinstance(scene, ParticleScene)
     params = from_dict(scene.Params, {"coupling": {"scheme": "explicit"}, "fbm": {"force": "test-function"}})
@@ -24,8 +24,8 @@ def test_every_particle_scene_is_built_by_the_builder_from_its_sections(name, mo
     assert standard <= set(scene.Params.__dataclass_fields__)
     setup = scene.build(params, 0)
     sim, time = setup.sim, scene.time(params)
-    assert (sim.coupling.name, sim.estimator.name) == ("explicit", "test-function")
-    assert (sim.integrator, sim.scheme) == (params.coupling.integrator, time.scheme)
+    assert (sim.coupling.name, sim.system.estimator.name) == ("explicit", "test-function")
+    assert (sim.system.integrator, sim.system.time_scheme) == (params.coupling.integrator, time.scheme)
     assert setup.n_steps == time.n_steps and setup.dt * setup.n_steps == pytest.approx(time.t_end)
     assert (sim.contact is not None) == (params.contact.enabled if hasattr(params, "contact") else False)
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fbmflow.params import ParamError, from_dict
+from fbmflow.config import ParamError, from_dict
 from fbmflow.scenes import get_scene
 
 
@@ -55,8 +55,8 @@ def test_many_particle_scenes_choose_the_coupling_by_the_responses_it_would_stor
     """``coupling.scheme = auto``: the implicit scheme at the default counts and levels, the
     stabilised one (no stored responses) for 2 000 disks or 1 000 spheres, which the implicit
     scheme's responses (137 GB, 614 GB) refused."""
+    from fbmflow.coupling.schemes import auto_coupling
     from fbmflow.fem import FlowSpace
-    from fbmflow.simulation import auto_coupling
 
     scene = get_scene(name)
     params = scene.Params()

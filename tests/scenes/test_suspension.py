@@ -5,12 +5,15 @@ import numpy as np
 import pytest
 
 from fbmflow import Simulation
+from fbmflow.config import from_dict
+from fbmflow.contact.settings import ContactParams
+from fbmflow.coupling.placement import periodic_drive
 from fbmflow.mesh import StructuredMesh
-from fbmflow.params import ContactParams, FluidParams, SolverParams, TimeParams, from_dict
+from fbmflow.params import FluidParams, TimeParams
 from fbmflow.particles import Ball, Particles
 from fbmflow.scenes import get_scene
 from fbmflow.scenes.suspension import random_positions
-from fbmflow.simulation import periodic_drive
+from fbmflow.solvers.settings import SolverParams
 
 FLUID = FluidParams(density=1.0, viscosity=1.0, gravity=1.0)
 
@@ -48,7 +51,7 @@ def test_disk_crossing_the_periodic_sides_moves_as_one_inside_the_box():
                          solver=SolverParams(linear="direct"))
         reports = sim.run()
         runs.append((np.array([r.velocity[0] for r in reports]), np.array([r.position[0] for r in reports])))
-        assert sim.zero_flux and all(r.flux_correction is not None for r in reports)
+        assert sim.system.zero_flux and all(r.flux_correction is not None for r in reports)
     (v0, x0), (v1, x1) = runs
     assert x0[-1, 1] > 2.5  # the straddling disk went through the bottom and reappeared at the top
     np.testing.assert_allclose(v0, v1, rtol=1e-6, atol=1e-9)
@@ -86,7 +89,7 @@ def test_hard_contact_acts_across_the_periodic_sides():
 
 
 def test_repulsion_acts_through_the_nearest_image():
-    from fbmflow.params import RepulsionParams
+    from fbmflow.contact.settings import RepulsionParams
 
     mesh = _periodic_box(periodic=(True, False))  # periodic in x, walls at y = 0 and 3
     rep = RepulsionParams().make(mesh, [(1, 0), (1, 1)])
@@ -146,15 +149,15 @@ def test_a_frozen_configuration_keeps_its_place_and_settles_to_its_steady_veloci
 
 
 def _count_responses(sim):
-    """Wrap ``sim.rigid_responses`` to count its calls (each one linear solve here); returns the
+    """Wrap ``sim.system.rigid_responses`` to count its calls (each one linear solve here); returns the
     running count, a one-element list."""
-    calls, solve = [0], sim.rigid_responses
+    calls, solve = [0], sim.system.rigid_responses
 
     def counted(*args, **kwargs):
         calls[0] += 1
         return solve(*args, **kwargs)
 
-    sim.rigid_responses = counted
+    sim.system.rigid_responses = counted
     return calls
 
 

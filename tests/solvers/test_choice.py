@@ -29,3 +29,22 @@ def test_auto_picks_what_was_measured_cheaper(dim, n, rtol, pardiso, expected):
 
 def test_a_solver_that_does_not_fit_is_passed_over():
     assert cheapest_solver(2, 45_570, 1e-2, True, fits=lambda name: name != "direct") == "multigrid"
+
+
+def test_the_coupling_s_responses_weigh_against_multigrid():
+    """30 disks at sedimentation-2d level 1 (35 682 unknowns, linear steps to 1e-3, no PARDISO):
+    multigrid is cheaper per Newton solve, but the implicit coupling's 90 responses per step are
+    substitutions with a direct factorisation and whole solves with multigrid (measured: the
+    dense-packing test took 1 143 s on multigrid, 37 s on SuperLU, compilation included)."""
+    assert cheapest_solver(2, 35_682, 1e-3, False) == "multigrid"
+    assert cheapest_solver(2, 35_682, 1e-3, False, responses=90) == "direct"
+    # ten-cate level 0 on two mirror planes: one response does not change the choice
+    assert cheapest_solver(3, 64_547, 1e-3, True, responses=1) == "multigrid"
+
+
+def test_substitutions_are_cheap_next_to_the_factorisation():
+    """The substitution model against the measured SuperLU runs of its docstring, within 30 %."""
+    from fbmflow.solvers.choice import substitution_time
+
+    for dim, n, measured in ((2, 35_682, 0.72 / 90), (2, 17_106, 0.22 / 90), (3, 32_707, 1.46 / 90)):
+        assert 0.7 * measured <= substitution_time("superlu", dim, n) <= 1.3 * measured

@@ -6,7 +6,7 @@ from fbmflow.coupling import node_owner, rigid_body_constraints
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
-from fbmflow.solvers import DirectSolver, direct
+from fbmflow.solvers import DirectSolver, MultigridSolver, direct
 from fbmflow.solvers.direct import PARDISO_MIN_UNKNOWNS_2D, auto_backend, factorize, pardiso_available
 
 
@@ -25,7 +25,7 @@ def fbm_system(x_centre=0.45, radius=0.3):
     mesh = StructuredMesh.box((6, 4, 4))
     obstacle = sphere_at_rest([x_centre, 0.5, 0.5], radius)
     bcs = {"xmax": DoNothing(), **{t: NoSlip() for t in mesh.tags if t != "xmax"}}
-    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct", extra_constraints=obstacle)
+    flow = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver(), extra_constraints=obstacle)
     con = flow.constraints(0.0)
     x = flow.zero_state(0.0)
     x[:flow.space.n_u] = np.random.default_rng(0).normal(size=flow.space.n_u)
@@ -50,11 +50,11 @@ def test_linear_solver_description(monkeypatch, installed):
     monkeypatch.setattr(direct, "pardiso_available", lambda: installed)
     mesh = StructuredMesh.box((2, 2, 2))
     bcs = {t: NoSlip() for t in mesh.tags}
-    chosen = NavierStokesProblem(mesh, 1.0, bcs, linear_solver="direct")
+    chosen = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver())
     assert chosen.linear_solver_description == ("direct (PARDISO)" if installed else "direct (SuperLU)")
     forced = NavierStokesProblem(mesh, 1.0, bcs, linear_solver=DirectSolver("superlu"))
     assert forced.linear_solver_description == "direct (SuperLU)"
-    assert (NavierStokesProblem(mesh, 1.0, bcs, linear_solver="multigrid").linear_solver_description
+    assert (NavierStokesProblem(mesh, 1.0, bcs, linear_solver=MultigridSolver()).linear_solver_description
             == "multigrid")
 
 
@@ -299,7 +299,7 @@ def test_incompatible_continuity_data_get_the_bordered_systems_solution():
                                       np.array([[0.0, -1.0]]), np.zeros(1))
 
     flow = NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
-                               linear_solver="direct", extra_constraints=obstacle)
+                               linear_solver=DirectSolver(), extra_constraints=obstacle)
     con = flow.constraints(0.0)
     x = flow.zero_state(0.0)
     system = flow.linear_system(x, 0.0, 1.0, con)

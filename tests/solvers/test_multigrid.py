@@ -12,7 +12,7 @@ from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
 from fbmflow.flow.levels import NewtonBlock
 from fbmflow.mesh import StructuredMesh
 from fbmflow.scenes.cavity import recirculating_state
-from fbmflow.solvers import MultigridSettings, MultigridSolver
+from fbmflow.solvers import DirectSolver, MultigridSettings, MultigridSolver
 from fbmflow.solvers.direct import factorize
 from fbmflow.solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 
@@ -49,7 +49,7 @@ def _tiny_system(dim, newton):
     mesh = StructuredMesh.box((3,) * dim)
     bcs = {t: NoSlip() for t in mesh.tags}
     bcs["ymax"] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
-    prob = NavierStokesProblem(mesh, 0.05, bcs, linear_solver="direct")
+    prob = NavierStokesProblem(mesh, 0.05, bcs, linear_solver=DirectSolver())
     x = prob.zero_state()
     x[:prob.space.n_u] += 0.3 * np.random.default_rng(3).standard_normal(prob.space.n_u)
     con = prob.constraints()
@@ -114,7 +114,7 @@ def _cavity_system(n, dim=2, re=None, cycle="V", smoother="vanka-full", krylov="
     mesh = StructuredMesh.box((n,) * dim)
     bcs = {t: NoSlip() for t in mesh.tags}
     bcs["ymax"] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
-    mg = MultigridSolver(MultigridSettings(cycle=cycle, smoother=smoother, krylov=krylov, rtol=1e-8,
+    mg = MultigridSolver(MultigridSettings(cycle=cycle, smoother=smoother, krylov=krylov,
                                            max_iterations=80))
     prob = NavierStokesProblem(mesh, 1.0 if re is None else 1.0 / re, bcs, convection=re is not None,
                                linear_solver=mg)
@@ -168,7 +168,7 @@ def test_periodic_taylor_green_oseen_system():
     from fbmflow.scenes.taylor_green import TaylorGreen2D
     counts = []
     for level in (1, 2, 3):
-        mg = MultigridSolver(MultigridSettings(krylov="fgmres", rtol=1e-8))
+        mg = MultigridSolver(MultigridSettings(krylov="fgmres"))
         prob = NavierStokesProblem(TaylorGreen2D.mesh(level), 0.01, {}, linear_solver=mg)
         x = TaylorGreen2D.initial_state(prob, 0.01)
         con = prob.constraints()
@@ -188,7 +188,7 @@ def test_channel_3d_newton_system():
         bcs["xmin"] = Dirichlet(lambda x, t: np.stack([16 * x[:, 1] * (1 - x[:, 1]) * x[:, 2] * (1 - x[:, 2]),
                                                        0 * x[:, 0], 0 * x[:, 0]], axis=1))
         bcs["xmax"] = DoNothing()
-        mg = MultigridSolver(MultigridSettings(krylov="fgmres", smoother="vanka-diagonal", rtol=1e-8))
+        mg = MultigridSolver(MultigridSettings(krylov="fgmres", smoother="vanka-diagonal"))
         prob = NavierStokesProblem(mesh, 0.02, bcs, linear_solver=mg, coarse_cells=4)
         x = prob.zero_state()
         con = prob.constraints()
@@ -202,7 +202,7 @@ def test_channel_3d_newton_system():
 @pytest.mark.parametrize("scene, level", [("cavity-2d", 1), ("channel-2d", 1), ("channel-3d", 1),
                                           ("taylor-green-2d", 1)])
 def test_scenes_agree_with_the_direct_solver(scene, level):
-    from fbmflow.params import from_dict
+    from fbmflow.config import from_dict
     from fbmflow.scenes import get_scene
     sc = get_scene(scene)
     out = {}
@@ -366,8 +366,7 @@ def test_multigrid_cycles_with_a_moving_ball(fbm, coarse_obstacle):
     thanks to the two extra sweeps at the interface; 11 / 13 / 13 without those; before the
     prolongation was truncated on the constrained DOFs: 100, not converged)."""
     _, system, b = _ball_system(fbm, n=32, coarse_obstacle=coarse_obstacle)
-    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", coarse_obstacle=coarse_obstacle,
-                                           rtol=1e-8))
+    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", coarse_obstacle=coarse_obstacle))
     du, dp, rep = mg.solve(system, b[:system.n_u], b[system.n_u:])
     x = np.concatenate([du, dp])
     assert np.linalg.norm(b - system.apply(x)) <= 1e-7 * np.linalg.norm(b)
@@ -386,7 +385,7 @@ def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     direct solver's."""
     _, system, b = _ball_system("sharp", n=n, dim=dim, closed=True)
     assert system.mean_weights is not None and system.rows is not None
-    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", rtol=1e-8))
+    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored"))
     du, dp, rep = mg.solve(system, b[:system.n_u], b[system.n_u:])
     _, plain_system, plain_b = _ball_system("none", n=n, dim=dim, closed=True)
     plain = mg.solve(plain_system, plain_b[:plain_system.n_u], plain_b[plain_system.n_u:])[2].iterations
@@ -422,7 +421,7 @@ def test_multigrid_solves_a_cylinder_spanning_the_box():
                                                           * x[:, 2] * (0.25 - x[:, 2]),
                                                           0 * x[:, 0], 0 * x[:, 0]]))
     bcs["xmax"] = DoNothing()
-    mg = MultigridSolver(MultigridSettings(rtol=1e-8, max_iterations=60))
+    mg = MultigridSolver(MultigridSettings(max_iterations=60))
     prob = NavierStokesProblem(mesh, 1e-2, bcs, linear_solver=mg, convection=False,
                                extra_constraints=FixedObstacles([Cylinder(0.1, 0.5)], [[0.51, 0.47, 0.125]]))
     x, con = prob.zero_state(), prob.constraints()
@@ -436,3 +435,36 @@ def test_multigrid_solves_a_cylinder_spanning_the_box():
     assert np.array_equal(np.bincount(pressures, minlength=system.n_p), np.ones(system.n_p, dtype=int))
     u, p, rep = mg.solve(system, -F[:system.n_u], -F[system.n_u:])
     assert rep.converged and rep.iterations <= 10, rep.iterations
+
+
+def test_the_hierarchy_shows_its_levels_and_serves_scipy_as_a_preconditioner():
+    """PyAMG's conveniences: the level table with the operator complexity, and one cycle as a
+    SciPy LinearOperator, with which SciPy's GMRES solves the Stokes cavity as FGMRES does."""
+    import scipy.sparse.linalg as spla
+
+    prob, mg, x, con, F = _cavity_system(16)
+    system = prob.linear_system(x, 0.0, 1.0, con)
+    hierarchy = mg.factor(system)
+    text = repr(hierarchy)
+    assert "Number of levels:    3" in text and "(direct)" in text
+    assert 1.0 < hierarchy.operator_complexity < 1.5  # each level about a quarter of the one above
+    assert hierarchy.sweeps_per_cycle == 2 * (2 + 2)  # V(2,2) on the two smoothed levels
+    K = system.matrix(bordered=False)
+    b = np.concatenate([-F[:system.n_u], system.balance(-F[system.n_u:])])
+    y, info = spla.gmres(K, b, M=hierarchy.aspreconditioner(), rtol=1e-8, restart=30, maxiter=60)
+    assert info == 0
+    u, p, report = hierarchy.solve(-F[:system.n_u], -F[system.n_u:])
+    system.remove_pressure_mean(y)
+    np.testing.assert_allclose(y[:system.n_u], u, atol=1e-6 * np.abs(u).max())
+
+
+def test_two_solves_on_one_hierarchy_report_alike():
+    """The hierarchy keeps no counter between solves: the same right-hand side twice gives the
+    same cycles and sweeps."""
+    prob, mg, x, con, F = _cavity_system(16)
+    hierarchy = mg.factor(prob.linear_system(x, 0.0, 1.0, con))
+    n_u = prob.space.n_u
+    first = hierarchy.solve(-F[:n_u], -F[n_u:])[2]
+    second = hierarchy.solve(-F[:n_u], -F[n_u:])[2]
+    assert (first.iterations, first.smoothing_sweeps) == (second.iterations, second.smoothing_sweeps)
+    assert first.setup_time_s > 0.0 and second.setup_time_s == 0.0  # the set-up billed once

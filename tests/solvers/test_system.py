@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from fbmflow.solvers import DirectSolver
 from fbmflow.solvers import system as system_module
 from fbmflow.solvers.system import _rank_deficient
 
@@ -54,7 +55,7 @@ def test_a_newton_solve_finds_the_orphaned_modes_once(sharp, monkeypatch):
             return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
         return rigid
 
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, linear_solver="direct",
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, linear_solver=DirectSolver(),
                                extra_constraints=disk)
     calls = []
     search = system_module.orphan_pressure_modes

@@ -19,22 +19,25 @@ by name in :data:`COUPLINGS` (the parameter ``coupling.scheme``).
   stabilised scheme misses in dense suspensions.
 
 A scheme is made from the coupling parameters (``tol``, ``max_subiterations``, ``first_rtol``,
-``flow_rtol``, ``added_mass``, ``krylov_rtol``: :class:`~fbmflow.params.CouplingParams`) and the
-Newton tolerance of the flow solves; its ``advance(sim, dt)`` returns a :class:`CoupledFlow`. ``sim`` offers
-(see :class:`~fbmflow.simulation.Simulation`): ``particles``, ``gravity``, ``flow``,
-``flow_and_forces(dt, velocities=None, guess=None, rtol=None, linear_rtol=None)``,
-``integrate(force, torque, dt, contact=True)``, ``velocity_gain(dt)`` and
-``rigid_responses(x, free, dt, motions=None)``.
+``flow_rtol``, ``added_mass``, ``krylov_rtol``: :class:`~fbmflow.coupling.settings.CouplingParams`)
+and the Newton tolerance of the flow solves. Its ``advance(system, dt)`` takes a
+:class:`CoupledProblem` (the :class:`~fbmflow.coupling.system.CoupledSystem`) and returns a
+:class:`CoupledFlow` without changing the system; once the step has been committed, ``accept``
+hands the scheme its own result, and a scheme that carries something from step to step keeps it
+there, checkpointed through ``state()`` / ``set_state()``.
 """
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..particles import pack_velocities, symmetric_motion, unpack_velocities
 from ..solvers import ConvergenceError, fgmres
+from ..solvers.choice import RESPONSE_BYTES
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +61,53 @@ class CoupledFlow:
     increment: np.ndarray | None = None
 
 
-class ExplicitCoupling:
+class CoupledProblem(Protocol):
+    """What a coupling scheme asks of the coupled system
+    (:class:`~fbmflow.coupling.system.CoupledSystem`, where each member is documented)."""
+
+    particles: object  # Particles: the state at the step's start
+    gravity: np.ndarray  # (dim,)
+    symmetry: tuple  # normal axes of the mirror planes
+    flow: object  # NavierStokesProblem
+
+    def flow_and_forces(self, dt: float, velocities=None, guess=None, rtol=None, linear_rtol=None): ...
+
+    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True): ...
+
+    def velocity_gain(self, dt: float) -> np.ndarray: ...
+
+    def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float, motions=None, rtol=None): ...
+
+    def own_stiffness(self, x: np.ndarray, free: np.ndarray, dt: float, added_mass: float) -> np.ndarray: ...
+
+    def repulsion_stiffness(self) -> sp.csr_matrix | None: ...
+
+
+class CouplingScheme:
+    """Base of the schemes: no state carried between steps, no flow fields kept."""
+
+    name = ""
+
+    def advance(self, system: CoupledProblem, dt: float) -> CoupledFlow:
+        raise NotImplementedError
+
+    @staticmethod
+    def stored_responses(particles, symmetry) -> int:
+        """Flow fields the scheme keeps per step besides the flow: none."""
+        return 0
+
+    def accept(self, solved: CoupledFlow) -> None:
+        """The step ``solved`` (this scheme's own result) was committed."""
+
+    def state(self) -> dict:
+        """What a restart needs of the scheme, as arrays (names prefixed ``coupling_``)."""
+        return {}
+
+    def set_state(self, state: dict) -> None:
+        """Restore :meth:`state` from a dict that may hold other entries too."""
+
+
+class ExplicitCoupling(CouplingScheme):
     """One flow solve with the particles' current velocities; its forces advance the particles."""
 
     name = "explicit"
@@ -68,24 +117,20 @@ class ExplicitCoupling:
         in the flow solve (:func:`flow_rtol`)."""
         self.flow_rtol = flow_rtol(params, newton_rtol)
 
-    def advance(self, sim, dt: float) -> CoupledFlow:
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
+    def advance(self, system: CoupledProblem, dt: float) -> CoupledFlow:
+        x, reports, force, torque = system.flow_and_forces(dt, rtol=self.flow_rtol,
+                                                           linear_rtol=self.flow_rtol)
         return CoupledFlow(x, reports, force, torque)
 
-    @staticmethod
-    def stored_responses(particles, symmetry) -> int:
-        """Flow fields the scheme keeps per step besides the flow: none."""
-        return 0
 
-
-class StabilisedCoupling:
+class StabilisedCoupling(CouplingScheme):
     """One flow solve with the particles' current velocities, as :class:`ExplicitCoupling`; the
     particles then take one Newton step of the implicit scheme's fixed point with each particle's
     own stiffness only (see :meth:`advance`).
 
     Parameters
     ----------
-    params : :class:`~fbmflow.params.CouplingParams` (``added_mass``, ``flow_rtol``)
+    params : :class:`~fbmflow.coupling.settings.CouplingParams` (``added_mass``, ``flow_rtol``)
     newton_rtol : float
         The solver's Newton residual reduction; ``params.flow_rtol`` above it replaces it in the
         step's flow solve (:func:`flow_rtol`).
@@ -96,28 +141,35 @@ class StabilisedCoupling:
     def __init__(self, params, newton_rtol: float | None = None):
         self.added_mass = float(params.added_mass)
         self.flow_rtol = flow_rtol(params, newton_rtol)
+        #: (n, r) float64 or None: the last committed step's increment ``s'`` (see :meth:`advance`)
+        self.last_increment: np.ndarray | None = None
 
-    @staticmethod
-    def stored_responses(particles, symmetry) -> int:
-        """Flow fields the scheme keeps per step besides the flow: none."""
-        return 0
+    def accept(self, solved: CoupledFlow) -> None:
+        self.last_increment = solved.increment
 
-    def advance(self, sim, dt: float) -> CoupledFlow:
+    def state(self) -> dict:
+        return {} if self.last_increment is None else {"coupling_increment": self.last_increment.copy()}
+
+    def set_state(self, state: dict) -> None:
+        increment = state.get("coupling_increment")
+        self.last_increment = None if increment is None else np.array(increment, dtype=float)
+
+    def advance(self, system: CoupledProblem, dt: float) -> CoupledFlow:
         """Solve the flow constrained by the current velocities ``v``; its forces ``f`` give the
         explicit update ``Phi(v)``. The new velocities ``v + s`` take each particle's own
         stiffness ``S_i`` (its force on its own velocity with the other particles and the flow
-        held, :meth:`~fbmflow.simulation.Simulation.own_stiffness`) implicitly, as a virtual
+        held, :meth:`~fbmflow.coupling.system.CoupledSystem.own_stiffness`) implicitly, as a virtual
         mass acting on the change of the particle's increments (Schwarz, Kempe & Froehlich 2015,
         J. Comput. Phys. 281):
 
             (I - G_i S_i) s_i = Phi_i(v) - v_i - G_i S_i s'_i,
 
         one ``r x r`` solve per particle, ``G_i = d v / d f`` its gain. ``s'_i`` is this
-        scheme's last increment (:attr:`~fbmflow.simulation.Simulation.last_increment`): the
+        scheme's last increment (:attr:`last_increment`): the
         last step predicted the fluid's reaction to it, ``S_i s'_i``, which ``f`` now measures.
         Contact's jumps are not part of it: nothing predicted their reaction (with them in, a
         bed forming on the floor at 4 cells per diameter oscillated and failed). The step's force is
-        ``f_i + S_i (s_i - s'_i)``, with which :meth:`~fbmflow.simulation.Simulation.integrate`
+        ``f_i + S_i (s_i - s'_i)``, with which :meth:`~fbmflow.coupling.system.CoupledSystem.integrate`
         gives ``v + s`` (and contact then acts).
 
         The term vanishes at a steady state and in a steady acceleration (``s = s'``), so both
@@ -125,19 +177,20 @@ class StabilisedCoupling:
         whose error is amplified per step by the spectral radius of ``G S`` (added mass and drag
         of all particles; above one for light particles and for many particles in a closed box).
         Measured against the implicit scheme: docs/validation.md, "Many particles"."""
-        p = sim.particles
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
+        p = system.particles
+        x, reports, force, torque = system.flow_and_forces(dt, rtol=self.flow_rtol,
+                                                           linear_rtol=self.flow_rtol)
         if p.fixed.all():
             return CoupledFlow(x, reports, force, torque)
         v = pack_velocities(p)
-        new = sim.integrate(force, torque, dt, contact=False)
-        gain = sim.velocity_gain(dt)
+        new = system.integrate(force, torque, dt, contact=False)
+        gain = system.velocity_gain(dt)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)
-        free[~p.fixed] = symmetric_motion(p.dim, sim.symmetry)
-        S = sim.own_stiffness(x, free, dt, self.added_mass)
+        free[~p.fixed] = symmetric_motion(p.dim, system.symmetry)
+        S = system.own_stiffness(x, free, dt, self.added_mass)
         GS = np.einsum("nab,nbc->nac", gain, S)
-        lag = np.zeros((p.n, r)) if sim.last_increment is None else np.where(free, sim.last_increment, 0.0)
+        lag = np.zeros((p.n, r)) if self.last_increment is None else np.where(free, self.last_increment, 0.0)
         res = np.where(free, pack_velocities(new) - v, 0.0) - np.einsum("nab,nb->na", GS, lag)
         step = np.linalg.solve(np.eye(r) - GS, res[:, :, None])[:, :, 0]
         f = np.einsum("nab,nb->na", S, step - lag)
@@ -163,7 +216,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         self.rtol = float(params.krylov_rtol)
         self.max_iterations = int(params.max_subiterations)
 
-    def advance(self, sim, dt: float) -> CoupledFlow:
+    def advance(self, system: CoupledProblem, dt: float) -> CoupledFlow:
         """Solve the flow constrained by the current velocities ``v``; its forces ``f`` give the
         explicit update ``Phi(v)``. The new velocities ``v + y`` solve the implicit scheme's
         Newton equation from ``v``,
@@ -176,18 +229,18 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         times the smaller of ``|Phi(v) - v|`` and the velocities' size (:func:`relative_scale`:
         the residual is an error of the new velocities) in at most ``max_subiterations``
         iterations, each applying ``S`` to one combined motion: one linear solve with the step's
-        Newton linearisation (:meth:`~fbmflow.simulation.Simulation.rigid_responses`), whatever
+        Newton linearisation (:meth:`~fbmflow.coupling.system.CoupledSystem.rigid_responses`), whatever
         the number of particles, to FGMRES's reduction divided by the stiffness over the step
         (:func:`response_amplification`) where the linear solver takes a target (multigrid,
         PARDISO's refinement): ``I - G S`` multiplies a response's error by that much, and
         responses only as accurate as FGMRES's target made it stall (3D suspensions, dt = 0.1 s:
         a 35-fold reduction in 200 iterations where 150 were asked, against 9 iterations). The
         right preconditioner is the stabilised scheme's per-particle ``(I - G_i S_i)^-1``
-        (:meth:`~fbmflow.simulation.Simulation.own_stiffness`). The flow and the forces then
+        (:meth:`~fbmflow.coupling.system.CoupledSystem.own_stiffness`). The flow and the forces then
         follow ``y`` linearly, through the response to ``y`` itself (the last product FGMRES
         forms), without a second flow solve.
 
-        The repulsion (:meth:`~fbmflow.simulation.Simulation.repulsion_stiffness`) enters at the
+        The repulsion (:meth:`~fbmflow.coupling.system.CoupledSystem.repulsion_stiffness`) enters at the
         step's end, ``F(X) + dt K v'``, ``K`` its change along the lines of action: the Newton
         equation takes ``S + dt K`` and the preconditioner ``K``'s own blocks. Explicit, a pair
         in range overshoots once ``dt`` times its stiffness exceeds twice its drag (5 times over
@@ -199,17 +252,18 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         couplings and its steps grow; this scheme takes them all, at the cost of the Krylov
         iterations' linear solves (measured: docs/validation.md, "Many particles"). Contact is
         left out of the map, as in :class:`ImplicitCoupling`."""
-        p = sim.particles
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.flow_rtol, linear_rtol=self.flow_rtol)
+        p = system.particles
+        x, reports, force, torque = system.flow_and_forces(dt, rtol=self.flow_rtol,
+                                                           linear_rtol=self.flow_rtol)
         if p.fixed.all():
             return CoupledFlow(x, reports, force, torque)
         v = pack_velocities(p)
-        gain = sim.velocity_gain(dt)
+        gain = system.velocity_gain(dt)
         r, d = gain.shape[1], p.dim
         free = np.zeros((p.n, r), dtype=bool)
-        free[~p.fixed] = symmetric_motion(d, sim.symmetry)
-        S = sim.own_stiffness(x, free, dt, self.added_mass)
-        K = sim.repulsion_stiffness()
+        free[~p.fixed] = symmetric_motion(d, system.symmetry)
+        S = system.own_stiffness(x, free, dt, self.added_mass)
+        K = system.repulsion_stiffness()
         push = np.zeros_like(force)
         if K is not None:  # the repulsion at the step's end, F(X + dt v') ~ F(X) + dt K v'
             K = dt * K
@@ -219,7 +273,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
             both = free[row[on], :d, None] & free[row[on], None, :d]
             S[row[on], :d, :d] += np.where(both, blocks.data[on], 0.0)
             push = (K @ v[:, :d].ravel()).reshape(p.n, d)
-        new = sim.integrate(force + push, torque, dt, contact=False)
+        new = system.integrate(force + push, torque, dt, contact=False)
         own_gs = np.einsum("nab,nbc->nac", gain, S)
         own = np.linalg.inv(np.eye(r) - own_gs)   # (n, r, r)
         last = {}
@@ -239,7 +293,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         def apply(y: np.ndarray) -> np.ndarray:  # (I - G (S + dt K)) y, keeping the response of y
             f = np.zeros((p.n, r))
             if y.any():
-                dX, dF, dT = sim.rigid_responses(x, free, dt, motions=y[None], rtol=inner)
+                dX, dF, dT = system.rigid_responses(x, free, dt, motions=y[None], rtol=inner)
                 last.update(dX=dX[0], dF=dF[0], dT=dT[0])
                 f = np.concatenate([dF[0], dT[0][:, 2:] if d == 2 else dT[0]], axis=1)
             else:
@@ -300,12 +354,13 @@ def flow_rtol(params, newton_rtol: float | None) -> float | None:
     return loose if newton_rtol is not None and loose > newton_rtol else None
 
 
-class ImplicitCoupling:
+class ImplicitCoupling(CouplingScheme):
     """Newton iteration on the particles' new generalised velocities ``v`` (see :meth:`advance`).
 
     Parameters
     ----------
-    params : :class:`~fbmflow.params.CouplingParams` (``tol``, ``max_subiterations``, ``first_rtol``)
+    params : :class:`~fbmflow.coupling.settings.CouplingParams`
+        ``tol``, ``max_subiterations``, ``first_rtol``.
     newton_rtol : float
         The flow solves' Newton residual reduction: a ``first_rtol`` above it makes each step's
         first flow solve a loose one, which only seeds the iteration (its forces give the first
@@ -327,7 +382,7 @@ class ImplicitCoupling:
         rigid-body component (3 per disk, 6 per sphere, fewer on mirror planes)."""
         return int((~particles.fixed).sum()) * int(np.sum(symmetric_motion(particles.dim, symmetry)))
 
-    def advance(self, sim, dt: float) -> CoupledFlow:
+    def advance(self, system: CoupledProblem, dt: float) -> CoupledFlow:
         """The fixed point ``v = Phi(v)``: integrate the particles with the forces of the flow
         constrained by ``v``.
 
@@ -354,25 +409,25 @@ class ImplicitCoupling:
         on and off between sub-iterations, stalls the iteration): it acts once the coupling has
         converged, with the converged hydrodynamic force.
         """
-        p = sim.particles
+        p = system.particles
         loose = self.first_rtol is not None and not p.fixed.all()
-        x, reports, force, torque = sim.flow_and_forces(dt, rtol=self.first_rtol if loose else None)
+        x, reports, force, torque = system.flow_and_forces(dt, rtol=self.first_rtol if loose else None)
         exact = not loose
-        new = sim.integrate(force, torque, dt, contact=False)
-        gain = sim.velocity_gain(dt)
+        new = system.integrate(force, torque, dt, contact=False)
+        gain = system.velocity_gain(dt)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
-        free[~p.fixed] = symmetric_motion(p.dim, sim.symmetry)
-        dX, dF, dT = sim.rigid_responses(x, free, dt)
+        free[~p.fixed] = symmetric_motion(p.dim, system.symmetry)
+        dX, dF, dT = system.rigid_responses(x, free, dt)
         # d f_i / d v_k for every iterated component k: (n, r, k)
         sens = np.concatenate([dF, dT[:, :, 2:] if p.dim == 2 else dT], axis=2).transpose(1, 2, 0)
         J = np.eye(len(dX)) - np.einsum("nab,nbk->nak", gain, sens)[free]
         guess = p.copy()
         v_guess = pack_velocities(p)
         # velocity scale of the convergence test: the step's velocities, at least what gravity adds
-        floor = max(float(np.linalg.norm(v_guess)), float(np.linalg.norm(sim.gravity)) * dt, 1e-30)
+        floor = max(float(np.linalg.norm(v_guess)), float(np.linalg.norm(system.gravity)) * dt, 1e-30)
         all_reports = list(reports)
-        n_u = sim.flow.space.n_u
+        n_u = system.flow.space.n_u
         res_old = step = size_old = x_old = drift = None
         for k in range(self.max_subiterations):
             res = (pack_velocities(new) - v_guess)[free]
@@ -400,9 +455,9 @@ class ImplicitCoupling:
             res_old, size_old, x_old = res, size, x
             v_guess[free] += step
             unpack_velocities(guess, v_guess)
-            x, reports, force, torque = sim.flow_and_forces(dt, velocities=guess, guess=x + step @ dX)
+            x, reports, force, torque = system.flow_and_forces(dt, velocities=guess, guess=x + step @ dX)
             all_reports += reports
-            new = sim.integrate(force, torque, dt, contact=False)
+            new = system.integrate(force, torque, dt, contact=False)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
                                f"sub-iterations (last step {np.linalg.norm(step) / scale:.1e})")
 
@@ -414,9 +469,28 @@ COUPLINGS = {cls.name: cls for cls in (ExplicitCoupling, StabilisedCoupling, New
 
 def make_coupling(params, newton_rtol: float):
     """The registered scheme ``params.scheme`` made from ``params``
-    (:class:`~fbmflow.params.CouplingParams`); ValueError listing the names otherwise."""
+    (:class:`~fbmflow.coupling.settings.CouplingParams`); ValueError listing the names otherwise."""
     try:
         cls = COUPLINGS[params.scheme]
     except KeyError:
         raise ValueError(f"unknown coupling {params.scheme!r}; choose one of {sorted(COUPLINGS)}") from None
     return cls(params, newton_rtol)
+
+
+#: the implicit coupling's responses that ``coupling.scheme = "auto"`` allows [bytes]
+AUTO_RESPONSE_BYTES = 4e9
+
+
+def auto_coupling(n_unknowns: int, particles, symmetry=()) -> str:
+    """The scheme ``coupling.scheme = "auto"`` takes: ``"implicit"`` while the flow responses it
+    keeps (:data:`~fbmflow.solvers.choice.RESPONSE_BYTES` per unknown each, one per free
+    rigid-body component) fit :data:`AUTO_RESPONSE_BYTES`, else ``"stabilised"`` (one flow solve
+    per step, none kept; less accurate in transients, and at a hard impact it needs half a cell
+    per step: docs/validation.md, "Many particles"). The same for every machine."""
+    responses = ImplicitCoupling.stored_responses(particles, symmetry)
+    stored = RESPONSE_BYTES * n_unknowns * responses
+    if stored <= AUTO_RESPONSE_BYTES:
+        return "implicit"
+    log.info("coupling.scheme = auto: stabilised, since the implicit scheme's %d responses would need "
+             "%.1f GB for %d unknowns", responses, stored / 1e9, n_unknowns)
+    return "stabilised"

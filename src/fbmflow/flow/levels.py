@@ -151,12 +151,14 @@ class FlowLevel:
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
 
-    def homogeneous_constraints(self, t: float = 0.0) -> DirichletConstraints:
+    def homogeneous_constraints(self, t: float = 0.0, extra=None) -> DirichletConstraints:
         """Which DOFs are constrained on this level (values zero): the box faces plus the extra
-        constraints (e.g. fictitious boundaries) at time ``t``."""
+        constraints (e.g. fictitious boundaries) at time ``t`` (``extra``: a solve's own instead
+        of the level's)."""
         con = self.boundary_constraints
-        if self.extra_constraints is not None:
-            con = con.merged(self.extra_constraints(self.space.V, t))
+        extra = extra or self.extra_constraints
+        if extra is not None:
+            con = con.merged(extra(self.space.V, t))
         return con.homogeneous()
 
     def close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:

@@ -23,9 +23,9 @@ import scipy.sparse as sp
 from ..fem import FlowSpace, apply_convection, apply_scalar_pair, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
-from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, make_linear_solver, solve_newton
-from ..solvers.choice import cheapest_solver
-from ..solvers.direct import BACKEND_NAMES, auto_backend, pardiso_available
+from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
+from ..solvers.base import Factorization, LinearSolver
+from ..solvers.choice import choose_linear_solver
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.reports import LinearWork
 from ..solvers.system import balance_volume, orphan_pressure_modes
@@ -57,10 +57,10 @@ class NavierStokesProblem:
         Force per unit volume [N/m^3].
     convection : bool, default True
         False solves the (time-dependent) Stokes equations.
-    linear_solver : str or solver object, default "auto"
-        Name in :data:`fbmflow.solvers.LINEAR_SOLVERS`, ``"auto"`` (the cheaper by measured cost
-        for this size and ``newton.linear_rtol``: :func:`fbmflow.solvers.choice.cheapest_solver`)
-        or an instance (e.g. a configured :class:`~fbmflow.solvers.MultigridSolver`).
+    linear_solver : LinearSolver, optional
+        A :class:`~fbmflow.solvers.base.LinearSolver` (e.g. a configured
+        :class:`~fbmflow.solvers.MultigridSolver`); default: the cheaper by measured cost for
+        this size and ``newton.linear_rtol`` (:func:`fbmflow.solvers.choice.choose_linear_solver`).
     newton : NewtonSettings
     coarse_cells : int, optional
         Multigrid only: the coarsest level keeps at least this many cells (default 16 in 2D,
@@ -75,7 +75,7 @@ class NavierStokesProblem:
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict,
                  density: float = 1.0, body_force: Callable | None = None,
-                 convection: bool = True, linear_solver="auto",
+                 convection: bool = True, linear_solver: LinearSolver | None = None,
                  newton: NewtonSettings = NewtonSettings(), coarse_cells: int | None = None,
                  max_cell_reynolds: float = 64.0, extra_constraints=None):
         if not viscosity > 0:
@@ -91,11 +91,12 @@ class NavierStokesProblem:
         self.body_force = body_force
         self.convection = convection
         self.newton = newton
-        if linear_solver == "auto":
-            linear_solver = cheapest_solver(mesh.dim, FlowSpace.estimate_dofs(mesh), newton.linear_rtol,
-                                            pardiso_available())
-        self.linear_solver = (make_linear_solver(linear_solver) if isinstance(linear_solver, str)
-                              else linear_solver)
+        if linear_solver is None:
+            linear_solver = choose_linear_solver(mesh.dim, FlowSpace.estimate_dofs(mesh), newton.linear_rtol)
+        if not isinstance(linear_solver, LinearSolver):
+            raise TypeError("linear_solver must be a LinearSolver (DirectSolver() or MultigridSolver()), got "
+                            f"{linear_solver!r}")
+        self.linear_solver = linear_solver
         pressure_fixed = not pressure_is_determined(boundary)
         self.extra_constraints = extra_constraints
         self.fine = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
@@ -122,27 +123,26 @@ class NavierStokesProblem:
     def linear_solver_description(self) -> str:
         """The linear solver in words, for reports: ``"multigrid"``, ``"direct (SuperLU)"`` or
         ``"direct (PARDISO)"`` (the backend ``"auto"`` picks for this problem)."""
-        backend = getattr(self.linear_solver, "backend", None)
-        if backend is None:
-            return self.linear_solver.name
-        if backend == "auto":
-            backend = auto_backend(self.mesh.dim, self.n_dofs)
-        return f"{self.linear_solver.name} ({BACKEND_NAMES[backend]})"
+        return self.linear_solver.describe(self.mesh.dim, self.n_dofs)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Velocity (dim, n_v) and pressure (n_p,) views of ``x``."""
         s = self.space
         return x[:s.n_u].reshape(s.dim, s.n_v), x[s.n_u:]
 
-    def constraints(self, t: float = 0.0) -> DirichletConstraints:
-        """Dirichlet constraints at time ``t`` (cached when they do not depend on time)."""
-        if self._steady_bc and self.extra_constraints is None:
+    def constraints(self, t: float = 0.0, extra=None) -> DirichletConstraints:
+        """Dirichlet constraints at time ``t`` (cached when they do not depend on time); ``extra``:
+        the further constraints ``(DofMap, t) -> DirichletConstraints`` of this solve instead of
+        :attr:`extra_constraints` (the same DOFs, other values: a coupling iteration's particle
+        velocities)."""
+        extra = extra or self.extra_constraints
+        if self._steady_bc and extra is None:
             if self._constraints is None:
                 self._constraints = build_constraints(self.space.V, self.boundary, t)
             return self._constraints
         con = build_constraints(self.space.V, self.boundary, t)
-        if self.extra_constraints is not None:
-            con = self._close_pockets(con.merged(self.extra_constraints(self.space.V, t)))
+        if extra is not None:
+            con = self._close_pockets(con.merged(extra(self.space.V, t)))
         return con
 
     def _close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
@@ -245,24 +245,24 @@ class NavierStokesProblem:
         return sp.csr_matrix((n_p, n_p)) if P is None else P
 
     def linear_system(self, x: np.ndarray, m: float, a: float,
-                      con: DirichletConstraints, t: float = 0.0) -> SaddlePointSystem:
+                      con: DirichletConstraints, t: float = 0.0, extra=None) -> SaddlePointSystem:
         """Newton linearisation at ``x`` with constraints applied; with a multigrid solver the
         system carries its re-discretisations on the coarser levels (``coarser`` chain), or,
         where the solver builds its hierarchy from the Picard linearisation
         (:meth:`MultigridSettings.picard_hierarchy`), a ``preconditioner`` system that does.
 
         The velocity blocks live in buffers of the levels and are overwritten by the next call.
+        ``extra``: the solve's further constraints (:meth:`constraints`), which the coarser levels
+        take too.
         """
         u = x[:self.space.n_u]
-        self.coarse = self._resolving_levels(u)
+        needs = self.linear_solver.hierarchy(m != 0.0)
+        self.coarse = self._resolving_levels(u, needs is not None)
         args = (m, a, self.rho, self.mu, self.convection)
-        settings = getattr(self.linear_solver, "settings", None)
-        picard = getattr(settings, "picard_hierarchy", None)
-        newton = not (self.coarse and self.convection and a != 0.0 and picard is not None
-                      and picard(m != 0.0))
+        newton = not (self.coarse and self.convection and a != 0.0 and needs.picard)
         if newton:
             system = finer_system = self.fine.system(u, *args, con=con, orphans=self._known_orphans(con))
-            if self.coarse and self.convection and a != 0.0 and getattr(settings, "krylov", None) == "fgmres":
+            if self.coarse and self.convection and a != 0.0 and needs.follows_iterates:
                 # FGMRES applies it: it can follow later Newton iterates (relinearise)
                 system = self.fine.newton_system(finer_system, u, a, self.rho, newton_base=True)
         else:  # the hierarchy of the Picard linearisation preconditions the Newton system, whose
@@ -271,8 +271,7 @@ class NavierStokesProblem:
                                             orphans=self._known_orphans(con))
             system = self.fine.newton_system(finer_system, u, a, self.rho)
         finer_level = self.fine
-        galerkin = (getattr(settings, "coarse_obstacle", "nodes") == "galerkin"
-                    and self.extra_constraints is not None)
+        galerkin = needs is not None and needs.galerkin and self.extra_constraints is not None
         irregular = self._irregular_cells(system) if galerkin and self.coarse else None
         for level in self.coarse:
             u = inject_velocity(u, level, finer_level.space.n_v)
@@ -282,7 +281,8 @@ class NavierStokesProblem:
                     finer_system, level.system(u, *args, con=walls, newton=newton), *finer_level.prolongation,
                     level.injection, irregular)
             else:
-                coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t), newton=newton)
+                coarse_system = level.system(u, *args, con=level.homogeneous_constraints(t, extra),
+                                             newton=newton)
             finer_system.coarser = coarse_system
             finer_system.prolongation = finer_level.prolongation
             finer_level, finer_system = level, coarse_system
@@ -314,14 +314,14 @@ class NavierStokesProblem:
             return np.inf
         return self.max_cell_reynolds * self.mu / (self.rho * scale)
 
-    def _resolving_levels(self, u: np.ndarray) -> list[FlowLevel]:
+    def _resolving_levels(self, u: np.ndarray, hierarchy: bool) -> list[FlowLevel]:
         """The multigrid levels below the fine one for the velocity ``u``: those whose cells stay
         within the cell Reynolds number limit (:meth:`_coarse_spacing_limit`; the flow got faster
         or the viscosity smaller: fewer levels), and coarser ones as long as the coarsest level
         would otherwise be larger than :data:`COARSEST_UNKNOWNS` (a weak coarse correction
         costs cycles; a direct solve of a large system, hours or more memory than there is).
         All levels are built at the first call (:func:`coarse_levels`)."""
-        if not getattr(self.linear_solver, "needs_hierarchy", False):
+        if not hierarchy:
             return []
         if self._levels is None:
             self._levels = coarse_levels(self.fine, self.boundary, self._pressure_fixed, self.coarse_cells,
@@ -339,7 +339,7 @@ class NavierStokesProblem:
     # -- solves -------------------------------------------------------------------------------
     def solve(self, x0: np.ndarray, m: float, a: float, rhs: np.ndarray, t: float,
               guess: np.ndarray | None = None, rtol: float | None = None,
-              newton: NewtonSettings | None = None, linear_rtol: float | None = None):
+              newton: NewtonSettings | None = None, linear_rtol: float | None = None, extra=None):
         """Solve ``F(x) = 0`` by Newton from ``x0`` with the constraints at time ``t``.
 
         ``guess`` (n_dofs,): start Newton there instead (e.g. a prediction of the solution);
@@ -347,16 +347,17 @@ class NavierStokesProblem:
         ``rtol``: Newton's residual reduction for this solve (default ``self.newton.rtol``);
         ``newton``: settings for this solve instead of ``self.newton``; ``linear_rtol``: the
         relative residual asked of its linear steps where that is looser than the settings' own
-        (a loose solve's steps need no more than its own reduction).
+        (a loose solve's steps need no more than its own reduction); ``extra``: this solve's
+        further constraints instead of :attr:`extra_constraints` (:meth:`constraints`).
         Returns x (n_dofs,) and the NewtonReport.
         """
-        con = self.constraints(t)
+        con = self.constraints(t, extra)
         x0 = x0.copy()
         con.apply_to_vector(x0)
         reference = None
 
         def linear_step(x, F, fresh=True, rtol=None):
-            solve = self._linearise(x, m, a, con, t, fresh)
+            solve = self._linearise(x, m, a, con, t, fresh, extra)
             du, dp, report = self._linear_solve(solve, -F[:self.space.n_u], -F[self.space.n_u:], rtol)
             return np.concatenate([du, dp]), report
 
@@ -371,10 +372,10 @@ class NavierStokesProblem:
             settings = dataclasses.replace(settings, linear_rtol=linear_rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
                                  settings, reference)
-        self._linearise(x, m, a, con, t, fresh=False)  # keeps one for lifting_response
+        self._linearise(x, m, a, con, t, False, extra)  # keeps one for lifting_response
         return x, report
 
-    def _linearise(self, x, m, a, con, t, fresh: bool):
+    def _linearise(self, x, m, a, con, t, fresh: bool, extra=None):
         """The factorised Newton linearisation at ``x`` (a new one when ``fresh`` or when the
         stored one belongs to other time-step weights or another constrained set).
 
@@ -387,7 +388,7 @@ class NavierStokesProblem:
         if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
             self._linearisation = last = None  # freed before the next is built (peak memory)
-            system = self.linear_system(x, m, a, con, t)
+            system = self.linear_system(x, m, a, con, t, extra)
             self._linearisation = (m, a, con, self.linear_solver.factor(system), system)
         else:
             self._linearisation = (m, a, con) + last[3:]
@@ -395,23 +396,21 @@ class NavierStokesProblem:
                 last[4].A.relinearise(x[:self.space.n_u])
         return self._linearisation[3]
 
-    def _linear_solve(self, solve, f, g, rtol=None):
-        """``solve(f, g)`` to ``rtol`` (default ``self.newton.linear_rtol``) where the solver
+    def _linear_solve(self, solve: Factorization, f, g, rtol=None):
+        """``solve.solve(f, g)`` to ``rtol`` (default ``self.newton.linear_rtol``) where the solver
         takes a target per solve (multigrid; the direct solver's PARDISO refinement), else to the
         solver's own; counted in :attr:`linear_work`. ConvergenceError when an iterative solver
         misses its target."""
         rtol = self.newton.linear_rtol if rtol is None else rtol
-        if rtol is not None and getattr(solve, "takes_rtol", False):
-            du, dp, report = solve(f, g, rtol)
-        else:
-            du, dp, report = solve(f, g)
+        du, dp, report = solve.solve(f, g, rtol)
         self.linear_work.add(report)
         if not report.converged:
             reduction = report.residuals[-1] / report.residuals[0] if report.residuals else float("nan")
             raise ConvergenceError(
                 f"the {report.solver} linear solver did not converge: residual reduced to {reduction:.2e} "
                 f"in {report.iterations} iterations; use solver.linear = \"direct\", a smaller time step, "
-                "or more smoothing (solver.mg_smoothing_steps, solver.mg_cycle = \"W\")")
+                "or more smoothing (solver.multigrid.pre_smooth and post_smooth, solver.multigrid.cycle = "
+                "\"W\")")
         return du, dp, report
 
     def forget_linearisation(self) -> None:
@@ -420,9 +419,7 @@ class NavierStokesProblem:
         A linear solver that keeps more between factorisations (PARDISO's analysis) forgets it
         too."""
         self._linearisation = None
-        forget = getattr(self.linear_solver, "forget", None)
-        if forget is not None:
-            forget()
+        self.linear_solver.forget()
 
     def lifting_response(self, x: np.ndarray, liftings, row_liftings=None,
                          rtol: float | None = None) -> np.ndarray:
@@ -453,7 +450,7 @@ class NavierStokesProblem:
             scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
             Ju[con.rows.dofs] = scale[:, None] * (con.rows.matrix @ Wd - dg)
         Jp = self._continuity(W, con, self.orphans(con))
-        if getattr(solve, "multiple_rhs", False):
+        if solve.multiple_rhs:
             du, dp, _ = self._linear_solve(solve, -Ju, -Jp, rtol)
         else:
             cols = [self._linear_solve(solve, -Ju[:, k], -Jp[:, k], rtol)[:2] for k in range(W.shape[1])]
@@ -484,9 +481,9 @@ class NavierStokesProblem:
         throughout.
         """
         newton = self.newton
-        if getattr(self.linear_solver, "needs_hierarchy", False):
-            moving = (self.mesh.dim == 3
-                      and getattr(getattr(self.linear_solver, "settings", None), "krylov", None) == "fgmres")
+        needs = self.linear_solver.hierarchy(False)
+        if needs is not None:
+            moving = self.mesh.dim == 3 and needs.follows_iterates
             newton = dataclasses.replace(newton, reuse_jacobian=newton.reuse_jacobian and moving,
                                          adaptive_linear_rtol=True)
         if x0 is None:

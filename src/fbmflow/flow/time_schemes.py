@@ -67,14 +67,15 @@ def get_scheme(name: str) -> tuple[Substep, ...]:
 
 
 def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.ndarray | None = None,
-            rtol: float | None = None, linear_rtol: float | None = None):
+            rtol: float | None = None, linear_rtol: float | None = None, extra=None):
     """One time step of ``problem`` (a NavierStokesProblem) from ``(x, t)`` over ``dt``.
 
     ``guess`` (n_dofs,): a prediction of the new state, where Newton starts (one-substep schemes
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
     the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
     (default the problem's); ``linear_rtol``: a looser target for its linear steps
-    (:meth:`~fbmflow.flow.NavierStokesProblem.solve`).
+    (:meth:`~fbmflow.flow.NavierStokesProblem.solve`); ``extra``: the substeps' further constraints
+    instead of the problem's own (:meth:`~fbmflow.flow.NavierStokesProblem.constraints`).
 
     Returns
     -------
@@ -97,7 +98,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
             rhs += sub.explicit * (problem.load(t) - problem.apply_spatial(u_old))
         x, report = problem.solve(x, 1.0 / k, sub.implicit, rhs, t_new,
                                   guess=guess if len(subs) == 1 else None, rtol=rtol,
-                                  linear_rtol=linear_rtol)
+                                  linear_rtol=linear_rtol, extra=extra)
         reports.append(report)
         t = t_new
     return x, reports

@@ -133,8 +133,8 @@ class SimulationScene(Scene):
         fails in the last approach to a wall keeps the curve it computed)."""
         from pathlib import Path
 
+        from ..config import ParamError
         from ..io import FieldWriter, RunData, save_checkpoint
-        from ..params import ParamError
         from ..solvers import ConvergenceError
 
         files = files or RunFiles()
@@ -217,8 +217,8 @@ class SimulationScene(Scene):
         ``meta`` (CheckpointError otherwise). Its parameters are compared resolved with today's
         defaults: a parameter added since it was written takes its default, which reproduces
         the behaviour of the code that wrote it."""
+        from ..config import ParamError, from_dict, to_dict
         from ..io import CheckpointError, load_checkpoint
-        from ..params import ParamError, from_dict, to_dict
 
         state, saved, extra = load_checkpoint(path, expect={k: v for k, v in meta.items() if k != "params"})
         if "params" in meta:

@@ -5,9 +5,9 @@ gives the mesh, the particles, the fluid, the boundary conditions and the mirror
 level. The builder adds everything else the same way for every scene, from the parameter
 sections every particle scene has (``time``, ``solver``, ``coupling``, ``fbm``, ``repulsion`` and,
 where the scene has it, ``contact``): the linear solver (``solver.linear = "auto"``:
-:func:`~fbmflow.simulation.choose_linear_solver`), the coupling scheme and the force estimator
+:func:`~fbmflow.solvers.choice.choose_linear_solver`), the coupling scheme and the force estimator
 (by name from their registries), the step count (:attr:`~fbmflow.params.TimeParams.n_steps`), the
-memory check (:func:`~fbmflow.simulation.check_memory`) and the warning about a contact skin too
+memory check (:func:`~fbmflow.solvers.choice.check_memory`) and the warning about a contact skin too
 coarse for the particles. The steady scenes build their flow problem with :func:`flow_problem`.
 """
 from __future__ import annotations
@@ -17,22 +17,15 @@ import math
 import sys
 from dataclasses import dataclass
 
+from ..config import Section, param, tree
+from ..contact.settings import ContactParams, ContactRepulsionParams, RepulsionParams
+from ..coupling.settings import CouplingParams, FictitiousBoundaryParams, NodalBoundaryParams
+from ..fem import FlowSpace
 from ..flow import NavierStokesProblem
-from ..params import (
-    ContactParams,
-    ContactRepulsionParams,
-    CouplingParams,
-    FictitiousBoundaryParams,
-    FluidParams,
-    NodalBoundaryParams,
-    RepulsionParams,
-    Section,
-    SolverParams,
-    TimeParams,
-    param,
-    tree,
-)
-from ..simulation import Simulation, check_memory, choose_linear_solver
+from ..params import FluidParams, TimeParams
+from ..simulation import Simulation
+from ..solvers.choice import check_memory
+from ..solvers.settings import SolverParams
 from .base import SceneResult, Setup, SimulationScene
 
 log = logging.getLogger(__name__)
@@ -137,13 +130,12 @@ class ParticleScene(SimulationScene):
 
 
 def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,
-                 linear=None, **kwargs) -> NavierStokesProblem:
+                 **kwargs) -> NavierStokesProblem:
     """The flow problem of a scene without particles, with the Newton and linear solver settings
-    of ``solver`` (``linear``: a solver chosen by the scene instead of
-    :func:`~fbmflow.simulation.choose_linear_solver`'s)
-    and its memory checked before the first solve (:func:`~fbmflow.simulation.check_memory`);
-    ``kwargs`` go to :class:`~fbmflow.flow.NavierStokesProblem`."""
-    linear = choose_linear_solver(solver, mesh) if linear is None else linear
+    of ``solver`` (:meth:`~fbmflow.solvers.settings.SolverParams.linear_solver`) and its memory
+    checked before the first solve (:func:`~fbmflow.solvers.choice.check_memory`); ``kwargs`` go to
+    :class:`~fbmflow.flow.NavierStokesProblem`."""
+    linear = solver.linear_solver(mesh.dim, FlowSpace.estimate_dofs(mesh))
     problem = NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,
                                   newton=solver.newton_settings(), **kwargs)
     check_memory(problem.n_dofs, mesh.dim, problem.linear_solver)

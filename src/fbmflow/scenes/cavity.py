@@ -12,10 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Section, param, tree
 from ..fem.functions import sample_velocity
 from ..flow import Dirichlet, NoSlip
 from ..mesh import StructuredMesh
-from ..params import Section, SteadySolverParams, param, tree
+from ..solvers.settings import SteadySolverParams
 from .base import Scene, SceneResult, pyplot, save_figure
 from .builder import flow_problem, steady_result
 from .data import ghia1982

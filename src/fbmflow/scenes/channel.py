@@ -11,11 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Section, param, tree
 from ..fem.functions import sample_pressure, sample_velocity
 from ..fem.quadrature import gauss_tensor
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import Section, SteadySolverParams, param, tree
+from ..solvers.settings import SteadySolverParams
 from .base import Scene, SceneResult
 from .builder import flow_problem, steady_result
 

@@ -20,12 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Section, derive, param, tree
 from ..coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
+from ..coupling.settings import NodalBoundaryParams
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import NodalBoundaryParams, Section, SteadySolverParams, derive, param, tree
 from ..particles import Ball, Cylinder
+from ..solvers.settings import SteadySolverParams
 from .base import Scene, SceneResult
 from .builder import flow_problem, steady_result
 

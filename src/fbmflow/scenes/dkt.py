@@ -25,8 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Section, derive, param
 from ..mesh import StructuredMesh
-from ..params import FluidParams, Section, TimeParams, derive, param
+from ..params import FluidParams, TimeParams
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CONTACT_SECTIONS, Layout, ParticleScene, particle_params

@@ -25,17 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import ParamError, Section, derive, param
+from ..contact.settings import WallContactParams
+from ..coupling.settings import SecondOrderCouplingParams
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (
-    SCHEMES,
-    ParamError,
-    SecondOrderCouplingParams,
-    Section,
-    TimeParams,
-    WallContactParams,
-    derive,
-    param,
-)
+from ..params import SCHEMES, TimeParams
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CgsFluid, DomainParams, Layout, ParticleScene, particle_params

@@ -8,8 +8,8 @@ import tomllib
 from pathlib import Path
 
 from .. import __version__
+from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
-from ..params import ParamError, from_dict, parse_value, set_dotted, to_dict
 from .base import RunFiles, Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D

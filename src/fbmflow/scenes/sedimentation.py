@@ -21,7 +21,7 @@ particles fit, so the lattice's volume fraction stays (``sedimentation-2d`` with
 Hard contact (restitution 0, sub-stepped) keeps the particles apart and inside the box. The
 coupling is ``auto``: implicit while its flow responses (three per disk, six per sphere) fit 4 GB,
 else the stabilised scheme (one flow solve per step, none stored, so that thousands of particles
-fit; :func:`~fbmflow.simulation.auto_coupling`). The plain explicit one is unstable here
+fit; :func:`~fbmflow.coupling.schemes.auto_coupling`). The plain explicit one is unstable here
 (measured: at 2 cells per diameter the disks' rotation rates grow by about 3x per step from the
 first steps, with alternating sign); the stabilised one is 3.6 to 12 times faster than the
 implicit one and follows it within about 5 % over the first 0.2 s, but lags it over a whole
@@ -41,11 +41,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import ParamError, Section, derive, param
 from ..contact.broadphase import candidate_pairs
+from ..coupling.settings import CouplingParams
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh
-from ..params import CouplingParams, ParamError, Section, SolverParams, TimeParams, derive, param
+from ..params import TimeParams
 from ..particles import Ball, Particles
+from ..solvers.settings import SolverParams
 from .base import pyplot, save_figure
 from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle_params
 

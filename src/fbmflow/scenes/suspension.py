@@ -6,7 +6,7 @@ in a box periodic along every axis, sized so that they fill ``particles.volume_f
 mu = 0.2 g/(cm s), g = 980 cm/s^2: a single sphere settles at about 1.2 cm/s (Re about 0.6).
 
 Gravity points along a periodic axis, so a mean pressure gradient carries the particles' weight in
-the fluid (:func:`~fbmflow.simulation.periodic_drive`): the suspension as a whole does not
+the fluid (:func:`~fbmflow.coupling.placement.periodic_drive`): the suspension as a whole does not
 accelerate and its mean volume flux stays zero. The particles cross the periodic sides; repulsion
 (nearest image) keeps them apart, or hard contact (``contact.enabled``, off by default), which
 acts across the periodic sides too.
@@ -43,8 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import ParamError, Section, derive, param
+from ..contact.settings import ContactParams
+from ..coupling.settings import FictitiousBoundaryParams
 from ..mesh import StructuredMesh
-from ..params import ContactParams, FictitiousBoundaryParams, ParamError, Section, TimeParams, derive, param
+from ..params import TimeParams
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
 from .builder import CgsFluid, Layout, ParticleScene, particle_params

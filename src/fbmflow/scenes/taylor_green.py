@@ -9,11 +9,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Section, derive, param, tree
 from ..fem.functions import error_norms
 from ..flow.time_schemes import advance
 from ..mesh import StructuredMesh
-from ..params import Section, SolverParams, TimeParams, derive, param, tree
+from ..params import TimeParams
 from ..solvers import ConvergenceError
+from ..solvers.settings import SolverParams
 from .base import Scene, SceneResult, pyplot, save_figure
 from .builder import flow_problem, steady_result
 

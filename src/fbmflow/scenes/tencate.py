@@ -30,21 +30,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import ParamError, Section, derive, param
+from ..contact.settings import WallContactParams
+from ..coupling.settings import SecondOrderCouplingParams
 from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
-from ..params import (
-    SCHEMES,
-    FluidParams,
-    ParamError,
-    SecondOrderCouplingParams,
-    Section,
-    SolverParams,
-    TimeParams,
-    WallContactParams,
-    derive,
-    param,
-)
+from ..params import SCHEMES, FluidParams, TimeParams
 from ..particles import Ball, Particles
+from ..solvers.settings import SolverParams
 from .base import pyplot, save_figure
 from .builder import DomainParams, Layout, ParticleScene, particle_params
 from .data import tencate2002

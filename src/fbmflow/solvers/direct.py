@@ -15,6 +15,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _kernels
+from .base import Factorization, LinearSolver
 from .krylov import fgmres
 from .ordering import lattice_points, nested_dissection
 from .reports import LinearReport
@@ -448,14 +449,34 @@ def _pinned_pressure(system: SaddlePointSystem) -> int | None:
     return int(np.flatnonzero(~touched)[0]) * npl if not touched.all() else 0
 
 
-class DirectSolver:
+class DirectFactorization(Factorization):
+    """A sparse LU of one saddle-point system (:func:`factorize`); solves one or several
+    right-hand sides at once."""
+
+    multiple_rhs = True
+
+    def __init__(self, solve, setup_time_s: float, name: str):
+        super().__init__(setup_time_s)
+        self._solve = solve
+        self.name = name
+
+    def solve(self, f, g, rtol=None):
+        """``rtol``: PARDISO's refinement target for this solve (None: the solver's); SuperLU's
+        solves are exact to round-off."""
+        t1 = time.perf_counter()
+        u, p = self._solve(f, g, rtol)
+        setup = self._charge_setup()
+        return u, p, LinearReport(self.name, setup + time.perf_counter() - t1, iterations=1,
+                                  setup_time_s=setup)
+
+
+class DirectSolver(LinearSolver):
     """Sparse LU of the saddle-point matrix with the constrained velocity DOFs eliminated
     (:func:`factorize`; ``backend`` ``"auto"``, ``"superlu"`` or ``"pardiso"``); for small and
     medium problems (2D: up to a few 10^5 unknowns; 3D: a few 10^4 with SuperLU, a few 10^5 with
     PARDISO). ``rtol``: PARDISO's solves are refined to this relative residual."""
 
     name = "direct"
-    needs_hierarchy = False
 
     def __init__(self, backend: str = "auto", rtol: float = 1e-12):
         if backend not in DIRECT_BACKENDS:
@@ -468,27 +489,20 @@ class DirectSolver:
         self.backend = backend
         self.analysis = PardisoAnalysis()  # kept between PARDISO factorisations; unused by SuperLU
 
-    def factor(self, system: SaddlePointSystem):
-        """Factorise ``system``; returns ``solve(f, g, rtol=None) -> (u, p, LinearReport)``
-        (``rtol``: this solve's refinement target instead of ``self.rtol``). With PARDISO the
-        factorisation reuses the last one's analysis where the pattern allows
-        (:class:`PardisoAnalysis`) and replaces its factors: solve with the latest only."""
+    def engine(self, dim: int, n_unknowns: int) -> str:
+        """``"pardiso"`` or ``"superlu"``: the backend, ``"auto"`` resolved (:func:`auto_backend`)."""
+        return auto_backend(dim, n_unknowns) if self.backend == "auto" else self.backend
+
+    def describe(self, dim: int, n_unknowns: int) -> str:
+        return f"{self.name} ({BACKEND_NAMES[self.engine(dim, n_unknowns)]})"
+
+    def factor(self, system: SaddlePointSystem) -> DirectFactorization:
+        """Factorise ``system``. With PARDISO the factorisation reuses the last one's analysis
+        where the pattern allows (:class:`PardisoAnalysis`) and replaces its factors: solve with
+        the latest only."""
         t0 = time.perf_counter()
         direct = factorize(system, self.backend, self.analysis, self.rtol)
-        pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
-
-        def solve(f, g, rtol=None):
-            t1 = time.perf_counter()
-            u, p = direct(f, g, rtol)
-            setup = pending.pop() if pending else 0.0
-            return u, p, LinearReport(self.name, setup + time.perf_counter() - t1, iterations=1,
-                                      setup_time_s=setup)
-        solve.multiple_rhs = True  # f (n_u, k) and g (n_p, k) solve k systems in one call
-        solve.takes_rtol = True  # solve(f, g, rtol): a target per solve (NewtonSettings.linear_rtol)
-        return solve
-
-    def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
-        return self.factor(system)(f, g)
+        return DirectFactorization(direct, time.perf_counter() - t0, self.name)
 
     def forget(self) -> None:
         """Drop the stored analysis: the next factorisation starts afresh, as after a restart."""

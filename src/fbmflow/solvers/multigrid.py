@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import ParamError, Section, param
+from .base import Factorization, Hierarchy, LinearSolver
 from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
@@ -49,45 +51,40 @@ LINEARISATIONS = ("auto", "newton", "picard")
 
 
 @dataclass(frozen=True)
-class MultigridSettings:
-    """Multigrid parameters (see the module docstring)."""
+class MultigridSettings(Section):
+    """Multigrid (the table ``[solver.multigrid]``; see the module docstring)."""
 
-    cycle: str = "V"
-    smoother: str = "auto"  # "auto": vanka-factored (smoother_for)
-    omega: float | None = None  # None: the smoother's default damping
-    pre_smooth: int = 2
-    post_smooth: int = 2
-    rtol: float = 1e-8
-    max_iterations: int = 100
-    krylov: str = "fgmres"  # or "none": multigrid as a stand-alone iteration
-    restart: int = 30
-    coarse_obstacle: str = "nodes"  # or "galerkin" (solvers/galerkin.py)
-    linearisation: str = "auto"  # of the hierarchy: "newton", "picard" or "auto" (LINEARISATIONS)
-    sweeps: str = "auto"  # "forward", "symmetric" or "auto" (SWEEPS)
+    renamed = {"rtol": "solver.linear_rtol"}
 
-    def __post_init__(self):
-        if self.cycle not in CYCLES:
-            raise ValueError(f"unknown cycle {self.cycle!r}; choose one of {CYCLES}")
-        if self.smoother != "auto" and self.smoother not in VANKA_VARIANTS:
-            raise ValueError(f"unknown smoother {self.smoother!r}; choose 'auto' or one of "
-                             f"{sorted(VANKA_VARIANTS)}")
-        if self.coarse_obstacle not in COARSE_OBSTACLES:
-            raise ValueError(f"unknown coarse obstacle {self.coarse_obstacle!r}; choose one of "
-                             f"{COARSE_OBSTACLES}")
+    cycle: str = param("V", "multigrid cycle", choices=CYCLES)
+    smoother: str = param("auto", "smoother ('auto': vanka-factored, local factors stored; vanka-full stores "
+                          "none and factorises in every sweep)", choices=("auto",) + tuple(VANKA_VARIANTS))
+    omega: float = param(0.0, "damping of the smoother's corrections (0: the smoother's own default)",
+                         nonnegative=True, maximum=2.0)
+    pre_smooth: int = param(2, "smoothing sweeps before the coarse-grid correction", minimum=1)
+    post_smooth: int = param(2, "smoothing sweeps after the coarse-grid correction", minimum=1)
+    max_iterations: int = param(100, "cycles (FGMRES iterations) per solve at most", minimum=1)
+    krylov: str = param("fgmres", "Krylov acceleration: fgmres, or none (multigrid as a stand-alone "
+                        "iteration)", choices=("fgmres", "none"))
+    restart: int = param(30, "FGMRES restart length", minimum=1)
+    coarse_obstacle: str = param("nodes", "how coarse levels see particles: their own nodes inside them, or "
+                                 "Galerkin rows of the truncated prolongation", choices=COARSE_OBSTACLES)
+    linearisation: str = param("auto", "operator the hierarchy is built from: newton, picard (FGMRES applies "
+                               "the Newton matrix; dim times fewer velocity entries) or auto (picard in "
+                               "time steps, newton in steady solves)", choices=LINEARISATIONS)
+    sweeps: str = param("auto", "order of the smoothing sweeps: forward, symmetric (forward and backward "
+                        "in turn) or auto (forward in time steps, symmetric in steady solves)",
+                        choices=SWEEPS)
+
+    def validate(self):
         if self.coarse_obstacle == "galerkin" and self.smoother not in ("auto", "vanka-factored"):
             # the other smoothers re-assemble cell blocks from the element matrices, not the
             # Galerkin rows (measured: overflow on the 3D ball, 8^3)
-            raise ValueError("coarse_obstacle 'galerkin' needs the vanka-factored smoother, not "
+            raise ParamError("multigrid: coarse_obstacle 'galerkin' needs the vanka-factored smoother, not "
                              f"{self.smoother!r}")
-        if self.krylov not in ("fgmres", "none"):
-            raise ValueError(f"unknown Krylov method {self.krylov!r}; choose 'fgmres' or 'none'")
-        if self.sweeps not in SWEEPS:
-            raise ValueError(f"unknown sweep order {self.sweeps!r}; choose one of {SWEEPS}")
-        if self.linearisation not in LINEARISATIONS:
-            raise ValueError(f"unknown linearisation {self.linearisation!r}; choose one of {LINEARISATIONS}")
         if self.linearisation == "picard" and self.krylov != "fgmres":
-            raise ValueError("a Picard hierarchy only preconditions the Newton system inside FGMRES; "
-                             "set krylov = 'fgmres' or linearisation = 'newton'")
+            raise ParamError("multigrid: a Picard hierarchy only preconditions the Newton system inside "
+                             "FGMRES; set krylov = 'fgmres' or linearisation = 'newton'")
 
     def symmetric_sweeps(self, time_step: bool) -> bool:
         """Whether the smoothers sweep forwards and backwards in turn: ``"symmetric"``, or
@@ -115,10 +112,11 @@ class _Level:
         self.system = system
         self.n_u, self.n_p = system.n_u, system.n_p
         self.d = system.space.dim if system.space is not None else None
+        self.nnz = int(system.A.nnz) + 2 * int(system.BT.nnz)  # of the saddle-point matrix
         if coarsest:
             self.direct = factorize(system)
             return
-        omega = settings.omega if settings.omega is not None else VANKA_VARIANTS[smoother]
+        omega = settings.omega or VANKA_VARIANTS[smoother]
         if smoother == "vanka-factored":
             self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric)
         else:
@@ -141,113 +139,95 @@ class _Level:
         return self.P @ e
 
 
-class MultigridSolver:
-    """Monolithic geometric multigrid, optionally inside FGMRES.
+class MultigridHierarchy(Factorization):
+    """The multigrid hierarchy of one system (PyAMG's ``MultilevelSolver``): its levels, finest
+    first, each with its system, smoother and transfers, the coarsest factorised. Re-entrant: a
+    solve keeps its counters to itself. ``repr`` shows the level table and the operator
+    complexity; :meth:`aspreconditioner` gives one cycle as a SciPy ``LinearOperator``."""
 
-    Needs systems with a ``coarser`` chain (``needs_hierarchy``): the flow problem builds them.
-    """
+    def __init__(self, system: SaddlePointSystem, levels: list[_Level], settings: MultigridSettings,
+                 smoother: str, rtol: float, setup_time_s: float):
+        super().__init__(setup_time_s)
+        self.system, self.levels, self.settings, self.smoother, self.rtol = (system, levels, settings,
+                                                                              smoother, rtol)
+        self.sweeps_per_cycle = self._sweeps(0, settings.cycle)
 
-    name = "multigrid"
-    needs_hierarchy = True
+    def _sweeps(self, depth: int, kind: str) -> int:
+        """Smoothing sweeps of one ``kind`` cycle from level ``depth`` (all levels it visits)."""
+        if depth == len(self.levels) - 1:
+            return 0
+        s = self.settings
+        inner = self._sweeps(depth + 1, "F" if kind == "F" else kind)
+        if depth + 1 < len(self.levels) - 1 and kind in ("W", "F"):
+            inner += self._sweeps(depth + 1, "W" if kind == "W" else "V")
+        return s.pre_smooth + s.post_smooth + inner
 
-    def __init__(self, settings: MultigridSettings | None = None, **kwargs):
-        self.settings = settings or MultigridSettings(**kwargs)
-
-    def smoother_for(self, system: SaddlePointSystem) -> str:
-        """The smoother used for ``system``: the configured one; ``"auto"`` is ``vanka-factored``,
-        whose stored local factors make a sweep several times cheaper than ``vanka-full``'s,
-        which factorises every cell's block in every sweep, and which alone handles row
-        constraints and Galerkin rows.
-        ``vanka-full`` stores nothing per cell, for a machine short of memory."""
-        return "vanka-factored" if self.settings.smoother == "auto" else self.settings.smoother
-
-    def setup(self, system: SaddlePointSystem) -> list[_Level]:
-        chain = [system]
-        while chain[-1].coarser is not None:
-            chain.append(chain[-1].coarser)
-        smoother = self.smoother_for(system)
-        symmetric = self.settings.symmetric_sweeps(system.transient)
-        return [_Level(s, self.settings, smoother, coarsest=(i == len(chain) - 1), symmetric=symmetric)
-                for i, s in enumerate(chain)]
-
-    def cycle(self, levels: list[_Level], b: np.ndarray, x: np.ndarray, depth: int = 0,
-              kind: str | None = None) -> np.ndarray:
+    def cycle(self, b: np.ndarray, x: np.ndarray, depth: int = 0, kind: str | None = None) -> np.ndarray:
         """One cycle on level ``depth`` for ``K x = b`` from ``x`` (updated and returned)."""
         kind = kind or self.settings.cycle
+        levels = self.levels
         level = levels[depth]
         if depth == len(levels) - 1:
             u, p = level.direct(b[:level.n_u], b[level.n_u:])
             return np.concatenate([u, p])
         s = self.settings
         level.smoother.smooth(b, x, s.pre_smooth)
-        self._sweeps += s.pre_smooth
         r = b - level.system.apply(x)
         coarse = levels[depth + 1]
         rc = level.restrict(r, coarse)
         ec = np.zeros_like(rc)
         if kind == "V":
-            ec = self.cycle(levels, rc, ec, depth + 1, "V")
+            ec = self.cycle(rc, ec, depth + 1, "V")
         elif kind == "W":
-            ec = self.cycle(levels, rc, ec, depth + 1, "W")
+            ec = self.cycle(rc, ec, depth + 1, "W")
             if depth + 1 < len(levels) - 1:
-                ec = self.cycle(levels, rc, ec, depth + 1, "W")
+                ec = self.cycle(rc, ec, depth + 1, "W")
         else:  # F: an F-cycle then a V-cycle on the coarser level
-            ec = self.cycle(levels, rc, ec, depth + 1, "F")
+            ec = self.cycle(rc, ec, depth + 1, "F")
             if depth + 1 < len(levels) - 1:
-                ec = self.cycle(levels, rc, ec, depth + 1, "V")
+                ec = self.cycle(rc, ec, depth + 1, "V")
         x += level.prolongate(ec, coarse)
         level.smoother.smooth(b, x, s.post_smooth)
-        self._sweeps += s.post_smooth
         return x
 
-    def factor(self, system: SaddlePointSystem):
-        """Set up the hierarchy of ``system`` once (smoother blocks, coarse factorisation);
-        returns ``solve(f, g, rtol=None) -> (u, p, LinearReport)`` (``rtol``: this solve's target,
-        default ``settings.rtol``)."""
-        if system.preconditioner is not None and self.settings.krylov != "fgmres":
-            raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
-        if system.rows is not None and system.mean_weights is not None and self.settings.krylov == "none":
-            raise ValueError("stand-alone multigrid cycles cannot solve the sharp fictitious boundary in a "
-                             "closed domain (its right-hand side is compatible only up to the mean-pressure "
-                             "multiplier, which FGMRES solves for); set solver.mg_krylov = \"fgmres\"")
-        if system.rows is not None and self.smoother_for(system) != "vanka-factored":
-            raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
-                             f"boundary), not {self.settings.smoother!r}; set solver.mg_smoother = "
-                             "\"auto\" or \"vanka-factored\", or use the direct solver")
-        t0 = time.perf_counter()
-        levels = self.setup(system if system.preconditioner is None else system.preconditioner)
-        pending = [time.perf_counter() - t0]  # the set-up time, charged to the first solve only
+    def aspreconditioner(self):
+        """One cycle from zero as a ``scipy.sparse.linalg.LinearOperator`` on the whole system's
+        vectors ``(n_u + n_p,)``, for SciPy's Krylov methods."""
+        from scipy.sparse.linalg import LinearOperator
 
-        def solve(f, g, rtol=None):
-            return self._solve(system, levels, pending.pop() if pending else 0.0, f, g, rtol)
+        n = self.system.n_u + self.system.n_p
+        return LinearOperator((n, n), matvec=lambda r: self.cycle(np.asarray(r, dtype=float).ravel(),
+                                                                  np.zeros(n)), dtype=float)
 
-        solve.takes_rtol = True
-        return solve
+    @property
+    def operator_complexity(self) -> float:
+        """Non-zeros of all levels' matrices over those of the finest (PyAMG's measure of the
+        hierarchy's memory and work per cycle)."""
+        nnz = [lv.nnz for lv in self.levels]
+        return float(sum(nnz) / nnz[0])
 
-    def solve(self, system: SaddlePointSystem, f: np.ndarray, g: np.ndarray):
-        """Solve ``[[A, B], [B^T, 0]] [u, p] = [f, g]`` to relative residual ``settings.rtol``."""
-        return self.factor(system)(f, g)
-
-    @staticmethod
-    def _border(system: SaddlePointSystem) -> np.ndarray | None:
-        """The direction ``e`` of the mean-pressure border's multiplier in a closed domain (None
-        where the pressure is determined): a uniform expansion rate of the fluid
-        (:func:`~fbmflow.solvers.system.expansion`). ``balance`` makes the continuity data
-        compatible with the constant pressure, the left null vector of the nodal boundary's
-        system; the sharp boundary's ghost rows give the left null vector velocity components
-        as well, so the right-hand side can miss the range along ``e`` and FGMRES solves for
-        that multiple too, as the bordered direct solve does."""
-        if system.mean_weights is None:
-            return None
-        e = np.zeros(system.n_u + system.n_p)
-        e[system.n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
-        return e
-
-    def _solve(self, system, levels, setup, f, g, rtol=None):
-        t0 = time.perf_counter() - setup
-        self._sweeps = 0
+    def __repr__(self) -> str:
         s = self.settings
-        rtol = s.rtol if rtol is None else rtol
+        lines = [f"MultigridHierarchy: {s.cycle}-cycle, {self.smoother} "
+                 f"({s.pre_smooth}+{s.post_smooth} sweeps), "
+                 f"{'inside FGMRES' if s.krylov == 'fgmres' else 'stand-alone'}",
+                 f"Number of levels:    {len(self.levels)}",
+                 f"Operator complexity: {self.operator_complexity:6.3f}",
+                 "  level   unknowns   non-zeros [%]"]
+        total = sum(lv.nnz for lv in self.levels)
+        for k, lv in enumerate(self.levels):
+            where = " (direct)" if k == len(self.levels) - 1 else ""
+            share = 100.0 * lv.nnz / total
+            lines.append(f"  {k:5d} {lv.n_u + lv.n_p:10d} {lv.nnz:11d} [{share:5.2f}]{where}")
+        return "\n".join(lines)
+
+    def solve(self, f, g, rtol=None):
+        """Cycles (inside FGMRES, or stand-alone) until the residual drops ``rtol`` times (None:
+        the solver's target); the report counts cycles and smoothing sweeps on all levels."""
+        system, s = self.system, self.settings
+        t0 = time.perf_counter()
+        setup = self._charge_setup()
+        rtol = self.rtol if rtol is None else rtol
         b = np.concatenate([f, system.balance(g)])
         x = np.zeros_like(b)
         if system.fixed is not None:
@@ -255,15 +235,15 @@ class MultigridSolver:
         project = system.remove_pressure_mean if system.mean_weights is not None else None
         if s.krylov == "fgmres":
             def precondition(r):
-                return self.cycle(levels, r, np.zeros_like(r))
+                return self.cycle(r, np.zeros_like(r))
 
             x, residuals, cycles = fgmres(system.apply, precondition, b, x, rtol, s.max_iterations,
-                                          s.restart, project, self._border(system))
+                                          s.restart, project, _border(system))
         else:
             r0 = float(np.linalg.norm(b - system.apply(x)))
             residuals, cycles = [r0], 0
             while residuals[-1] > rtol * r0 and cycles < s.max_iterations:
-                x = self.cycle(levels, b, x)
+                x = self.cycle(b, x)
                 if project is not None:
                     project(x)
                 residuals.append(float(np.linalg.norm(b - system.apply(x))))
@@ -273,7 +253,79 @@ class MultigridSolver:
         log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
                   time.perf_counter() - t0)
         converged = bool(residuals[-1] <= rtol * residuals[0])  # False for NaN as well
-        report = LinearReport(self.name, time.perf_counter() - t0, iterations=cycles,
-                              residuals=residuals, smoothing_sweeps=self._sweeps, setup_time_s=setup,
-                              converged=converged)
+        report = LinearReport("multigrid", setup + time.perf_counter() - t0, iterations=cycles,
+                              residuals=residuals, smoothing_sweeps=cycles * self.sweeps_per_cycle,
+                              setup_time_s=setup, converged=converged)
         return x[:system.n_u], x[system.n_u:], report
+
+
+def _border(system: SaddlePointSystem) -> np.ndarray | None:
+    """The direction ``e`` of the mean-pressure border's multiplier in a closed domain (None
+    where the pressure is determined): a uniform expansion rate of the fluid
+    (:func:`~fbmflow.solvers.system.expansion`). ``balance`` makes the continuity data
+    compatible with the constant pressure, the left null vector of the nodal boundary's
+    system; the sharp boundary's ghost rows give the left null vector velocity components
+    as well, so the right-hand side can miss the range along ``e`` and FGMRES solves for
+    that multiple too, as the bordered direct solve does."""
+    if system.mean_weights is None:
+        return None
+    e = np.zeros(system.n_u + system.n_p)
+    e[system.n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
+    return e
+
+
+class MultigridSolver(LinearSolver):
+    """Monolithic geometric multigrid, optionally inside FGMRES, with ``settings``
+    (:class:`MultigridSettings`, or its fields as keywords); ``rtol``: the relative residual a
+    solve reaches when it is asked for none. Needs systems with a ``coarser`` chain, which the
+    flow problem builds as :meth:`hierarchy` asks."""
+
+    name = "multigrid"
+
+    def __init__(self, settings: MultigridSettings | None = None, rtol: float = 1e-8, **kwargs):
+        self.settings = settings or MultigridSettings(**kwargs)
+        if not 0.0 < rtol < 1.0:
+            raise ValueError(f"rtol (multigrid's residual reduction per solve) must lie in (0, 1), got "
+                             f"{rtol}")
+        self.rtol = float(rtol)
+
+    def engine(self, dim: int, n_unknowns: int) -> str:
+        return "multigrid"
+
+    def hierarchy(self, time_step: bool) -> Hierarchy:
+        s = self.settings
+        return Hierarchy(picard=s.picard_hierarchy(time_step), follows_iterates=s.krylov == "fgmres",
+                         galerkin=s.coarse_obstacle == "galerkin")
+
+    def smoother_for(self, system: SaddlePointSystem) -> str:
+        """The smoother used for ``system``: the configured one; ``"auto"`` is ``vanka-factored``,
+        whose stored local factors make a sweep several times cheaper than ``vanka-full``'s,
+        which factorises every cell's block in every sweep, and which alone handles row
+        constraints and Galerkin rows.
+        ``vanka-full`` stores nothing per cell, for a machine short of memory."""
+        return "vanka-factored" if self.settings.smoother == "auto" else self.settings.smoother
+
+    def factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
+        """Set up the hierarchy of ``system`` (of its ``preconditioner`` where it has one): the
+        smoothers' blocks on every level and the coarsest level's factorisation."""
+        s = self.settings
+        if system.preconditioner is not None and s.krylov != "fgmres":
+            raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
+        if system.rows is not None and system.mean_weights is not None and s.krylov == "none":
+            raise ValueError("stand-alone multigrid cycles cannot solve the sharp fictitious boundary in a "
+                             "closed domain (its right-hand side is compatible only up to the mean-pressure "
+                             "multiplier, which FGMRES solves for); set solver.multigrid.krylov = \"fgmres\"")
+        if system.rows is not None and self.smoother_for(system) != "vanka-factored":
+            raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
+                             f"boundary), not {s.smoother!r}; set solver.multigrid.smoother = "
+                             "\"auto\" or \"vanka-factored\", or use the direct solver")
+        t0 = time.perf_counter()
+        base = system if system.preconditioner is None else system.preconditioner
+        chain = [base]
+        while chain[-1].coarser is not None:
+            chain.append(chain[-1].coarser)
+        smoother = self.smoother_for(base)
+        symmetric = s.symmetric_sweeps(base.transient)
+        levels = [_Level(c, s, smoother, coarsest=(i == len(chain) - 1), symmetric=symmetric)
+                  for i, c in enumerate(chain)]
+        return MultigridHierarchy(system, levels, s, smoother, self.rtol, time.perf_counter() - t0)

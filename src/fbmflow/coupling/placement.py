@@ -1,0 +1,137 @@
+"""Where the particles may be and what the domain's faces are to them: the checks of a set-up
+before anything is assembled (placement, mirror planes), the walls of contact and repulsion, the
+wrap of centres across periodic sides, and the mean pressure gradient that carries a periodic
+suspension's weight (the periodic drive). Functions of the mesh's box and the particles' state;
+they solve nothing."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..particles import Particles
+
+
+def check_symmetry(mesh, particles: Particles, gravity: np.ndarray, axes: tuple):
+    """Mirror planes must be domain faces through every particle centre, parallel to gravity."""
+    for a in axes:
+        if not 0 <= a < mesh.dim:
+            raise ValueError(f"symmetry axis {a} is not an axis of a {mesh.dim}D mesh")
+        tol = 1e-9 * (mesh.upper[a] - mesh.lower[a])
+        on = np.isclose(particles.position[:, a], mesh.lower[a], atol=tol) | \
+            np.isclose(particles.position[:, a], mesh.upper[a], atol=tol)
+        if not on.all():
+            raise ValueError(f"symmetry plane with normal axis {a}: particles {np.flatnonzero(~on).tolist()} "
+                             "are not centred on it; put their centres on the domain face or drop the "
+                             "symmetry")
+        if gravity[a] != 0.0:
+            raise ValueError(f"symmetry plane with normal axis {a}: gravity has a component {gravity[a]} "
+                             "across it; the motion would not be symmetric")
+
+
+def periodic_drive(mesh, particles: Particles, gravity: np.ndarray, fluid_density: float,
+                   symmetry: tuple = ()) -> np.ndarray:
+    """Force per unit volume on the fluid [N/m^3], (dim,) float64, that carries the free particles'
+    weight in the fluid along the periodic axes of ``mesh``: the mean pressure gradient of a
+    periodic suspension, zero where gravity has no periodic component.
+
+        f = - sum_i (M_i - rho_f V_i) g_per / |Omega|,
+
+    ``g_per`` the components of ``gravity`` along periodic axes and ``|Omega|`` the box's volume
+    (the particles counted by their share of the box, ``2^-k`` with ``k`` mirror planes through
+    their centres). The fluid feels ``f`` and every free particle ``f V_i``, so the net force on
+    fluid and particles together vanishes: without it a periodic suspension would accelerate
+    without end. Its mean volume flux stays what it started with (zero from rest).
+    """
+    g = np.where(mesh.periodic, np.asarray(gravity, dtype=float), 0.0)
+    if not np.any(g) or particles.n == 0:
+        return np.zeros(mesh.dim)
+    free = ~particles.fixed
+    excess = float(np.sum(particles.mass[free] - fluid_density * particles.volume[free]))
+    box = float(np.prod(np.array(mesh.upper) - np.array(mesh.lower)))
+    return -excess * 0.5 ** len(symmetry) / box * g
+
+
+def wrap(mesh, X: np.ndarray) -> np.ndarray:
+    """Centres ``X (n, dim)`` moved into ``[lower, upper)`` along the periodic axes (a new array)."""
+    L = mesh.periods
+    if not np.any(L):
+        return X
+    lower = np.array(mesh.lower, dtype=float)
+    return np.where(L > 0, lower + np.mod(X - lower, np.where(L > 0, L, 1.0)), X)
+
+
+def check_placement(mesh, particles: Particles, symmetry: tuple):
+    """Particles must lie in the domain (balls wholly, other shapes with their centre; along
+    periodic axes anywhere; not across symmetry planes), balls must not overlap (across periodic
+    sides with the nearest image), and
+    every particle must span the velocity-node spacing (half a cell) where it sits: a smaller one
+    can cover no node and feel no drag. ValueError naming the particles and the remedy."""
+    X, n = particles.position, particles.n
+    if n == 0:
+        return
+    radius = particles.ball_radius
+    reach = np.zeros(n) if radius is None else radius
+    for a in range(mesh.dim):
+        lo, hi = float(mesh.lower[a]), float(mesh.upper[a])
+        tol = 1e-9 * (hi - lo)
+        if mesh.periodic[a]:
+            continue
+        r = np.zeros(n) if a in symmetry else reach
+        out = np.flatnonzero((X[:, a] - r < lo - tol) | (X[:, a] + r > hi + tol))
+        if out.size:
+            k = out[0]
+            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside "
+                             f"the domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
+    if radius is not None and n > 1:
+        L, lower = mesh.periods, np.array(mesh.lower, dtype=float)
+        reach_pairs = 2.0 * float(radius.max())
+        extent = np.array(mesh.upper, dtype=float) - lower
+        # periodic axes wrap (cKDTree's boxsize); the others get a box too wide to wrap within reach
+        box = np.where(L > 0, L, extent + 2.0 * reach_pairs + 1.0)
+        Xb = wrap(mesh, X) - lower
+        pairs = cKDTree(np.clip(Xb, 0.0, np.nextafter(box, 0.0)), boxsize=box).query_pairs(
+            reach_pairs, output_type="ndarray")
+        if pairs.size:
+            diff = X[pairs[:, 0]] - X[pairs[:, 1]]
+            diff -= L * np.round(diff / np.where(L > 0, L, 1.0))
+            gap = np.linalg.norm(diff, axis=1) - radius[pairs].sum(axis=1)
+            bad = np.flatnonzero(gap < -1e-9 * radius[pairs].sum(axis=1))
+            if bad.size:
+                i, j = pairs[bad[0]]
+                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres "
+                                 f"{X[i].tolist()} and {X[j].tolist()}){_more(bad)}; place them at least a "
+                                 "diameter apart")
+    axes = mesh.axis_coordinates
+    if axes is not None:  # the local cell size where each particle sits
+        h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
+                    for a, ax in enumerate(axes)], axis=0)
+        small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
+        if small.size:
+            k = small[0]
+            raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller "
+                             "than the velocity-node spacing, half the cell it sits in (cell size "
+                             f"{h[k]:.4g}){_more(small)}: it can cover no velocity node and feel no drag; "
+                             "refine the mesh (cells of at most two diameters; 4 or more cells per diameter "
+                             "for accurate forces) or enlarge the particles")
+
+
+def _more(indices: np.ndarray) -> str:
+    return f" (and {indices.size - 1} more)" if indices.size > 1 else ""
+
+
+def walls(mesh, particles: Particles, symmetry: tuple):
+    """The domain faces ``(axis, side)`` that are walls for contact and repulsion: all of them
+    (None) without mirror planes and periodic axes, else all but the periodic faces and those the
+    particles are centred on."""
+    if not symmetry and not any(mesh.periodic):
+        return None
+    walls = []
+    for a in range(mesh.dim):
+        if mesh.periodic[a]:
+            continue
+        for side, face in enumerate((mesh.lower[a], mesh.upper[a])):
+            on_plane = a in symmetry and np.allclose(particles.position[:, a], face,
+                                                     atol=1e-9 * (mesh.upper[a] - mesh.lower[a]))
+            if not on_plane:
+                walls.append((a, side))
+    return walls

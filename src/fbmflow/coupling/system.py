@@ -1,0 +1,457 @@
+"""The coupled system: the flow, the particles, the force estimator, contact and repulsion, and
+the state they advance together (the flow ``x``, the time, the particles, the last step's forces).
+
+A :class:`CoupledSystem` is what the coupling schemes (:mod:`fbmflow.coupling.schemes`) drive,
+through the members of :class:`~fbmflow.coupling.schemes.CoupledProblem`: a flow solve with the
+particles as fictitious boundaries and its forces (:meth:`CoupledSystem.flow_and_forces`), the
+particles' integration under given forces (:meth:`~CoupledSystem.integrate`), and the linear
+responses of the flow and its forces to the particles' rigid motions
+(:meth:`~CoupledSystem.rigid_responses`, :meth:`~CoupledSystem.own_stiffness`). A scheme's
+:class:`~fbmflow.coupling.schemes.CoupledFlow` is then committed (:meth:`~CoupledSystem.commit`):
+the particles move, the state advances. The :class:`~fbmflow.simulation.Simulation` above owns a
+system and a scheme and asks nothing of the system that a scheme could not.
+
+What one particle configuration is on the mesh (the node owner on every multigrid level, the
+sharp boundary, the force estimator's rule) is a :class:`ParticleGeometry`, made once per
+configuration: the positions do not change during a step's flow solves and coupling iterations.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..contact.settings import ContactParams, RepulsionParams
+from ..fem.constraints import DirichletConstraints
+from ..fem.functions import mean_velocity
+from ..flow import NavierStokesProblem
+from ..flow.time_schemes import advance, pressure_lag
+from ..params import FluidParams
+from ..particles import Particles, accelerations, integrate, velocity_gain
+from ..solvers import ConvergenceError, NewtonSettings
+from ..solvers.base import LinearSolver
+from .estimators import make_force_estimator
+from .forces import mirror_images
+from .indicator import node_owner, rigid_body_constraints, rigid_liftings
+from .placement import check_placement, check_symmetry, periodic_drive, walls, wrap
+from .schemes import CoupledFlow
+from .settings import FictitiousBoundaryParams
+from .sharp import sharp_boundary, supports_sharp_boundary
+
+log = logging.getLogger(__name__)
+
+
+class ParticleGeometry:
+    """One particle configuration (centres and rotations) on the flow's mesh, each part made on
+    first use: the node owner of every DOF map asked for (the fine level's and the multigrid
+    levels'), the sharp boundary on the fine level (with ``sharp``), and the force estimator's
+    rule.
+
+    Parameters
+    ----------
+    space : FlowSpace, the fine level's
+    particles : Particles, whose positions and orientations this geometry is (copied)
+    sharp : bool, the sharp fictitious boundary is on
+    estimator : a force estimator (:data:`~fbmflow.coupling.FORCE_ESTIMATORS`)
+    wall_nodes : (k,) int64, the velocity nodes the walls hold (for the estimator)
+    """
+
+    def __init__(self, space, particles: Particles, sharp: bool, estimator, wall_nodes: np.ndarray):
+        self.space, self.sharp_on, self.estimator, self.wall_nodes = space, sharp, estimator, wall_nodes
+        self.position = particles.position.copy()
+        self.orientation = np.array(particles.orientation, copy=True)
+        self.shapes = particles.shapes
+        self.rotations = particles.rotations()
+        self._owner: dict = {}  # id of a DOF map -> owner
+        self._sharp = None
+        self._rule = None
+
+    def describes(self, particles: Particles) -> bool:
+        """Whether ``particles`` are at this configuration (positions and orientations equal)."""
+        return (np.array_equal(self.position, particles.position)
+                and np.array_equal(self.orientation, particles.orientation))
+
+    def owner(self, V) -> np.ndarray:
+        """Particle owning every node of the DOF map ``V`` (-1: fluid), (n_v,) int64."""
+        if id(V) not in self._owner:
+            self._owner[id(V)] = node_owner(V, self.position, self.shapes, self.rotations)
+        return self._owner[id(V)]
+
+    def sharp(self, V):
+        """The sharp boundary on the fine DOF map ``V`` (None for the nodal boundary and on the
+        coarser multigrid levels)."""
+        if not self.sharp_on or V is not self.space.V:
+            return None
+        if self._sharp is None:
+            self._sharp = sharp_boundary(self.space, self.owner(V), self.position, self.shapes,
+                                         self.rotations)
+        return self._sharp
+
+    def rule(self):
+        """The force estimator's rule for this configuration."""
+        if self._rule is None:
+            self._rule = self.estimator.prepare(self.space, self.position, self.shapes, self.rotations,
+                                                owner=self.owner(self.space.V), walls=self.wall_nodes)
+        return self._rule
+
+    def constraints(self, V, velocity: np.ndarray, angular_velocity: np.ndarray) -> DirichletConstraints:
+        """Fictitious-boundary constraints on ``V`` for the particles moving with ``velocity
+        (n, dim)`` and ``angular_velocity``: rigid motion on their nodes, with the sharp
+        boundary's changes on the fine level."""
+        rigid = rigid_body_constraints(V, self.owner(V), self.position, velocity, angular_velocity)
+        sharp = self.sharp(V)
+        return rigid if sharp is None else sharp.constraints(rigid, velocity, angular_velocity)
+
+
+class CoupledSystem:
+    """Rigid particles in an incompressible flow on a structured mesh, and their state.
+
+    Parameters
+    ----------
+    mesh : StructuredMesh
+    particles : Particles, the initial state (copied; centres wrapped into a periodic box)
+    fluid : FluidParams
+    boundary : dict tag -> condition, the flow's boundary conditions
+    time_scheme : str, the flow's time scheme (:data:`~fbmflow.flow.time_schemes.TIME_SCHEMES`)
+    integrator : str, the particles' (``semi-implicit-euler`` or ``trapezoidal``)
+    fbm : FictitiousBoundaryParams, the boundary and the force estimator
+    contact : ContactParams or None, hard contact (None: off)
+    repulsion : RepulsionParams or None, short-range repulsion (None: off)
+    symmetry : tuple of int, normal axes of mirror planes through every particle centre
+    frozen : bool, hold the particles' positions and orientations
+    linear_solver : LinearSolver, newton : NewtonSettings, the flow's solvers
+
+    See :class:`~fbmflow.simulation.Simulation` for what each does; ValueError for a set-up that
+    cannot run (placement, mirror planes, a boundary or force the shapes do not support).
+    """
+
+    def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict, time_scheme: str,
+                 integrator: str, fbm: FictitiousBoundaryParams, contact: ContactParams | None,
+                 repulsion: RepulsionParams | None, symmetry: tuple, frozen: bool,
+                 linear_solver: LinearSolver, newton: NewtonSettings):
+        sharp = fbm.boundary == "sharp"
+        if sharp and not supports_sharp_boundary(particles.shapes):
+            raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
+                             "(Ball, Box, Cylinder); use fbm.boundary = 'nodes' for the others")
+        self.estimator = make_force_estimator(fbm.force)
+        self.estimator.check(particles.shapes, sharp)
+        self.sharp = sharp
+        self.symmetry, self.frozen, self.integrator = tuple(symmetry), bool(frozen), integrator
+        self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)
+        check_symmetry(mesh, particles, self.gravity, self.symmetry)
+        check_placement(mesh, particles, self.symmetry)
+        #: (dim,) the mean pressure gradient carrying a periodic suspension's weight [N/m^3]
+        self.drive = periodic_drive(mesh, particles, self.gravity, fluid.density, self.symmetry)
+        #: remove the mixture's mean volume flux after every step (a box periodic along every axis)
+        self.zero_flux = bool(np.any(self.drive)) and all(mesh.periodic) and not particles.fixed.any()
+        faces = walls(mesh, particles, self.symmetry)
+        self.contact = None if contact is None else contact.make(mesh, fluid.viscosity, faces)
+        self.contact_substeps = 1 if contact is None else contact.substeps
+        self.repulsion = None if repulsion is None else repulsion.make(mesh, faces)
+        self.time_scheme = time_scheme
+        self._pressure_lag = pressure_lag(time_scheme)
+        self.particles = particles.copy()
+        self.particles.position = wrap(mesh, self.particles.position)
+        self._geometry: ParticleGeometry | None = None
+        self._behind = None  # (centres, force rule) where the pressure's force is taken
+        self._wall_nodes = np.zeros(0, dtype=np.int64)  # set once the flow is made
+        drive = None if not np.any(self.drive) else (lambda x, t: np.broadcast_to(self.drive, x.shape))
+        self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
+                                        body_force=drive, linear_solver=linear_solver, newton=newton,
+                                        extra_constraints=self._own_constraints)
+        self.x = self.flow.zero_state()
+        self.t = 0.0
+        self.step_count = 0
+        # hydrodynamic force (n, dim) and torque (n, 3) at the end of the last step (None before
+        # the first: unknown, the fluid's reaction to the first acceleration is not zero)
+        self.last_force: np.ndarray | None = None
+        self.last_torque: np.ndarray | None = None
+        self.contact_report = None  # what contact did in the last integration with it
+        fixed = self.flow.fine.boundary_constraints.dofs  # velocity nodes the walls hold wholly
+        space = self.flow.space
+        self._wall_nodes = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
+        self._geometry = None  # made with the wall nodes from now on
+        self._warned_fast = 0.0  # the largest move in cells per step warned about (_warn_if_fast)
+
+    # -- the configuration ----------------------------------------------------------------------
+    def geometry(self) -> ParticleGeometry:
+        """The :class:`ParticleGeometry` of the particles' current configuration."""
+        if self._geometry is None or not self._geometry.describes(self.particles):
+            self._geometry = ParticleGeometry(self.flow.space, self.particles, self.sharp, self.estimator,
+                                              self._wall_nodes)
+        return self._geometry
+
+    def owner(self) -> np.ndarray:
+        """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
+        return self.geometry().owner(self.flow.space.V)
+
+    def _own_constraints(self, V, t):
+        """The flow's fictitious-boundary constraints: the particles' rigid motion with their own
+        velocities (a scheme that iterates on other velocities passes its own to the solve)."""
+        p = self.particles
+        return self.geometry().constraints(V, p.velocity, p.angular_velocity)
+
+    # -- what the coupling schemes use (fbmflow.coupling.schemes.CoupledProblem) -------------------
+    def flow_and_forces(self, dt: float, velocities: Particles | None = None, guess: np.ndarray | None = None,
+                        rtol: float | None = None, linear_rtol: float | None = None):
+        """Solve the flow over the step ``dt`` from the current state, the particles at their
+        current positions moving with the velocities of ``velocities`` (default: their own), from
+        the initial guess ``guess`` (n_dofs,) with Newton's residual reduction ``rtol`` (default:
+        the solver settings') and linear steps no tighter than ``linear_rtol`` (default: the
+        solver settings'). Returns ``(x (n_dofs,), Newton reports, force (n, dim), torque
+        (n, 3))``; the state itself is not changed."""
+        extra = None
+        if velocities is not None:
+            geometry = self.geometry()
+
+            def extra(V, t):
+                return geometry.constraints(V, velocities.velocity, velocities.angular_velocity)
+        x, reports = advance(self.flow, self.x, self.t, dt, self.time_scheme, guess, rtol, linear_rtol, extra)
+        force, torque = self.forces(x, dt)
+        return x, reports, force, torque
+
+    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
+        """New particle state under the hydrodynamic ``force (n, dim)`` and ``torque (n, 3)``, the
+        push of the periodic drive's pressure gradient on their volume (:attr:`drive`), the
+        repulsive forces (at the positions of the start of the step) and, with hard contact
+        (unless ``contact`` is False), the contact impulses; the state itself is not changed."""
+        previous = None  # the trapezoidal rule's forces at the start of the step (None: no history)
+        if self.last_force is not None:
+            previous = self.last_force, self.last_torque
+        extra = np.zeros_like(force)
+        if np.any(self.drive):  # the mean pressure gradient's push on the particles' volume
+            extra += np.where(self.particles.fixed[:, None], 0.0, self.particles.volume[:, None] * self.drive)
+        if self.repulsion is not None:
+            extra += self.repulsion.forces(self.particles, self.gravity, self.flow.rho)
+        if np.any(extra):
+            force = force + extra
+            if previous is not None:
+                previous = (previous[0] + extra, previous[1])
+        if self.contact is None or not contact:
+            return integrate(self.particles, force, torque, self.gravity, self.flow.rho, dt, self.integrator,
+                             previous)
+        lin, ang = accelerations(self.particles, force, torque, self.gravity, self.flow.rho)
+        new, self.contact_report = self.contact.advance(self.particles, lin, ang, dt, self.contact_substeps)
+        return new
+
+    def repulsion_stiffness(self) -> sp.csr_matrix | None:
+        """The repulsive forces' change with the positions at the start of the step,
+        ``(n dim, n dim)`` (:meth:`~fbmflow.contact.Repulsion.stiffness`); None when the repulsion
+        is off or the particles are frozen (their positions do not change)."""
+        if self.repulsion is None or self.frozen:
+            return None
+        return self.repulsion.stiffness(self.particles, self.gravity, self.flow.rho)
+
+    def velocity_gain(self, dt: float) -> np.ndarray:
+        """``d v_new / d f`` of :meth:`integrate` over ``dt`` (:func:`~fbmflow.particles.velocity_gain`),
+        (n, r, r) float64."""
+        return velocity_gain(self.particles, dt, self.integrator, history=self.last_force is not None)
+
+    def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float, motions: np.ndarray | None = None,
+                        rtol: float | None = None):
+        """The flow's linear response to a unit rigid motion of every free component and its
+        force: ``free (n, r)`` bool selects the ``k`` generalised velocity components; returns
+        ``dX (k, n_dofs)``, ``dF (k, n, dim)`` and ``dT (k, n, 3)`` about the flow ``x`` solved
+        last (:meth:`~fbmflow.flow.NavierStokesProblem.lifting_response`). With ``motions
+        (m, k)``, the responses to those ``m`` combinations of the unit motions instead (one
+        linear solve each, to ``rtol`` where the linear solver takes one): ``dX (m, n_dofs)``,
+        ``dF (m, n, dim)``, ``dT (m, n, 3)``."""
+        p, space, geometry = self.particles, self.flow.space, self.geometry()
+        sharp = geometry.sharp(space.V)
+        W = rigid_liftings(space.V, geometry.owner(space.V), p.position, free)
+        row_liftings = None if sharp is None else sharp.ghosts.liftings(free)
+        if motions is not None:
+            W = sp.csc_matrix(W @ motions.T)
+            row_liftings = None if row_liftings is None else sp.csc_matrix(row_liftings @ motions.T)
+        dX = self.flow.lifting_response(x, W, row_liftings, rtol)
+        dF, dT = self._response_forces(dX, dt, about=x)
+        return dX, dF, dT
+
+    def own_stiffness(self, x: np.ndarray, free: np.ndarray, dt: float, added_mass: float) -> np.ndarray:
+        """Each particle's generalised force on its own generalised velocity, estimated locally
+        about the flow ``x``: ``S (n, r, r)``, ``S[i, a, b] ~ d f_ia / d v_ib`` for the True entries
+        of ``free (n, r)`` (zero elsewhere).
+
+        Two parts, neither needing a flow solve: the force of the particle's own unit rigid
+        motions on its nodes with the rest of the flow held at zero (the viscous stress across
+        its cut cells: :meth:`~fbmflow.coupling.forces.ForceFunctional.own_response`, one sparse
+        product for all particles), and ``added_mass`` times the potential-flow added mass of a
+        ball, ``-C rho_f V_i / dt`` on the translations with ``C = 1`` for a disk and ``1/2``
+        for a sphere (the ball's value for every shape), which the held flow (no pressure) leaves
+        out (how close the sum comes to the exact blocks: docs/validation.md, "Many particles")."""
+        p, space, geometry = self.particles, self.flow.space, self.geometry()
+        W = rigid_liftings(space.V, geometry.owner(space.V), p.position, free)
+        S = self.estimator.own_response(geometry.rule(), W, free, self.flow.mu, self.flow.rho, dt=dt,
+                                        about=x[:space.n_u])
+        if self.symmetry:  # whole particles on mirror planes: the images' forces, column by column
+            d = p.dim
+            rows = S[:, d:, :].transpose(2, 0, 1)  # (r, n, 1) in 2D (z), (r, n, 3) in 3D
+            torque = np.zeros(rows.shape[:2] + (3,))
+            torque[..., 3 - rows.shape[-1]:] = rows
+            force, torque = mirror_images(S[:, :d, :].transpose(2, 0, 1), torque, self.symmetry)
+            S = np.concatenate([force, torque[..., 2:] if d == 2 else torque], axis=2).transpose(1, 2, 0)
+        idx = np.arange(p.dim)
+        potential = 1.0 if p.dim == 2 else 0.5
+        S[:, idx, idx] -= added_mass * potential * self.flow.rho * p.volume[:, None] / dt
+        return np.where(free[:, :, None] & free[:, None, :], S, 0.0)
+
+    # -- forces ---------------------------------------------------------------------------------
+    def forces(self, x: np.ndarray, dt: float, about: np.ndarray | None = None):
+        """Hydrodynamic force (n, dim) and torque (n, 3) of the whole particles for the flow ``x``
+        at the end of a step of length ``dt`` from ``self.x``, by the force estimator; with
+        ``about`` (a flow), ``x`` is a change of that flow and the result the force's change
+        (linear in ``x``).
+
+        Estimators that allow it (``lags_pressure``) take the pressure's part where the pressure
+        belongs: on the particles moved back by ``lag dt U`` (``lag``:
+        :func:`~fbmflow.flow.time_schemes.pressure_lag`, one half with Crank–Nicolson; ``U`` the
+        velocities at the step's start: ``dt U`` is the last step's displacement to first order;
+        docs/method.md, "The pressure's time level"). Rotation is left out of the lag (none for
+        balls).
+        """
+        n_u = self.flow.space.n_u
+        u, p = x[:n_u], x[n_u:]
+        u_old, linear = (self.x[:n_u], None) if about is None else (None, about[:n_u])
+        est, mu, rho = self.estimator, self.flow.mu, self.flow.rho
+        here = self.geometry().rule()
+        behind = self._rule_lagged(dt)
+        if behind is None:
+            force, torque = est.evaluate(here, u, p, mu, rho, u_old=u_old, dt=dt, about=linear)
+        else:
+            force, torque = est.evaluate(here, u, None, mu, rho, u_old=u_old, dt=dt, about=linear)
+            force_p, torque_p = est.evaluate(behind, None, p, mu, rho, u_old=u_old, dt=dt, about=linear)
+            force, torque = force + force_p, torque + torque_p
+        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
+    def _response_forces(self, dX: np.ndarray, dt: float, about: np.ndarray):
+        """:meth:`forces` of the ``k`` flow responses ``dX (k, n_dofs)`` about the flow ``about``:
+        force (k, n, dim) and torque (k, n, 3), all responses and particles in one evaluation
+        (``evaluate_many`` of the estimator)."""
+        n_u, pt = self.flow.space.n_u, self.particles
+        if len(dX) == 0:
+            return np.zeros((0, pt.n, pt.dim)), np.zeros((0, pt.n, 3))
+        U, P = dX[:, :n_u], dX[:, n_u:]
+        est, mu, rho = self.estimator, self.flow.mu, self.flow.rho
+        here = self.geometry().rule()
+        behind = self._rule_lagged(dt)
+        if behind is None:
+            force, torque = est.evaluate_many(here, U, P, mu, rho, dt=dt, about=about[:n_u])
+        else:
+            force, torque = est.evaluate_many(here, U, None, mu, rho, dt=dt, about=about[:n_u])
+            force_p, torque_p = est.evaluate_many(behind, None, P, mu, rho, dt=dt, about=about[:n_u])
+            force, torque = force + force_p, torque + torque_p
+        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
+    def _rule_lagged(self, dt: float):
+        """The estimator's rule where the pressure of a step of length ``dt`` belongs; None where
+        that is where the particles are (an estimator that does not lag the pressure, a time
+        scheme without lag, particles at rest). See :meth:`forces`."""
+        p = self.particles
+        if not self.estimator.lags_pressure or self._pressure_lag == 0.0 or not np.any(p.velocity):
+            return None
+        centres = p.position - self._pressure_lag * dt * p.velocity
+        if self._behind is None or not np.array_equal(self._behind[0], centres):
+            rule = self.estimator.prepare(self.flow.space, centres, p.shapes, p.rotations(),
+                                          walls=self._wall_nodes)
+            self._behind = (centres.copy(), rule)
+        return self._behind[1]
+
+    # -- the step's end -------------------------------------------------------------------------
+    def commit(self, solved: CoupledFlow, new: Particles, dt: float) -> np.ndarray | None:
+        """End the step of length ``dt``: the flow ``solved.x``, the particles ``new`` (held in
+        place when frozen, wrapped into a periodic box), uncovered ghost nodes set to the solid's
+        velocity (sharp boundary), the mixture's mean flux removed (:attr:`zero_flux`), the step's
+        forces kept for the next (the trapezoidal rule's history), the time and step count
+        advanced. ConvergenceError when the state is not finite. Returns the mean velocity
+        removed, (dim,) float64, or None."""
+        if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(solved.x))):
+            raise ConvergenceError("non-finite state")
+        if self.frozen:
+            new.position, new.orientation = self.particles.position.copy(), self.particles.orientation.copy()
+        sharp = self.geometry().sharp(self.flow.space.V)  # of the positions the flow was solved with
+        self._warn_if_fast(new.position - self.particles.position, dt)
+        new.position = wrap(self.flow.mesh, new.position)
+        self.x, self.particles = solved.x, new
+        if sharp is not None:  # uncovered ghost nodes start the next step with the solid's velocity
+            dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
+                                                  new.angular_velocity)
+            self.x[dofs] = values
+        shift = self._remove_mean_flux() if self.zero_flux else None
+        self.last_force, self.last_torque = solved.force, solved.torque
+        self.t += dt
+        self.step_count += 1
+        return shift
+
+    def _remove_mean_flux(self) -> np.ndarray:
+        """Subtract the mixture's mean velocity (:func:`~fbmflow.fem.functions.mean_velocity`, the
+        volume flux per unit area) from the flow and the particles: a Galilean change of frame,
+        exact in a fully periodic box. Returns the velocity removed, (dim,) float64.
+
+        The drive carries the particles' weight exactly, so the flux would stay zero, but the
+        particles move under the estimated hydrodynamic force, whose error the fluid does not
+        feel: momentum leaks at that rate, and without this the mixture would drift without
+        bound (docs/validation.md, "Periodic suspensions")."""
+        space = self.flow.space
+        shift = mean_velocity(space, self.x[:space.n_u])
+        self.x[:space.n_u] -= np.repeat(shift, space.n_v)
+        self.particles.velocity = self.particles.velocity - shift
+        return shift
+
+    def _warn_if_fast(self, moved: np.ndarray, dt: float) -> None:
+        """Warn when a step moves a particle more than a finest cell (the fictitious boundary
+        jumps over velocity nodes, and forces and contact lose accuracy), and again each time
+        the largest such move doubles."""
+        if moved.size == 0:
+            return
+        cells = np.linalg.norm(moved, axis=1) / float(np.min(self.flow.mesh.finest_spacing))
+        k = int(np.argmax(cells))
+        if cells[k] > max(1.0, 2.0 * self._warned_fast):
+            self._warned_fast = float(cells[k])
+            log.warning("step %d moved particle %d by %.1f cells; forces and contact lose accuracy above "
+                        "about one cell per step: reduce the time step (dt = %.3g s) to %.3g s or less",
+                        self.step_count + 1, k, cells[k], dt, dt / cells[k])
+
+    # -- restarts -------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """Everything a restart of the system needs, as arrays and numbers: flow ``x``, time, step
+        count, the particles' positions, velocities, orientations, angular velocities, densities,
+        fixed flags, the last step's forces and the contact warm-start impulses. (The shapes come
+        from the set-up.)"""
+        p = self.particles
+        out = {"x": self.x.copy(), "t": self.t, "step_count": self.step_count,
+               "position": p.position.copy(), "velocity": p.velocity.copy(),
+               "orientation": p.orientation.copy(), "angular_velocity": p.angular_velocity.copy(),
+               "density": p.density.copy(), "fixed": p.fixed.copy()}
+        if self.last_force is not None:  # the trapezoidal rule's force history (none before step 1)
+            out.update(last_force=self.last_force.copy(), last_torque=self.last_torque.copy())
+        if self.contact is not None:
+            out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
+        return out
+
+    def set_state(self, state: dict) -> None:
+        """Restore :meth:`state`; ValueError when it does not fit this system."""
+        p = self.particles
+        if np.shape(state["x"]) != self.x.shape or np.shape(state["position"]) != p.position.shape:
+            raise ValueError(f"state of {np.shape(state['position'])[0]} particles and "
+                             f"{np.size(state['x'])} unknowns does not fit this simulation "
+                             f"({p.n} particles, {self.x.size} unknowns)")
+        if (self.contact is not None) != ("contact_keys" in state):
+            raise ValueError("the state and this simulation disagree on hard contact")
+        self.x = np.array(state["x"], dtype=float)
+        self.t, self.step_count = float(state["t"]), int(state["step_count"])
+        for name in ("position", "velocity", "orientation", "angular_velocity", "density"):
+            setattr(p, name, np.array(state[name], dtype=float))
+        p.fixed = np.array(state["fixed"], dtype=bool)
+        if "last_force" in state:
+            self.last_force = np.array(state["last_force"], dtype=float)
+            self.last_torque = np.array(state["last_torque"], dtype=float)
+        elif self.integrator == "trapezoidal" and self.step_count > 0:
+            raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
+        else:
+            self.last_force = self.last_torque = None
+        if self.contact is not None:
+            self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
+                                    if k.startswith("contact_")})
+        self._geometry = None
+        self.flow.forget_linearisation()

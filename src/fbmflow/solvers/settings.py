@@ -1,0 +1,60 @@
+"""The solver settings a scene or a :class:`~fbmflow.simulation.Simulation` takes: Newton and the
+linear solver (:class:`SolverParams`, with its multigrid table ``[solver.multigrid]``)."""
+from __future__ import annotations
+
+import dataclasses
+
+from ..config import Section, param, section
+from .base import LinearSolver
+from .choice import choose_linear_solver
+from .multigrid import MultigridSettings
+from .newton import NewtonSettings
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverParams(Section):
+    """Nonlinear and linear solver settings."""
+
+    renamed = {f"mg_{key}": f"multigrid.{key}" for key in ("cycle", "smoother", "coarse_obstacle", "krylov",
+                                                           "linearisation", "sweeps")}
+    renamed["mg_smoothing_steps"] = "multigrid.pre_smooth and multigrid.post_smooth"
+
+    linear: str = param("auto", "linear solver for the Newton systems ('auto': the cheaper of the two by "
+                        "measured cost for the size, the accuracy asked and the coupling's responses, "
+                        "among those whose memory fits; fbmflow.solvers.choice)",
+                        choices=("auto", "direct", "multigrid"))
+    linear_rtol: float = param(1e-8, "relative residual per linear solve (multigrid: its stopping "
+                               "rule; direct with PARDISO: its refinement target in Newton steps)",
+                               positive=True, maximum=0.1)
+    multigrid: MultigridSettings = section(MultigridSettings)
+    newton_rtol: float = param(1e-10, "Newton stop: residual reduction", positive=True, maximum=1.0)
+    newton_atol: float = param(1e-12, "Newton stop: absolute residual", positive=True)
+    newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
+    newton_reuse_jacobian: bool = param(True, "keep a factorised Jacobian while it contracts the "
+                                        "residual 10x per iteration (same solution, less work)")
+
+    def linear_solver(self, dim: int, n_unknowns: int, responses: int = 0) -> LinearSolver:
+        """The linear solver for a ``dim``-dimensional flow of ``n_unknowns``, ``"auto"`` resolved
+        with ``responses`` right-hand sides per step besides the Newton steps
+        (:func:`~fbmflow.solvers.choice.choose_linear_solver`)."""
+        return choose_linear_solver(dim, n_unknowns, self.linear_rtol, self.linear, self.multigrid, responses)
+
+    def newton_settings(self) -> NewtonSettings:
+        """The Newton stopping rule and Jacobian reuse of these settings."""
+        return NewtonSettings(rtol=self.newton_rtol, atol=self.newton_atol,
+                              max_iterations=self.newton_max_iterations,
+                              reuse_jacobian=self.newton_reuse_jacobian, linear_rtol=self.linear_rtol)
+
+
+@dataclasses.dataclass(frozen=True)
+class SteadySolverParams(SolverParams):
+    """Solver settings of a steady Newton solve: inexact Newton steps (the stopping rule is on the
+    nonlinear residual, so the accuracy is Newton's; measured cost: docs/validation.md)."""
+
+    linear_rtol: float = param(1e-2, "relative residual per linear solve (inexact Newton steps; the "
+                               "Newton stop on the nonlinear residual decides the accuracy; multigrid: "
+                               "at most this, tighter near the solution by Eisenstat-Walker)",
+                               positive=True, maximum=0.1)
+    continuation_rtol: float = param(1e-3, "Newton stop of the intermediate steady solves of a continuation "
+                                     "(they only start the next one; the last solves to newton_rtol)",
+                                     positive=True, maximum=1.0)
