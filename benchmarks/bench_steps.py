@@ -28,8 +28,8 @@ from pathlib import Path
 
 from fbmflow.config import from_dict, parse_value, set_dotted
 from fbmflow.io import load_checkpoint
+from fbmflow.run import RunFiles
 from fbmflow.scenes import get_scene
-from fbmflow.scenes.base import RunFiles
 from fbmflow.solvers import DirectSolver
 from fbmflow.solvers.direct import PardisoAnalysis
 

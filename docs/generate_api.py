@@ -34,7 +34,7 @@ GROUPS = [
      "The scene library behind the command line, the benchmarks and the examples; its reference data "
      "(digitised curves and tables) are the modules `fbmflow.scenes.data.koblitz2017`, "
      "`fbmflow.scenes.data.tencate2002` and `fbmflow.scenes.data.ghia1982`.",
-     ["SCENES", "get_scene", "load_scene", "run_scene"]),
+     ["SCENES", "get_scene", "load_scene", "run_scene", "resume"]),
 ]
 
 

@@ -139,13 +139,34 @@ def test_plot_of_a_damaged_summary_exits_2(tmp_path, capsys):
     assert "does not hold what" in capsys.readouterr().err
 
 
-def test_progress_eta_of_a_resumed_run_counts_only_the_steps_it_made(capsys, monkeypatch):
-    """A run resumed at step 25 of 130 that took 10 s per step since: the ETA is 10 s per
-    remaining step, not the elapsed time spread over all 27 steps."""
-    from fbmflow import cli
-    clock = iter([0.0, 10.0, 20.0])
-    monkeypatch.setattr(cli.time, "perf_counter", lambda: next(clock))
-    report = cli._progress(quiet=False)
-    report(26, 130, 0.26)
-    report(27, 130, 0.27)
-    assert capsys.readouterr().err.rstrip().endswith("eta 1030.0 s")
+def test_progress_writes_lines_where_no_terminal_reads_them():
+    """A log file gets plain lines, at most one every ``every`` seconds, and always the last."""
+    import io
+
+    from fbmflow.run import Progress
+
+    log = io.StringIO()
+    progress = Progress(every=1e9, stream=log)
+    for step in range(26, 131):
+        progress(step, 130, step * 0.01, {"newton": 3, "max|U|": 0.25})
+    lines = log.getvalue().splitlines()
+    assert lines == ["step 26/130  t = 0.26  newton 3  max|U| 0.25",
+                     "step 130/130  t = 1.3  newton 3  max|U| 0.25"]
+
+
+def test_progress_on_a_terminal_is_a_bar_that_starts_where_a_resumed_run_does():
+    """tqdm, started at the resumed step: its rate and ETA count only the steps this run made."""
+    import io
+
+    from fbmflow.run import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    screen = Terminal()
+    progress = Progress(stream=screen)
+    progress(26, 130, 0.26, {"newton": 3})
+    assert progress.bar.n == 26 and progress.bar.initial == 25
+    progress(130, 130, 1.3, {"newton": 2})
+    assert "130/130" in screen.getvalue() and "newton=2" in screen.getvalue()

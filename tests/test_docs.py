@@ -35,9 +35,13 @@ def _tutorial_examples() -> list[str]:
     return re.findall(r"```python\n(.*?)```", (DOCS / "tutorial.md").read_text(), re.S)
 
 
-def test_tutorial_ball_example_runs_as_written_and_settles(capsys):
+def test_tutorial_ball_example_runs_as_written_and_settles(capsys, tmp_path, monkeypatch):
     """The first example, exactly as printed (it is the README's too): the disk reaches its
-    terminal velocity, where the drag balances the net weight."""
+    terminal velocity, where the drag balances the net weight; its folder holds every step and
+    the checkpoints."""
+    import h5py
+
+    monkeypatch.chdir(tmp_path)
     namespace: dict = {}
     exec(_tutorial_examples()[0], namespace)
     last, weight = namespace["last"], namespace["net_weight"]
@@ -45,6 +49,9 @@ def test_tutorial_ball_example_runs_as_written_and_settles(capsys):
     assert 5.0 < -last.velocity[0, 1] < 6.5  # cm/s: Re 12.5 to 16 (Koblitz et al.: 14.0)
     assert abs(last.force[0, 1] / weight - 1.0) < 0.02
     assert "settling at" in capsys.readouterr().out
+    with h5py.File(tmp_path / "out" / "disk" / "run.h5") as f:
+        assert f["step"].shape == (51,) and f["velocity"][-1, 0, 1] == last.velocity[0, 1]
+    assert (tmp_path / "out" / "disk" / "checkpoint.h5").is_file()
 
 
 def test_readme_example_is_the_tutorials_first():

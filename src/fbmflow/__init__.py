@@ -9,7 +9,7 @@ __version__ = "0.1.0"
 
 _API = {
     "Simulation": "fbmflow.simulation",
-    "StepReport": "fbmflow.simulation",
+    "StepReport": "fbmflow.coupling.system",
     "InsufficientMemory": "fbmflow.solvers.choice",
     "FluidParams": "fbmflow.params",
     "TimeParams": "fbmflow.params",
@@ -45,6 +45,7 @@ _API = {
     "get_scene": "fbmflow.scenes",
     "load_scene": "fbmflow.scenes",
     "run_scene": "fbmflow.scenes",
+    "resume": "fbmflow.scenes",
 }
 
 __all__ = ["__version__", *_API]

@@ -14,10 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import signal
 import sys
-import threading
-import time
 from pathlib import Path
 
 from . import __version__
@@ -62,66 +59,15 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _progress(quiet: bool):
-    """A one-line progress bar on stderr: step, simulated time, elapsed time and ETA, and what the
-    scene reports about the step (Newton iterations, linear cycles, fastest particle)."""
-    if quiet:
-        return None
-    start = time.perf_counter()
-    width = 20
-    before = []  # the steps done before the first report (a resumed run starts past 0)
-
-    def report(step: int, n: int, t: float | None, info: dict | None = None) -> None:
-        elapsed = time.perf_counter() - start
-        if not before:
-            before.append(step - 1)
-        eta = elapsed / max(step - before[0], 1) * (n - step)
-        done = int(width * step / n)
-        where = f"t = {t:.4g}" if t is not None else "steady stage"
-        extra = "".join(f"  {k} {v:.3g}" if isinstance(v, float) else f"  {k} {v}"
-                        for k, v in (info or {}).items())
-        sys.stderr.write(f"\r  [{'#' * done}{'.' * (width - done)}] {step}/{n}  {where}{extra}  "
-                         f"elapsed {elapsed:.1f} s  eta {eta:.1f} s ")
-        if step == n:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-    return report
-
-
-def _stop_on_signals():
-    """Ctrl-C and SIGTERM ask the run to stop after the step under way (it then saves a
-    checkpoint); a second one aborts at once. Returns the ``stop`` callable for ``run_scene`` and
-    a callable that restores the previous handlers."""
-    asked = []
-
-    def handler(signum, frame):
-        if asked:
-            raise KeyboardInterrupt
-        asked.append(signum)
-        sys.stderr.write(f"fbmflow: {signal.Signals(signum).name}: stopping after this step "
-                         "(again to abort at once)\n")
-
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, handler)
-
-    def restore():
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-    return (lambda: bool(asked)), restore
-
-
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
                         format="%(message)s", stream=sys.stderr)
     from .io import CheckpointError
-    from .scenes import SCENES, get_scene, load_scene, resume_scene, run_scene
-    from .scenes.base import RunInterrupted
-    from .scenes.registry import output_directory
+    from .run import Progress, RunInterrupted, output_folder
+    from .scenes import SCENES, get_scene, load_scene, resume, run_scene
 
-    restore = None
+    progress = None if getattr(args, "quiet", False) else Progress()
     try:
         if args.command == "scenes":
             for name, scene in SCENES.items():
@@ -147,18 +93,20 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "resume":
             out = args.directory
             log.info("fbmflow %s: resuming %s", __version__, out)
-            stop, restore = _stop_on_signals()
-            summary = resume_scene(out, _progress(args.quiet), plot=not args.no_plot, stop=stop)
+            summary = resume(out, progress, plot=not args.no_plot)
+            if not isinstance(summary, dict):  # a run of the Python API: no summary of its own
+                log.info("done: t = %.6g after %d steps; run data in %s", summary.t, summary.step_count,
+                         out / "run.h5")
+                return 0
         else:
             if args.checkpoint_every < 0 or args.fields_every < 0:
                 raise ParamError("--checkpoint-every and --fields-every must be >= 0")
             scene, params, level = load_scene(args.scene, args.level, args.overrides)
-            out = Path("fbmflow-out") / scene.name if args.out is None else output_directory(args.out)
+            out = Path("fbmflow-out") / scene.name if args.out is None else output_folder(args.out)
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
-            stop, restore = _stop_on_signals()
-            summary = run_scene(scene, params, level, out, _progress(args.quiet), plot=not args.no_plot,
+            summary = run_scene(scene, params, level, out, progress, plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
-                                fields_format=args.fields_format, stop=stop)
+                                fields_format=args.fields_format)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations (%s); summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], summary.get("linear_solver") or "linear solver not recorded",
@@ -177,9 +125,6 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: refine the mesh (--level), reduce the "
                          "time step, or relax solver.newton_rtol.\n")
         return 1
-    finally:
-        if restore is not None:
-            restore()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -12,50 +12,26 @@ memory (:func:`~fbmflow.solvers.choice.check_memory`) before anything is assembl
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .contact import ContactReport
+from . import __version__
 from .contact.settings import ContactParams, RepulsionParams
 from .coupling import make_coupling
 from .coupling.schemes import auto_coupling
 from .coupling.settings import CouplingParams, FictitiousBoundaryParams
-from .coupling.system import CoupledSystem
+from .coupling.system import CoupledSystem, StepReport
 from .fem import FlowSpace
 from .fem.functions import sample_pressure, sample_velocity
 from .flow import NoSlip
+from .io import load_checkpoint
 from .params import FluidParams, TimeParams
 from .particles import Particles
+from .run import Progress, RunFiles, output_folder, run_loop, write_run_info
 from .solvers import ConvergenceError
 from .solvers.choice import check_memory
-from .solvers.reports import LinearWork
 from .solvers.settings import SolverParams
-
-
-@dataclass
-class StepReport:
-    """What one time step did.
-
-    force : (n, dim) float64 and torque : (n, 3) float64, the hydrodynamic force and torque on
-    every particle at the step's end; position, velocity : (n, dim) float64, the particles' new
-    centres and velocities; newton_iterations : over all flow solves of the step.
-    """
-
-    step: int
-    t: float
-    newton_iterations: int
-    force: np.ndarray
-    torque: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    flow_solves: int = 1  # flow solves of the coupling iteration (1 for the explicit coupling)
-    contact: ContactReport | None = None  # what the contact solver did (None without contact)
-    linear: LinearWork = dataclasses.field(default_factory=LinearWork)  # the step's linear solves
-    # (Newton steps and the coupling's lifting responses)
-    flux_correction: np.ndarray | None = None  # (dim,) the mean volume flux removed at the step's end
-    # (a fully periodic suspension; None otherwise)
 
 
 class Simulation:
@@ -143,6 +119,10 @@ class Simulation:
                 expected = cls.__name__ if isinstance(cls, type) else f"{cls[0].__name__} or None"
                 raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
                                 f"make it with {expected.split()[0]}(...) or fbmflow.config.from_dict")
+        #: the arguments this simulation was made with (what :func:`fbmflow.resume` makes it again from)
+        self._setup = dict(mesh=mesh, particles=particles.copy(), fluid=fluid, boundary=boundary, time=time,
+                           solver=solver, coupling=coupling, fbm=fbm, contact=contact, repulsion=repulsion,
+                           symmetry=tuple(symmetry), frozen=frozen)
         contact = contact if contact is not None and contact.enabled else None
         if contact is not None and coupling.integrator != "semi-implicit-euler":
             raise ValueError("hard contact advances the particles by semi-implicit Euler; integrator "
@@ -157,13 +137,12 @@ class Simulation:
         responses = self.coupling.stored_responses(particles, tuple(symmetry))
         linear = solver.linear_solver(mesh.dim, n_unknowns, responses)
         check_memory(n_unknowns, mesh.dim, linear, responses)
-        #: the coupled flow and particles and their state
         boundary = {t: NoSlip() for t in mesh.tags} if boundary is None else boundary
-        self.system = CoupledSystem(
-            mesh, particles, fluid, boundary=boundary,
-            time_scheme=time.scheme, integrator=coupling.integrator, fbm=fbm, contact=contact,
-            repulsion=repulsion, symmetry=symmetry, frozen=frozen, linear_solver=linear,
-            newton=solver.newton_settings())
+        #: the coupled flow and particles and their state
+        self.system = CoupledSystem(mesh, particles, fluid, boundary=boundary, time_scheme=time.scheme,
+                                    integrator=coupling.integrator, fbm=fbm, contact=contact,
+                                    repulsion=repulsion, symmetry=symmetry, frozen=frozen,
+                                    linear_solver=linear, newton=solver.newton_settings())
 
     # -- the state ------------------------------------------------------------------------------
     @property
@@ -259,15 +238,30 @@ class Simulation:
         self.coupling.set_state(state)
 
     # -- stepping -------------------------------------------------------------------------------
-    def run(self, callback=None) -> list[StepReport]:
-        """Step from the current step to ``time.t_end`` in steps of :attr:`dt`; ``callback(report)``
-        after every step. Returns the steps' reports; ConvergenceError names a failing step."""
-        reports = []
-        for _ in range(self.step_count, self.n_steps):
-            reports.append(self.step(self.dt))
-            if callback is not None:
-                callback(reports[-1])
-        return reports
+    def run(self, out=None, *, checkpoint_every: int = 0, fields_every: int = 0, fields_format: str = "xdmf",
+            resume: bool = False, progress: bool = False, callback=None) -> list[StepReport]:
+        """Step from the current step to ``time.t_end`` in steps of :attr:`dt`; returns the steps'
+        reports (ConvergenceError names a failing step).
+
+        With an output folder ``out`` the run writes ``run.h5`` (a row per step), a checkpoint
+        every ``checkpoint_every`` steps (and on a failed step, Ctrl-C or SIGTERM), ParaView
+        output every ``fields_every`` steps, and its set-up (``setup.pickle``), so that
+        :func:`fbmflow.resume` continues it bit-exactly (:func:`fbmflow.run.run_loop`). ``resume``:
+        continue from ``out``'s checkpoint instead (this simulation made as the run's was).
+        ``progress``: show progress on stderr; ``callback(report)`` after every step.
+        """
+        files, resumed = None, None
+        if out is not None:
+            files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,
+                             {"kind": "simulation", "fbmflow_version": __version__})
+            if resume:
+                state, _, resumed = load_checkpoint(files.out / "checkpoint.h5", expect=files.meta)
+                self.set_state(state)
+            else:
+                write_run_info(files, setup=self._setup)
+        result = run_loop(self, self.n_steps, self.dt, files, callback=callback, resumed=resumed,
+                          progress=Progress() if progress else None)
+        return result.reports
 
     def step(self, dt: float | None = None) -> StepReport:
         """Advance flow and particles over ``dt`` [s] (default :attr:`dt`) by the coupling

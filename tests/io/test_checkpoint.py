@@ -139,24 +139,83 @@ def test_damaged_or_missing_run_data_and_a_bad_level_are_refused(tmp_path, capsy
 def test_an_interrupted_run_saves_its_step_and_resumes(tmp_path, capsys, monkeypatch):
     """Ctrl-C / SIGTERM stop the run after the step under way: a checkpoint of that step, one
     line naming it and the resume command, exit 130; resume then finishes the run."""
-    import fbmflow.cli as cli
+    from fbmflow import run
 
-    stop, restore = cli._stop_on_signals()
-    try:
-        assert not stop()
+    before = signal.getsignal(signal.SIGTERM)
+    with run._Signals() as signals:
+        assert not signals.asked
         os.kill(os.getpid(), signal.SIGTERM)  # the handler only records it
-        assert stop()
-    finally:
-        restore()
+        assert signals.asked == [signal.SIGTERM]
+    assert signal.getsignal(signal.SIGTERM) is before  # restored after the loop
     assert "SIGTERM: stopping after this step" in capsys.readouterr().err  # at once: a step can be long
-    monkeypatch.setattr(cli, "_stop_on_signals", lambda: ((lambda: True), (lambda: None)))
+
+    class Asked(run._Signals):  # a signal during the first step
+        def __enter__(self):
+            super().__enter__()
+            self.asked.append(signal.SIGTERM)
+            return self
+
+    monkeypatch.setattr(run, "_Signals", Asked)
     args = ["glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
             "--quiet", "--no-plot"]
     assert main(["run", *args, "--out", str(tmp_path)]) == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "interrupted at step 1" in err[0] and f"fbmflow resume {tmp_path}" in err[0]
     assert _checkpoint_step(tmp_path / "checkpoint.h5") == 1
-    monkeypatch.setattr(cli, "_stop_on_signals", lambda: ((lambda: False), (lambda: None)))
+    monkeypatch.undo()
     assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 0
     with h5py.File(tmp_path / "run.h5") as f:
         assert np.array_equal(f["step"][()], np.arange(7))
+
+
+def _disk_simulation(t_end=0.08):
+    """The README's settling disk, shorter and coarser."""
+    import fbmflow as fb
+
+    mesh = fb.StructuredMesh.box((8, 24), upper=(2.0, 6.0))
+    disk = fb.Particles.at_rest([fb.Ball(0.125, dim=2)], density=1.25, position=[[1.0, 4.0]])
+    return fb.Simulation(mesh, disk, fb.FluidParams(density=1.0, viscosity=0.1, gravity=980.0),
+                         time=fb.TimeParams(dt=0.01, t_end=t_end, scheme="crank-nicolson"),
+                         coupling=fb.CouplingParams(integrator="trapezoidal"))
+
+
+def test_a_script_s_run_resumes_bit_exactly_from_its_folder(tmp_path):
+    """``sim.run(out, checkpoint_every=3)`` stopped after step 5 (the checkpoint of step 3 is the
+    last) and ``fbmflow.resume(out)`` end where the uninterrupted run ends, to the last bit, and
+    ``run.h5`` holds each step once."""
+    import fbmflow as fb
+
+    whole = _disk_simulation()
+    whole.run(tmp_path / "whole", checkpoint_every=3)
+
+    def crash(report):
+        if report.step == 5:
+            raise RuntimeError("killed")
+
+    with pytest.raises(RuntimeError, match="killed"):
+        _disk_simulation().run(tmp_path / "stopped", checkpoint_every=3, callback=crash)
+    assert _checkpoint_step(tmp_path / "stopped" / "checkpoint.h5") == 3
+    resumed = fb.resume(tmp_path / "stopped")
+    assert resumed.step_count == whole.step_count == 8
+    assert np.array_equal(resumed.x, whole.x)
+    assert np.array_equal(resumed.particles.velocity, whole.particles.velocity)
+    with h5py.File(tmp_path / "stopped" / "run.h5") as f, h5py.File(tmp_path / "whole" / "run.h5") as g:
+        assert np.array_equal(f["step"][()], np.arange(9))
+        assert np.array_equal(f["velocity"][()], g["velocity"][()])
+
+
+def test_a_script_s_run_without_a_stored_set_up_says_how_to_resume(tmp_path, caplog):
+    """A set-up pickle cannot hold (a lambda as a boundary value): the run warns, and
+    ``fbmflow.resume`` names the way that works, which then does."""
+    import fbmflow as fb
+
+    sim = _disk_simulation(0.03)
+    sim._setup["boundary"] = {"unpicklable": lambda x: x}  # what a script's lambda would be
+    with caplog.at_level("WARNING"):
+        sim.run(tmp_path, checkpoint_every=1)
+    assert "cannot be stored" in caplog.text
+    with pytest.raises(fb.ParamError, match=r"call sim.run\(.*resume=True\)"):
+        fb.resume(tmp_path)
+    again = _disk_simulation(0.03)
+    again.run(tmp_path, checkpoint_every=1, resume=True)
+    assert again.step_count == 3

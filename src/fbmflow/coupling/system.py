@@ -17,11 +17,13 @@ configuration: the positions do not change during a step's flow solves and coupl
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..contact import ContactReport
 from ..contact.settings import ContactParams, RepulsionParams
 from ..fem.constraints import DirichletConstraints
 from ..fem.functions import mean_velocity
@@ -31,6 +33,7 @@ from ..params import FluidParams
 from ..particles import Particles, accelerations, integrate, velocity_gain
 from ..solvers import ConvergenceError, NewtonSettings
 from ..solvers.base import LinearSolver
+from ..solvers.reports import LinearWork
 from .estimators import make_force_estimator
 from .forces import mirror_images
 from .indicator import node_owner, rigid_body_constraints, rigid_liftings
@@ -40,6 +43,31 @@ from .settings import FictitiousBoundaryParams
 from .sharp import sharp_boundary, supports_sharp_boundary
 
 log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class StepReport:
+    """What one time step did.
+
+    force : (n, dim) float64 and torque : (n, 3) float64, the hydrodynamic force and torque on
+    every particle at the step's end; position, velocity : (n, dim) float64, the particles' new
+    centres and velocities; newton_iterations : over all flow solves of the step.
+    """
+
+    step: int
+    t: float
+    newton_iterations: int
+    force: np.ndarray
+    torque: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    flow_solves: int = 1  # flow solves of the coupling iteration (1 for the explicit coupling)
+    contact: ContactReport | None = None  # what the contact solver did (None without contact)
+    linear: LinearWork = dataclasses.field(default_factory=LinearWork)  # the step's linear solves
+    # (Newton steps and the coupling's lifting responses)
+    flux_correction: np.ndarray | None = None  # (dim,) the mean volume flux removed at the step's end
+    # (a fully periodic suspension; None otherwise)
+
 
 
 class ParticleGeometry:

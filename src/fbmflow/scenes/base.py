@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
+from ..run import RunFiles, run_loop
 
 log = logging.getLogger(__name__)
 
@@ -80,37 +81,13 @@ class Setup:
     n_steps: int
 
 
-@dataclass
-class RunFiles:
-    """Where a time-dependent run keeps its files (None: no files) and how often it checkpoints."""
-
-    out: Any = None
-    checkpoint_every: int = 0
-    resume: bool = False
-    fields_every: int = 0  # ParaView output every that many steps (0: none)
-    fields_format: str = "xdmf"  # or "vtu"
-    meta: dict = field(default_factory=dict)  # scene, level, params, fbmflow_version
-    stop: Callable[[], bool] | None = None  # asked after every step: True ends the run (RunInterrupted)
-
-
-class RunInterrupted(RuntimeError):
-    """A run stopped on request (``RunFiles.stop``) after a completed step, its state saved."""
-
-    def __init__(self, step: int, out):
-        self.step, self.out = step, out
-        where = f"; `fbmflow resume {out}` continues" if out is not None else ""
-        super().__init__(f"interrupted at step {step}{where}")
-
-
 class SimulationScene(Scene):
     """A scene whose run is the time loop of a :class:`~fbmflow.simulation.Simulation`.
 
     Subclasses give :meth:`build`, :meth:`observe` (one row of named time series per step, and at
-    ``t = 0``), :meth:`quantities` and optionally :meth:`stop`. The loop here writes the run data
-    (``run.h5``), the ParaView output every ``fields_every`` steps, checkpoints every
-    ``checkpoint_every`` steps (``checkpoint.h5``; also the last good state when a step fails),
-    and resumes from the checkpoint: the resumed run repeats the uninterrupted one's iterations,
-    because the stored Newton factorisation is dropped at every checkpoint in both.
+    ``t = 0``), :meth:`quantities` and optionally :meth:`stop`. The loop is the one every run
+    takes (:func:`~fbmflow.run.run_loop`: ``run.h5``, fields, checkpoints, resume, signals); the
+    scene's series travel in its checkpoints.
     """
 
     def build(self, params, level: int) -> Setup:
@@ -127,15 +104,12 @@ class SimulationScene(Scene):
 
     def run(self, params, level: int, progress: Progress | None = None, files: RunFiles | None = None,
             stop_on_failure: bool = False) -> SceneResult:
-        """Run the time loop. A step that fails (ConvergenceError) raises, after saving the last
-        good state when writing files; with ``stop_on_failure`` the run ends at the last good step
-        instead and the result carries the error in ``extra["failure"]`` (benchmarks: a run that
-        fails in the last approach to a wall keeps the curve it computed)."""
-        from pathlib import Path
-
+        """Run the time loop (:func:`~fbmflow.run.run_loop`). A step that fails (ConvergenceError)
+        raises, after saving the last good state when writing files; with ``stop_on_failure`` the
+        run ends at the last good step instead and the result carries the error in
+        ``extra["failure"]`` (benchmarks: a run that fails in the last approach to a wall keeps the
+        curve it computed)."""
         from ..config import ParamError
-        from ..io import FieldWriter, RunData, save_checkpoint
-        from ..solvers import ConvergenceError
 
         files = files or RunFiles()
         try:
@@ -145,70 +119,17 @@ class SimulationScene(Scene):
         except ValueError as err:  # the simulation refused the scene it was given
             raise ParamError(f"{self.name}: {err}") from None
         sim = setup.sim
-        series = {k: [v] for k, v in self.observe(params, sim).items()}
-        newton_its = 0
-        out = Path(files.out) if files.out is not None else None
-        data = None
+        resumed = None
         if files.resume:
-            state, extra = self._resume_checkpoint(out / "checkpoint.h5", params, files.meta)
+            state, resumed = self._resume_checkpoint(Path(files.out) / "checkpoint.h5", params, files.meta)
             sim.set_state(state)
-            series, newton_its = extra["series"], extra["newton_iterations"]
             log.info("resumed from step %d (t = %.6g)", sim.step_count, sim.t)
-        fields = None
-        if out is not None:
-            data = RunData(out / "run.h5", files.meta, resume_step=sim.step_count if files.resume else None)
-            if not files.resume:
-                data.append(self._row(sim, None))
-            if files.fields_every:
-                fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
-                if not files.resume:
-                    fields.write(0, sim.t, sim.x, sim.owner(), sim.particles,
-                                 np.zeros_like(sim.particles.position))
-
-        def checkpoint(step):
-            save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
-                            {"series": series, "newton_iterations": newton_its})
-
-        failure = None
-        for k in range(sim.step_count + 1, setup.n_steps + 1):
-            try:
-                rep = sim.step(setup.dt)
-            except ConvergenceError as err:
-                if out is not None:
-                    checkpoint(sim.step_count)  # the last good state, for inspection or resumption
-                    err = ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
-                                           f"{out / 'checkpoint.h5'}")
-                if not stop_on_failure:
-                    raise err from None
-                log.warning("run stopped early: %s", err)
-                failure = str(err)
-                break
-            newton_its += rep.newton_iterations
-            row = self.observe(params, sim)
-            for key, value in row.items():
-                series[key].append(value)
-            if data is not None:
-                data.append(self._row(sim, rep))
-            if fields is not None and k % files.fields_every == 0:
-                fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, rep.force)
-            if progress:
-                speed = np.linalg.norm(sim.particles.velocity, axis=1).max(initial=0.0)
-                progress(k, setup.n_steps, rep.t, {"newton": rep.newton_iterations,
-                                                   "solves": rep.linear.solves,
-                                                   "linear": rep.linear.iterations, "max|U|": float(speed)})
-            if self.stop(params, row):
-                break
-            if files.stop is not None and files.stop():
-                if out is not None:
-                    checkpoint(k)
-                raise RunInterrupted(k, out)
-            if files.checkpoint_every and k % files.checkpoint_every == 0 and k < setup.n_steps:
-                sim.flow.forget_linearisation()
-                if out is not None:
-                    checkpoint(k)
-        return SceneResult(self.quantities(params, series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
-                           steps=sim.step_count, newton_iterations=newton_its,
-                           extra={} if failure is None else {"failure": failure},
+        done = run_loop(sim, setup.n_steps, setup.dt, files, observe=lambda s: self.observe(params, s),
+                        until=lambda row: self.stop(params, row), progress=progress, resumed=resumed,
+                        stop_on_failure=stop_on_failure)
+        return SceneResult(self.quantities(params, done.series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
+                           steps=sim.step_count, newton_iterations=done.newton_iterations,
+                           extra={} if done.failure is None else {"failure": done.failure},
                            linear_solver=sim.flow.linear_solver_description)
 
     @staticmethod
@@ -230,20 +151,3 @@ class SimulationScene(Scene):
                 raise CheckpointError(f"checkpoint {path} is for another params ({resolved!r}, this run has "
                                       f"{meta['params']!r}); resume it with its own settings or start afresh")
         return state, extra
-
-    @staticmethod
-    def _row(sim, rep) -> dict:
-        p = sim.particles
-        n, dim = p.position.shape
-        zero = np.zeros((n, dim)), np.zeros((n, 3))
-        return {"step": sim.step_count, "t": sim.t, "position": p.position, "velocity": p.velocity,
-                "orientation": p.orientation, "angular_velocity": p.angular_velocity,
-                "force": rep.force if rep is not None else zero[0],
-                "torque": rep.torque if rep is not None else zero[1],
-                "newton_iterations": rep.newton_iterations if rep is not None else 0,
-                "linear_iterations": rep.linear.iterations if rep is not None else 0,
-                "flow_solves": rep.flow_solves if rep is not None else 0,
-                "linear_solves": rep.linear.solves if rep is not None else 0,
-                "linear_sweeps": rep.linear.sweeps if rep is not None else 0,
-                "linear_time_s": rep.linear.time_s if rep is not None else 0.0,
-                "contacts": rep.contact.contacts if rep is not None and rep.contact is not None else 0}

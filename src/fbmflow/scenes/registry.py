@@ -10,7 +10,9 @@ from pathlib import Path
 from .. import __version__
 from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
-from .base import RunFiles, Scene, SimulationScene
+from ..run import RunFiles, output_folder, read_run_info, write_run_info
+from ..simulation import Simulation
+from .base import Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
 from .dfg import DFG2D1, DFG3D1Z
@@ -89,26 +91,23 @@ def check_level(scene: Scene, level) -> int:
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
               checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0,
-              fields_format: str = "xdmf", stop=None) -> dict:
+              fields_format: str = "xdmf") -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
     (what :func:`resume_scene` needs), the per-step particle data ``run.h5`` and its CSV export
     ``particles.csv``, with ``checkpoint_every > 0`` a checkpoint every that many steps and with
-    ``fields_every > 0`` ParaView output (:mod:`fbmflow.io.fields`); ``resume`` continues from the
-    checkpoint in ``out``. ``stop`` (a callable asked after every step; True ends the run at that
-    step with a checkpoint, :class:`~fbmflow.scenes.base.RunInterrupted`): how the CLI turns
-    Ctrl-C and SIGTERM into a resumable stop.
+    ``fields_every > 0`` ParaView output (:func:`~fbmflow.run.run_loop`); ``resume`` continues
+    from the checkpoint in ``out``. Ctrl-C and SIGTERM end such a run after the step under way
+    with a checkpoint (:class:`~fbmflow.run.RunInterrupted`).
     """
-    out = output_directory(out)
+    out = output_folder(out)
     meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
     t0 = time.perf_counter()
     if isinstance(scene, SimulationScene):
+        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
         if not resume:
-            (out / "run.json").write_text(json.dumps({**meta, "checkpoint_every": checkpoint_every,
-                                                      "fields_every": fields_every,
-                                                      "fields_format": fields_format}, indent=1))
-        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta, stop)
+            write_run_info(files)
         result = scene.run(params, level, progress, files)
         export_csv(out / "run.h5", out / "particles.csv")
     else:
@@ -126,44 +125,39 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     return summary
 
 
-def output_directory(out) -> Path:
-    """``out`` as a directory, created if missing; ParamError when it is empty, names a file, lies
-    below a file or cannot be created or written."""
-    if str(out).strip() == "":
-        raise ParamError("the output directory is empty; give --out DIR")
+def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
+    """Continue the scene run in ``out`` (written by :func:`run_scene`) from its checkpoint;
+    ParamError (CheckpointError) when there is nothing usable to resume."""
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ParamError(f"output directory {out} is a file; give another --out")
+    info, _ = read_run_info(out)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".fbmflow-write-test"
-        probe.touch()
-        probe.unlink()
-    except OSError as err:
-        raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; "
-                         "give another --out") from None
-    return out
-
-
-def resume_scene(out: Path, progress=None, plot: bool = True, stop=None) -> dict:
-    """Continue the run in ``out`` (written by :func:`run_scene` with ``checkpoint_every > 0``)
-    from its checkpoint; ParamError (CheckpointError) when there is nothing usable to resume."""
-    out = Path(out)
-    info_path = out / "run.json"
-    if not info_path.is_file():
-        raise ParamError(f"{info_path} not found; give the --out directory of a run started with "
-                         "'fbmflow run ... --checkpoint-every N'")
-    try:
-        info = json.loads(info_path.read_text())
         scene = get_scene(info["scene"])
         params = from_dict(scene.Params, info["params"])
         level, every, fields = info["level"], int(info["checkpoint_every"]), int(info.get("fields_every", 0))
         fmt = str(info.get("fields_format", "xdmf"))
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as err:
-        raise ParamError(f"{info_path} is damaged ({err}); start the run again") from None
+    except (KeyError, TypeError, ValueError) as err:
+        raise ParamError(f"{out / 'run.json'} is damaged ({err!r}); start the run again") from None
     level = check_level(scene, level)
     if not (out / "run.h5").is_file():
         raise ParamError(f"{out / 'run.h5'} is missing: the resumed run would keep only the steps after its "
                          "checkpoint; restore the file or start the run again")
     return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True,
-                     fields_every=fields, fields_format=fmt, stop=stop)
+                     fields_every=fields, fields_format=fmt)
+
+
+def resume(out, progress=None, plot: bool = True):
+    """Continue the run in the folder ``out`` from its checkpoint to its end, whichever made it:
+    a scene (:func:`resume_scene`; returns the summary) or :meth:`Simulation.run
+    <fbmflow.simulation.Simulation.run>` (the simulation made again from the run's set-up;
+    returns the simulation, advanced to its end). ParamError when ``out`` holds no run to resume."""
+    info, setup = read_run_info(out)
+    if info.get("kind") != "simulation":
+        return resume_scene(out, progress, plot)
+    if setup is None:
+        raise ParamError(f"{Path(out) / 'setup.pickle'} is missing (the run's set-up could not be stored); "
+                         "make the simulation again as the run's script did and call "
+                         f"sim.run({str(out)!r}, resume=True)")
+    sim = Simulation(**setup)
+    sim.run(out, checkpoint_every=int(info["checkpoint_every"]), fields_every=int(info["fields_every"]),
+            fields_format=str(info["fields_format"]), resume=True, progress=progress is not None)
+    return sim

@@ -1,0 +1,295 @@
+"""The one run loop: steps a simulation to its end and keeps what a run must not lose.
+
+:func:`run_loop` serves :meth:`fbmflow.Simulation.run`, the built-in scenes
+(:class:`~fbmflow.scenes.base.SimulationScene`) and so the command line alike. Given an output
+folder (:class:`RunFiles`) it writes
+
+* ``run.h5``: one row per step (:class:`~fbmflow.io.RunData`: positions, velocities, forces,
+  solver work), row 0 the state it starts from;
+* ``checkpoint.h5`` every ``checkpoint_every`` steps, when a step fails (the last good state), and
+  when the run is stopped by Ctrl-C or SIGTERM (:class:`RunInterrupted`; a second signal aborts at
+  once); a run resumed from it repeats the uninterrupted run's iterations exactly, because the
+  stored Newton factorisation is dropped at every checkpoint in both;
+* ParaView output every ``fields_every`` steps (:class:`~fbmflow.io.FieldWriter`).
+
+Progress goes to stderr through :class:`Progress`: a tqdm bar on a terminal or in a notebook, else
+plain lines (a log file), at most one every few seconds.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import pickle
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .config import ParamError
+from .io import FieldWriter, RunData, save_checkpoint
+from .solvers import ConvergenceError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunFiles:
+    """Where a run keeps its files (``out`` None: no files) and how often it checkpoints.
+
+    out : folder; checkpoint_every : steps between checkpoints (0: only on failure and stop);
+    resume : the run continues from ``out/checkpoint.h5`` (``run.h5`` is cut after its step);
+    fields_every : ParaView output every that many steps (0: none); fields_format : ``xdmf`` or
+    ``vtu``; meta : what identifies the run in its files (scene, level, params, version).
+    """
+
+    out: Path | None = None
+    checkpoint_every: int = 0
+    resume: bool = False
+    fields_every: int = 0
+    fields_format: str = "xdmf"
+    meta: dict = field(default_factory=dict)
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_loop` did: the steps' reports, the series of observed rows (the starting
+    row first; from the run's start where it resumed), the Newton iterations of all its steps
+    (the resumed run's before), and the error that ended it early, if it did
+    (``stop_on_failure``)."""
+
+    reports: list
+    series: dict[str, list]
+    newton_iterations: int
+    failure: str | None = None
+
+
+class RunInterrupted(RuntimeError):
+    """A run stopped on request (Ctrl-C, SIGTERM) after a completed step, its state saved."""
+
+    def __init__(self, step: int, out):
+        self.step, self.out = step, out
+        where = f"; `fbmflow resume {out}` continues" if out is not None else ""
+        super().__init__(f"interrupted at step {step}{where}")
+
+
+class Progress:
+    """A progress display on stderr, called as ``progress(step, n, t, info)`` (``t`` None for a
+    steady stage; ``info``: what the step did, e.g. Newton iterations). A tqdm bar where stderr
+    is a terminal or a notebook; else one line at most every ``every`` seconds, and the last."""
+
+    def __init__(self, every: float = 10.0, stream=None):
+        self.stream = stream or sys.stderr
+        self.every = every
+        self.bar = None
+        self._last = -np.inf
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)()) or "ipykernel" in sys.modules
+
+    def __call__(self, step: int, n: int, t: float | None, info: dict | None = None) -> None:
+        where = f"t = {t:.4g}" if t is not None else "steady stage"
+        extra = {k: (f"{v:.3g}" if isinstance(v, float) else v) for k, v in (info or {}).items()}
+        if self._tty:
+            if self.bar is None:
+                from tqdm.auto import tqdm
+
+                self.bar = tqdm(total=n, initial=step - 1, file=self.stream, unit="step", dynamic_ncols=True)
+            self.bar.set_description(where, refresh=False)
+            self.bar.set_postfix(extra, refresh=False)
+            self.bar.update(step - self.bar.n)
+            if step >= n:
+                self.bar.close()
+            return
+        now = time.monotonic()
+        if now - self._last >= self.every or step >= n:
+            self._last = now
+            pairs = "".join(f"  {k} {v}" for k, v in extra.items())
+            self.stream.write(f"step {step}/{n}  {where}{pairs}\n")
+            self.stream.flush()
+
+
+class _Signals:
+    """Ctrl-C and SIGTERM ask the run to stop after the step under way; a second one aborts at
+    once (KeyboardInterrupt). Installed only in the main thread, for the loop's duration."""
+
+    def __init__(self):
+        self.asked: list[int] = []
+        self.previous: dict = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self.previous[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        if self.asked:
+            raise KeyboardInterrupt
+        self.asked.append(signum)
+        sys.stderr.write(f"fbmflow: {signal.Signals(signum).name}: stopping after this step "
+                         "(again to abort at once)\n")
+
+    def __exit__(self, *exc):
+        for sig, old in self.previous.items():
+            signal.signal(sig, old)
+        return False
+
+
+def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
+             observe: Callable | None = None, until: Callable | None = None,
+             progress: Callable | None = None, callback: Callable | None = None,
+             resumed: dict | None = None, stop_on_failure: bool = False) -> RunResult:
+    """Step ``sim`` from its step count to ``n_steps`` in steps of ``dt`` [s].
+
+    ``sim``: a :class:`~fbmflow.Simulation` (``step``, ``state``, ``t``, ``step_count``,
+    ``particles``, ``x``, ``flow``, ``owner``, ``force``). ``observe(sim) -> dict``: a row of named
+    values after every step (and at the start), collected into the result's series and kept in
+    the checkpoints; ``until(row) -> bool``: True ends the run after that step; ``callback(report)``
+    after every step; ``progress(step, n, t, info)`` (:class:`Progress`). ``resumed``: what the
+    checkpoint the state was restored from recorded (``series``, ``newton_iterations``). A step
+    that fails (ConvergenceError) raises after saving the last good state (with files), or with
+    ``stop_on_failure`` ends the run there, its error in the result. Ctrl-C or SIGTERM (with
+    files) ends the run after the step with a checkpoint: :class:`RunInterrupted`.
+    """
+    files = files or RunFiles()
+    out = Path(files.out) if files.out is not None else None
+    series = {k: [v] for k, v in observe(sim).items()} if observe is not None else {}
+    newton = 0
+    if resumed is not None:
+        series, newton = resumed.get("series", series), int(resumed.get("newton_iterations", 0))
+    data = fields = None
+    if out is not None:
+        data = RunData(out / "run.h5", files.meta, resume_step=sim.step_count if files.resume else None)
+        if not files.resume:
+            data.append(_row(sim, None))
+        if files.fields_every:
+            fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
+            if not files.resume:
+                zero = np.zeros_like(sim.particles.position)
+                fields.write(0, sim.t, sim.x, sim.owner(), sim.particles, zero)
+
+    def checkpoint(step: int) -> None:
+        save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
+                        {"series": series, "newton_iterations": newton})
+
+    reports, failure = [], None
+    with _Signals() as signals:
+        for k in range(sim.step_count + 1, n_steps + 1):
+            try:
+                report = sim.step(dt)
+            except ConvergenceError as err:
+                if out is not None:
+                    checkpoint(sim.step_count)  # the last good state, for inspection or resumption
+                    err = ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
+                                           f"{out / 'checkpoint.h5'}")
+                if not stop_on_failure:
+                    raise err from None
+                log.warning("run stopped early: %s", err)
+                failure = str(err)
+                break
+            reports.append(report)
+            newton += report.newton_iterations
+            row = observe(sim) if observe is not None else {}
+            for key, value in row.items():
+                series[key].append(value)
+            if data is not None:
+                data.append(_row(sim, report))
+            if fields is not None and k % files.fields_every == 0:
+                fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, report.force)
+            if callback is not None:
+                callback(report)
+            if progress is not None:
+                speed = np.linalg.norm(sim.particles.velocity, axis=1).max(initial=0.0)
+                progress(k, n_steps, report.t, {"newton": report.newton_iterations,
+                                                "solves": report.linear.solves,
+                                                "linear": report.linear.iterations, "max|U|": float(speed)})
+            if until is not None and until(row):
+                break
+            if signals.asked:
+                if out is not None:
+                    checkpoint(k)
+                raise RunInterrupted(k, out)
+            if files.checkpoint_every and k % files.checkpoint_every == 0 and k < n_steps:
+                sim.flow.forget_linearisation()
+                if out is not None:
+                    checkpoint(k)
+    return RunResult(reports, series, newton, failure)
+
+
+def _row(sim, report) -> dict:
+    """One row of ``run.h5`` (:data:`~fbmflow.io.rundata.SCALARS` and ``ARRAYS``)."""
+    p = sim.particles
+    n, dim = p.position.shape
+    work = report.linear if report is not None else None
+    return {"step": sim.step_count, "t": sim.t, "position": p.position, "velocity": p.velocity,
+            "orientation": p.orientation, "angular_velocity": p.angular_velocity,
+            "force": report.force if report is not None else np.zeros((n, dim)),
+            "torque": report.torque if report is not None else np.zeros((n, 3)),
+            "newton_iterations": report.newton_iterations if report is not None else 0,
+            "linear_iterations": work.iterations if work is not None else 0,
+            "flow_solves": report.flow_solves if report is not None else 0,
+            "linear_solves": work.solves if work is not None else 0,
+            "linear_sweeps": work.sweeps if work is not None else 0,
+            "linear_time_s": work.time_s if work is not None else 0.0,
+            "contacts": report.contact.contacts if report is not None and report.contact is not None else 0}
+
+
+def output_folder(out) -> Path:
+    """``out`` as a folder, made if missing; ParamError when it is empty, names a file, lies below
+    a file or cannot be made or written."""
+    if str(out).strip() == "":
+        raise ParamError("the output directory is empty; give --out DIR")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ParamError(f"output directory {out} is a file; give another --out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".fbmflow-write-test"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; "
+                         "give another --out") from None
+    return out
+
+
+def write_run_info(files: RunFiles, setup: dict | None = None) -> None:
+    """Write ``run.json`` (``files.meta`` and the file settings: what a resume needs) and, for a
+    run of the Python API, its set-up ``setup`` (the simulation's arguments) as ``setup.pickle``.
+    A set-up that cannot be pickled (a lambda as a boundary value) is left out with a warning:
+    the run then resumes only from a simulation made again by its script."""
+    (files.out / "run.json").write_text(json.dumps({**files.meta, "checkpoint_every": files.checkpoint_every,
+                                                    "fields_every": files.fields_every,
+                                                    "fields_format": files.fields_format}, indent=1))
+    if setup is None:
+        return
+    (files.out / "setup.pickle").unlink(missing_ok=True)
+    try:
+        blob = pickle.dumps(setup, protocol=pickle.HIGHEST_PROTOCOL)
+    except (pickle.PicklingError, TypeError, AttributeError) as err:
+        log.warning("the run's set-up cannot be stored (%s); fbmflow.resume cannot continue it, but "
+                    "sim.run(out, resume=True) on a simulation made again by the same script can", err)
+        return
+    (files.out / "setup.pickle").write_bytes(blob)
+
+
+def read_run_info(out) -> tuple[dict, dict | None]:
+    """``(run.json's content, the set-up or None)`` of the run in the folder ``out``; ParamError
+    when there is no readable ``run.json``. The set-up is unpickled: read only folders you trust."""
+    out = Path(out)
+    path = out / "run.json"
+    if not path.is_file():
+        raise ParamError(f"{path} not found; give the --out directory of a run started with "
+                         "'fbmflow run ... --checkpoint-every N' or sim.run(out, ...)")
+    try:
+        info = json.loads(path.read_text())
+        if not isinstance(info, dict):
+            raise ValueError("not a table")
+    except (ValueError, UnicodeDecodeError, OSError) as err:
+        raise ParamError(f"{path} is damaged ({err}); start the run again") from None
+    setup_path = out / "setup.pickle"
+    setup = pickle.loads(setup_path.read_bytes()) if setup_path.is_file() else None
+    return info, setup
