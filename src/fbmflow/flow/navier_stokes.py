@@ -113,6 +113,10 @@ class NavierStokesProblem:
         self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
         self._orphans = None  # (constraints, their orphaned pressure modes) last computed
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
+        #: ``on_linear_solve(report, system)``, called after every linear solve with its
+        #: :class:`~fbmflow.solvers.LinearReport` and the :class:`~fbmflow.solvers.SaddlePointSystem`
+        #: it solved (a hook for studies and profiles; None: none)
+        self.on_linear_solve = None
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -404,6 +408,8 @@ class NavierStokesProblem:
         rtol = self.newton.linear_rtol if rtol is None else rtol
         du, dp, report = solve.solve(f, g, rtol)
         self.linear_work.add(report)
+        if self.on_linear_solve is not None:
+            self.on_linear_solve(report, self._linearisation[4])
         if not report.converged:
             reduction = report.residuals[-1] / report.residuals[0] if report.residuals else float("nan")
             raise ConvergenceError(

@@ -1,0 +1,1 @@
+"""The studies: one question each, run by ``python -m fbmbench STUDY`` (:mod:`fbmbench.study`)."""
