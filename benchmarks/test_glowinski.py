@@ -1,7 +1,8 @@
 """Glowinski's free fall of a disk: the peak settling velocity, and in the quick runs the whole
 velocity curve, against Koblitz et al.'s (2017) overset-grid solution (peak 5.591 cm/s).
 
-Measured values from ``benchmarks/results/glowinski*.md`` and docs/validation.md (Glowinski free
+Measured values from ``benchmarks/results/glowinski*.md`` and docs/validation/glowinski-free-fall.md
+(Glowinski free
 fall); each error is asserted within ``bound(measured)`` (fbmflow.common.bound). Times on the
 2-core machine, alone: level 1 (2 cells/D) with dt 4 ms about 20 s, level 2 (4 cells/D, the
 default) with dt 4 ms about 70 s, with dt 2 ms (the scene's default) 3-4 min, with dt 1 ms about

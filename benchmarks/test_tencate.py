@@ -2,7 +2,7 @@
 settling velocity against Table II and the gap curve against the measured one; the quick run
 checks the acceleration against the measured velocity curve.
 
-Measured values from ``benchmarks/results/tencate.md`` and docs/validation.md (ten Cate); each
+Measured values from ``benchmarks/results/tencate.md`` and docs/validation/ten-cate-e1-e4.md; each
 error is asserted within ``bound(measured)`` (fbmbench.common.bound). The 3 % target on u_max is
 met by E2-E4 at level 1; the 5 % target on the gap curve is not met by any case (the bounds below
 are the measured deviations). A run checkpoints every 5 steps into ``out/bench/`` and the same

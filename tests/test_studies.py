@@ -1,6 +1,7 @@
 """The studies in ``benchmarks/studies/``: each imports against today's fbmflow, has its header
-(question, answer, when and where measured, the command) citing a section of
-docs/validation.md that exists, and a command line that the shared entry point makes from it."""
+(question, answer, when and where measured, the command) citing a page of docs/validation/ that
+exists (and a section of it, where it names one), and a command line that the shared entry point
+makes from it."""
 import re
 import sys
 from pathlib import Path
@@ -11,7 +12,7 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 from fbmbench import study  # noqa: E402
 
-SECTIONS = set(re.findall(r"^#+ (.+)$", (BENCHMARKS.parent / "docs" / "validation.md").read_text(), re.M))
+VALIDATION = BENCHMARKS.parent / "docs" / "validation"
 
 
 def test_benchmarks_holds_the_suite_and_nothing_else():
@@ -25,12 +26,15 @@ def test_benchmarks_holds_the_suite_and_nothing_else():
 def test_every_study_imports_and_says_what_it_answers(name):
     module = study.load(name)
     fields = study.header(module)
-    cited = re.search(r'docs/validation\.md, "([^"]+)"', fields["Measured"])
-    assert cited and cited.group(1) in SECTIONS, (name, fields["Measured"])
+    cited = re.search(r'docs/validation/([a-z0-9\-]+)\.md(?:, "([^"]+)")?', fields["Measured"])
+    assert cited and (VALIDATION / f"{cited.group(1)}.md").is_file(), (name, fields["Measured"])
+    if cited.group(2):
+        headings = re.findall(r"^#+ (.+)$", (VALIDATION / f"{cited.group(1)}.md").read_text(), re.M)
+        assert " ".join(cited.group(2).split()) in headings, (name, cited.group(2))
     assert re.search(r"\d{4}-\d{2}-\d{2}, commit [0-9a-f]{7}", fields["Measured"]), fields["Measured"]
     assert fields["Run"].startswith(f"python -m fbmbench {name}")
     parser = study.parser(name, module)
-    assert parser.parse_args(fields["Run"].split()[4:]) is not None  # the header's command parses
+    assert study.arguments(parser, fields["Run"].split()[4:]) is not None  # the header's command parses
 
 
 def test_no_study_reaches_into_fbmflow_s_private_names():

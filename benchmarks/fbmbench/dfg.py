@@ -72,7 +72,7 @@ def write(scene: str, rows: list[dict]) -> None:
         f"Reference {refs} (docstring of fbmflow.scenes.dfg). Wall time of the run on a 2-core machine "
         "(assembly, all Newton "
         "steps and the force evaluation, not the JIT compilation); PARDISO, when installed, takes 3D "
-        "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python benchmarks/bench_dfg.py "
+        "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python -m fbmbench dfg "
         f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`.",
         "",
         "| level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L | dp "

@@ -66,7 +66,7 @@ def write(rows: list[dict], reference: Path = REFERENCE) -> None:
         "",
         "Scene `dkt-2d`, the scene's defaults: implicit coupling, hard contact (skin one cell), backward "
         "Euler. Wall time of the run on a 2-core machine without the JIT compilation, other jobs beside "
-        "(upper bounds). Reproduce a row: `python benchmarks/bench_dkt.py --levels L`, or "
+        "(upper bounds). Reproduce a row: `python -m fbmbench dkt --levels L`, or "
         "`python -m pytest benchmarks -k dkt`.",
         "",
         "| level | cells/d | unknowns | wall s | CPU s | t_kiss s | error | t_tumble s | error | "

@@ -195,7 +195,7 @@ def write(name: str, rows: list[dict]) -> None:
         f"fictitious boundary, implicit coupling, {scheme} with the {INTEGRATOR[scheme]} particle "
         "integrator. "
         "Wall time of the run without the JIT compilation, on a 2-core machine with other jobs beside most "
-        "runs (upper bounds). Reproduce a row: `python benchmarks/bench_glowinski.py --levels L --dt DT "
+        "runs (upper bounds). Reproduce a row: `python -m fbmbench glowinski --levels L --dt DT "
         "--t-end T` (plus `--boundary`, `--scheme`, `--mesh` for the other studies), or the pytest "
         "benchmark `python -m pytest benchmarks -k glowinski`.",
         f"References: Koblitz et al. (2017), overset grid: v_max {koblitz2017.V_MAX:.3f} cm/s "

@@ -178,7 +178,7 @@ def write(rows: list[dict], model: dict) -> None:
         "is the no-slip wall at gap h, 'free' the mirror plane of two equal spheres at surface gap 2h, "
         "'pair' two fictitious spheres at surface gap 2h whose midplane lies the given cells above a mesh "
         "plane (far walls at 40a, not extrapolated; unknowns not recorded). "
-        "Reproduce: `python benchmarks/bench_lubrication.py` (see `--help`).",
+        "Reproduce: `python -m fbmbench lubrication` (see `--help`).",
         "",
         "| wall | cells/d | h/a | Brenner | resolved | error | with correction | error | unknowns | wall s "
         "| measured |",

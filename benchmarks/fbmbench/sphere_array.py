@@ -188,7 +188,7 @@ def write(rows: list[dict]) -> None:
         "exact drag "
         "f (L^3 - pi d^3/6); K = f L^3 / (3 pi mu d U) from the superficial velocity U against Sangani & "
         "Acrivos' series. Wall time on a 2-core machine without the JIT warm-up. Reproduce a row: "
-        "`python benchmarks/bench_sphere_array.py --cells N`, or `python -m pytest benchmarks -k sphere`.",
+        "`python -m fbmbench sphere_array --cells N`, or `python -m pytest benchmarks -k sphere`.",
         "",
         "| cells/d | unknowns | volume force error | test-function force error | surface force error "
         "| K | K error "

@@ -5,7 +5,7 @@ the run that answered it). Its docstring opens with a title line and a header::
 
     Question: what the study asks.
     Answer: what it found, with the figures.
-    Measured: YYYY-MM-DD, commit abcdef0; quoted in docs/validation.md, "Section heading".
+    Measured: YYYY-MM-DD, commit abcdef0; quoted in docs/validation/PAGE.md, "Section heading".
     Run: python -m fbmbench NAME --option value
 
 and its ``run(*, option=default, ...)`` takes keyword-only options whose annotations give their
@@ -85,25 +85,40 @@ def parser(name: str, module) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=f"python -m fbmbench {name}", description=doc)
     hints = typing.get_type_hints(run)
     helps = _helps(run)
+    lists: dict = {}  # list options and their defaults, filled in after parsing
     for pname, param in inspect.signature(run).parameters.items():
         kind = hints.get(pname, str)
+        if type(None) in typing.get_args(kind):  # X | None: an X, None the default
+            kind = next(a for a in typing.get_args(kind) if a is not type(None))
         origin, args = typing.get_origin(kind), typing.get_args(kind)
         text = helps.get(pname, "")
         flag = "--" + pname.replace("_", "-")
         if param.default is inspect.Parameter.empty:
             ap.add_argument(pname, type=kind if kind in (int, float, Path) else str, help=text)
             continue
-        options: dict = {"dest": pname, "default": param.default, "help": f"{text} (default {param.default!r})"}
+        options: dict = {"dest": pname, "default": param.default,
+                         "help": f"{text} (default {param.default!r})"}
         if kind is bool:
             options["action"] = argparse.BooleanOptionalAction
         elif origin is typing.Literal:
             options.update(choices=args, type=type(args[0]))
-        elif origin in (list, tuple):
-            options.update(nargs="+", type=args[0])
+        elif origin in (list, tuple):  # a repeated flag adds its values (--set A=1 --set B=2)
+            options.update(nargs="+", type=args[0], action="extend", default=None)
+            lists[pname] = param.default
         else:
             options["type"] = kind
         ap.add_argument(flag, **options)
+    ap.set_defaults(_lists=lists)
     return ap
+
+
+def arguments(ap: argparse.ArgumentParser, argv: list[str]) -> dict:
+    """The options of ``run`` parsed from ``argv`` (list options not given take their defaults)."""
+    args = vars(ap.parse_args(argv))
+    for name, default in args.pop("_lists").items():
+        if args[name] is None:
+            args[name] = default
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,6 +130,5 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {name:28s} {header(load(name))['Question']}")
         return 0
     module = load(argv[0])
-    args = parser(argv[0], module).parse_args(argv[1:])
-    module.run(**vars(args))
+    module.run(**arguments(parser(argv[0], module), argv[1:]))
     return 0

@@ -222,8 +222,8 @@ def write(rows: list[dict]) -> None:
         "residual reduction (the same peak to 3e-7 in E4 at level 0). 'curve to 0.3 s': the largest "
         "deviation of the velocity from the experiment's samples up to t = 0.3 s (or the run's end), over "
         "Table II's u_max: the acceleration (E1's first PIV samples scatter by about 15 %). "
-        "Reproduce a row: `python benchmarks/bench_tencate.py --cases C "
-        "--levels L --dt DT [--set KEY=VALUE]`, or `python -m pytest benchmarks -k tencate`.",
+        "Reproduce a row: `python -m fbmbench tencate --cases C "
+        "--levels L --dt DT [--set KEY=VALUE ...]`, or `python -m pytest benchmarks -k tencate`.",
         "",
         "| case | level | settings | linear solver | cells/d | unknowns | dt s | steps | wall s | CPU s "
         "| u_max m/s "

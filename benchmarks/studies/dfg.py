@@ -5,7 +5,7 @@ Question: how close do the drag and the pressure difference of the DFG cylinder 
 reference values at each level, and at what cost?
 Answer: C_D within 0.07-4.8 % (2D, levels 5-1) and 2.3-5.1 % (3D, levels 3-1); the tables and
 plots are benchmarks/results/dfg-2d-1.md and dfg-3d-1z.md.
-Measured: 2026-11-26, commit 0e3bddf; quoted in docs/validation.md, "DFG 2D-1 and 3D-1Z".
+Measured: 2026-11-26, commit 0e3bddf; quoted in docs/validation/dfg-2d-1-and-3d-1z.md.
 Run: python -m fbmbench dfg --scene dfg-3d-1z --levels 1 2 3
 
 Each level's row goes into ``benchmarks/results/<scene>.json`` (see :mod:`fbmbench.dfg`); the

@@ -1,6 +1,7 @@
 """fbmflow: particulate flows with the finite element fictitious boundary method.
 
-The public API is listed in ``__all__`` (documented in docs/api.md); names are imported lazily so
+The public API is listed in ``__all__`` (documented on the site's Python API page); names are imported lazily
+so
 that ``import fbmflow`` does no work (no Numba import, no compilation).
 """
 import importlib

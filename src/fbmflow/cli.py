@@ -1,4 +1,4 @@
-"""The ``fbmflow`` command line.
+"""The ``fbmflow`` command line::
 
     fbmflow scenes
     fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--checkpoint-every N]

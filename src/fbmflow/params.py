@@ -1,5 +1,6 @@
 """The sections every scene and :class:`~fbmflow.simulation.Simulation` shares that belong to no
-package: the fluid (:class:`FluidParams`) and the time stepping (:class:`TimeParams`). The
+package: the fluid (:class:`~fbmflow.params.FluidParams`) and the time stepping
+(:class:`~fbmflow.params.TimeParams`). The
 parameter machinery is :mod:`fbmflow.config`; the solver, coupling and contact sections live in
 their packages (``solvers.settings``, ``coupling.settings``, ``contact.settings``)."""
 from __future__ import annotations

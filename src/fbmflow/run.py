@@ -1,16 +1,16 @@
 """The one run loop: steps a simulation to its end and keeps what a run must not lose.
 
-:func:`run_loop` serves :meth:`fbmflow.Simulation.run`, the built-in scenes
+:func:`run_loop` serves :meth:`fbmflow.simulation.Simulation.run`, the built-in scenes
 (:class:`~fbmflow.scenes.base.SimulationScene`) and so the command line alike. Given an output
 folder (:class:`RunFiles`) it writes
 
-* ``run.h5``: one row per step (:class:`~fbmflow.io.RunData`: positions, velocities, forces,
+* ``run.h5``: one row per step (:class:`~fbmflow.io.rundata.RunData`: positions, velocities, forces,
   solver work), row 0 the state it starts from;
 * ``checkpoint.h5`` every ``checkpoint_every`` steps, when a step fails (the last good state), and
   when the run is stopped by Ctrl-C or SIGTERM (:class:`RunInterrupted`; a second signal aborts at
   once); a run resumed from it repeats the uninterrupted run's iterations exactly, because the
   stored Newton factorisation is dropped at every checkpoint in both;
-* ParaView output every ``fields_every`` steps (:class:`~fbmflow.io.FieldWriter`).
+* ParaView output every ``fields_every`` steps (:class:`~fbmflow.io.fields.FieldWriter`).
 
 Progress goes to stderr through :class:`Progress`: a tqdm bar on a terminal or in a notebook, else
 plain lines (a log file), at most one every few seconds.
@@ -144,7 +144,7 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
              resumed: dict | None = None, stop_on_failure: bool = False) -> RunResult:
     """Step ``sim`` from its step count to ``n_steps`` in steps of ``dt`` [s].
 
-    ``sim``: a :class:`~fbmflow.Simulation` (``step``, ``state``, ``t``, ``step_count``,
+    ``sim``: a :class:`~fbmflow.simulation.Simulation` (``step``, ``state``, ``t``, ``step_count``,
     ``particles``, ``x``, ``flow``, ``owner``, ``force``). ``observe(sim) -> dict``: a row of named
     values after every step (and at the start), collected into the result's series and kept in
     the checkpoints; ``until(row) -> bool``: True ends the run after that step; ``callback(report)``

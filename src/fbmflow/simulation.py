@@ -2,8 +2,8 @@
 forces, particles, contact.
 
 A :class:`Simulation` is made from a mesh, the particles and typed parameter sections: the fluid,
-the time stepping, the solvers, the coupling scheme (:data:`fbmflow.coupling.COUPLINGS`), the
-fictitious boundary with its force estimator (:data:`fbmflow.coupling.FORCE_ESTIMATORS`), hard
+the time stepping, the solvers, the coupling scheme (:data:`fbmflow.coupling.schemes.COUPLINGS`), the
+fictitious boundary with its force estimator (:data:`fbmflow.coupling.estimators.FORCE_ESTIMATORS`), hard
 contact and repulsion. It is a thin orchestrator: the state and the physics live in its
 :class:`~fbmflow.coupling.system.CoupledSystem` (:attr:`Simulation.system`), a coupling scheme
 advances that system by one step, and the simulation resolves the ``auto`` choices, checks the
@@ -62,14 +62,14 @@ class Simulation:
         solver and multigrid by measured cost
         (:func:`~fbmflow.solvers.choice.choose_linear_solver`).
     coupling : CouplingParams
-        The coupling scheme (:data:`~fbmflow.coupling.COUPLINGS`)
+        The coupling scheme (:data:`~fbmflow.coupling.schemes.COUPLINGS`)
         and the particle integrator (``trapezoidal`` with ``crank-nicolson`` is second order in
         time).
     fbm : FictitiousBoundaryParams
         ``boundary``: ``nodes`` (every node inside a particle moves rigidly; first order in the
         mesh size) or ``sharp`` (the no-slip condition on the true surface,
         :mod:`fbmflow.coupling.sharp`; shapes with ``project``); ``force``: the estimator
-        (:data:`~fbmflow.coupling.FORCE_ESTIMATORS`: ``volume``, ``test-function`` or
+        (:data:`~fbmflow.coupling.estimators.FORCE_ESTIMATORS`: ``volume``, ``test-function`` or
         ``surface``).
     contact : ContactParams or None
         Hard contact (off when None or not ``enabled``): the particles then advance over a fluid
@@ -83,8 +83,8 @@ class Simulation:
         cannot resolve the last gap); off when None or not ``enabled``.
     symmetry : tuple of int
         Normal axes of mirror planes that cut the domain through every particle centre (the
-        domain's faces there carry :class:`~fbmflow.flow.Slip`); forces and torques are those
-        of the whole particles (:func:`~fbmflow.coupling.mirror_images`), the particles' motion
+        domain's faces there carry :class:`~fbmflow.flow.boundary.Slip`); forces and torques are those
+        of the whole particles (:func:`~fbmflow.coupling.forces.mirror_images`), the particles' motion
         stays on the planes, and the planes are no walls for contact and repulsion. Gravity must
         lie in the planes.
     frozen : bool
@@ -119,7 +119,8 @@ class Simulation:
                 expected = cls.__name__ if isinstance(cls, type) else f"{cls[0].__name__} or None"
                 raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
                                 f"make it with {expected.split()[0]}(...) or fbmflow.config.from_dict")
-        #: the arguments this simulation was made with (what :func:`fbmflow.resume` makes it again from)
+        #: the arguments this simulation was made with (:func:`fbmflow.scenes.registry.resume` makes it
+        #: again from them)
         self._setup = dict(mesh=mesh, particles=particles.copy(), fluid=fluid, boundary=boundary, time=time,
                            solver=solver, coupling=coupling, fbm=fbm, contact=contact, repulsion=repulsion,
                            symmetry=tuple(symmetry), frozen=frozen)
@@ -147,7 +148,7 @@ class Simulation:
     # -- the state ------------------------------------------------------------------------------
     @property
     def flow(self):
-        """The :class:`~fbmflow.flow.NavierStokesProblem` (mesh, space, solvers)."""
+        """The :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` (mesh, space, solvers)."""
         return self.system.flow
 
     @property
@@ -172,12 +173,13 @@ class Simulation:
 
     @property
     def contact(self):
-        """The :class:`~fbmflow.contact.ContactSet` (None without hard contact)."""
+        """The :class:`~fbmflow.contact.contact_set.ContactSet` (None without hard contact)."""
         return self.system.contact
 
     @property
     def n_steps(self) -> int:
-        """Steps of a whole run, from ``t = 0`` to ``time.t_end`` (:attr:`TimeParams.n_steps`)."""
+        """Steps of a whole run, from ``t = 0`` to ``time.t_end``
+            (:attr:`~fbmflow.params.TimeParams.n_steps`)."""
         return self.time.n_steps
 
     @property
@@ -216,7 +218,7 @@ class Simulation:
 
     def write_fields(self, out, step: int | None = None, fmt: str = "vtu") -> Path:
         """Write the flow (velocity, pressure, vorticity, owner) and the particles for ParaView
-        into the directory ``out`` (:class:`~fbmflow.io.FieldWriter`), as output number ``step``
+        into the directory ``out`` (:class:`~fbmflow.io.fields.FieldWriter`), as output number ``step``
         (default: the step count); returns the directory."""
         from .io import FieldWriter
 
@@ -246,7 +248,8 @@ class Simulation:
         With an output folder ``out`` the run writes ``run.h5`` (a row per step), a checkpoint
         every ``checkpoint_every`` steps (and on a failed step, Ctrl-C or SIGTERM), ParaView
         output every ``fields_every`` steps, and its set-up (``setup.pickle``), so that
-        :func:`fbmflow.resume` continues it bit-exactly (:func:`fbmflow.run.run_loop`). ``resume``:
+        :func:`fbmflow.scenes.registry.resume` continues it bit-exactly (:func:`fbmflow.run.run_loop`).
+        ``resume``:
         continue from ``out``'s checkpoint instead (this simulation made as the run's was).
         ``progress``: show progress on stderr; ``callback(report)`` after every step.
         """

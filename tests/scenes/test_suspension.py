@@ -137,7 +137,7 @@ def test_a_frozen_configuration_keeps_its_place_and_settles_to_its_steady_veloci
     """``particles.frozen``: the disks stay where they were placed while their velocities and the
     flow evolve, so the settling velocity tends to the configuration's quasi-steady one (measured:
     steps 3 and 4 agree to 0.6 %, and the first is 6 % low; moving, the disks' steps 3 and 4 differ by
-    3.3 %; spheres: docs/validation.md, "Frozen random configurations")."""
+    3.3 %; spheres: docs/validation/periodic-suspensions.md, "Frozen random configurations")."""
     pp = {"count": 4, "volume_fraction": 0.2, "min_gap": 0.05, "seed": 1, "frozen": True}
     q = _run("suspension-2d", 2, particles=pp, time={"t_end": 0.4, "dt": 0.1},
              coupling={"scheme": "newton-krylov"}, repulsion={"enabled": False})

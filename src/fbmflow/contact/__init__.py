@@ -1,7 +1,8 @@
 """Particle–particle and particle–wall contact (imports ``particles`` only).
 
 Broadphase (:mod:`.broadphase`) -> narrowphase (:mod:`.narrowphase`) -> projected Gauss–Seidel
-contact solver (:class:`ContactSet`); short-range repulsion (:class:`Repulsion`) is the soft
+contact solver (:class:`~fbmflow.contact.contact_set.ContactSet`); short-range repulsion
+(:class:`~fbmflow.contact.repulsion.Repulsion`) is the soft
 alternative.
 """
 from .broadphase import BROADPHASES, candidate_pairs, plane_candidates

@@ -8,7 +8,7 @@ precomputed angular parts ``a_i = r_i x d``, ``a_j = r_j x d`` (arms ``r = p - X
     u = d . (v_i - v_j) + a_i . w_i - a_j . w_j,
 
 and an impulse ``lambda`` (``+lambda d`` on i at its contact point, ``-lambda d`` on j) changes it
-by ``k lambda`` with the effective inverse mass ``k = 1/m_i + a_i . b_i + 1/m_j + a_j . b_j``.
+by ``k lambda`` with the effective inverse mass ``k = 1/m_i + a_i · b_i + 1/m_j + a_j · b_j``.
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def _apply(v, w, inv_m, i, j, d, bi, bj, lam):
 def row_masses(ci, cj, D, ri, rj, inv_m, inv_I):
     """Angular parts and effective inverse masses of every row: ``A = r x d`` (m, 3, 3) for
     either side, ``B = I^{-1} A`` (m, 3, 3) with the inverse world inertia ``inv_I (n, 3, 3)``
-    and ``K = 1/m_i |d|^2 + a_i . b_i + 1/m_j |d|^2 + a_j . b_j`` (m, 3), from the row
+    and ``K = 1/m_i |d|^2 + a_i · b_i + 1/m_j |d|^2 + a_j · b_j`` (m, 3), from the row
     directions ``D (m, 3, 3)`` and the arms ``ri, rj (m, 3)``; a plane (``j < 0``) adds nothing
     (its ``A`` and ``B`` are zero). Returns Ai, Aj, Bi, Bj, K."""
     m = ci.shape[0]
@@ -66,7 +66,7 @@ def row_masses(ci, cj, D, ri, rj, inv_m, inv_I):
 
 @njit
 def _angular(r, d, inv_I, A, B):
-    """``A = r x d`` and ``B = inv_I A`` written into ``A``, ``B`` (3,); returns ``A . B``."""
+    """``A = r x d`` and ``B = inv_I A`` written into ``A``, ``B`` (3,); returns ``A · B``."""
     _cross(r, d, A)
     k = 0.0
     for a in range(3):
@@ -156,7 +156,7 @@ def pgs(ci, cj, D, Ai, Aj, Bi, Bj, K, target, mu, inv_m, lam, v, w, iterations, 
 def project_positions(ci, cj, n, gap, goal, inv_m, X, sweeps, slop):
     """Gauss–Seidel projection of the positions (velocities untouched, so no energy is added).
 
-    A contact's current gap is ``gap_c + n_c . (X_i - X_j)`` (``X (N, 3)`` the displacements
+    A contact's current gap is ``gap_c + n_c · (X_i - X_j)`` (``X (N, 3)`` the displacements
     since ``gap`` was measured). Where ``goal_c`` is NaN the gap must not fall below ``-slop``;
     elsewhere (collisions of this sub-step) it is set to ``goal_c``. Each correction moves i and j
     along ``n_c`` in proportion to their inverse masses. Updates ``X`` in place; returns the

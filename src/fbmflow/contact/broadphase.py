@@ -2,7 +2,7 @@
 
 A pair ``(i, j)``, ``i < j``, is a candidate when the bounding balls come within ``margin``:
 
-    |X_i - X_j| <= R_i + R_j + margin.
+    ``|X_i - X_j| <= R_i + R_j + margin``.
 
 Particle–plane candidates (domain walls) come from :func:`plane_candidates`. In a box with
 periodic axes the pairs meet through their nearest images (:func:`candidate_pairs` with
@@ -206,6 +206,7 @@ def hierarchical_grid_pairs(X: np.ndarray, R: np.ndarray, margin: float = 0.0) -
     return _sorted(np.concatenate(found))
 
 
+#: the broadphases by name (the parameter ``contact.broadphase``)
 BROADPHASES = {"brute-force": brute_force_pairs, "grid": grid_pairs,
                "hierarchical-grid": hierarchical_grid_pairs}
 

@@ -107,7 +107,7 @@ class ContactSet:
 
     Parameters
     ----------
-    planes : :class:`Planes` or None, e.g. ``Planes.box(lower, upper)``
+    planes : :class:`~fbmflow.contact.narrowphase.Planes` or None, e.g. ``Planes.box(lower, upper)``
     restitution : coefficient of restitution ``e`` in [0, 1]
     friction : Coulomb coefficient ``mu >= 0`` (0: frictionless, no tangent rows)
     iterations : PGS sweeps per sub-step at most

@@ -15,7 +15,7 @@ flow's film force behaves as ``C`` at the effective gap ``g_e = (g^p + s^p)^(1/p
 (``resolved_gap``) a fraction of a cell and ``p`` = :data:`BLEND_EXPONENT`: both fitted to
 Brenner's exact drag at 6 cells per diameter, of a sphere approaching a wall and of two spheres
 approaching each other, whose resolved film moves by up to 20 % with where their midplane falls
-between mesh planes (benchmarks/bench_lubrication.py; ``s`` 0.37 cells, the default of
+between mesh planes (benchmarks/studies/lubrication.py; ``s`` 0.37 cells, the default of
 ``contact.lubrication_resolved_cells``). The correction adds what is missing,
 
     c(g) = [C(g) - C(g_e(g))] - [C(delta) - C(g_e(delta))]   for g < delta (the range), else 0,
@@ -23,7 +23,7 @@ between mesh planes (benchmarks/bench_lubrication.py; ``s`` 0.37 cells, the defa
 continuous at ``delta`` and vanishing like ``s^2 / g^3`` far from contact, so that the flow
 solver and the correction do not count the film twice. ``g`` is clipped below at ``min_gap``
 (surface roughness; the film force is finite at contact). The force is stiff (``c -> inf`` as
-``g -> 0``), so :class:`~fbmflow.contact.ContactSet` applies it implicitly in each contact
+``g -> 0``), so :class:`~fbmflow.contact.contact_set.ContactSet` applies it implicitly in each contact
 sub-step (backward Euler of the pair's damped approach), before the contact impulses. Shapes
 other than balls use their bounding radii.
 """
@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 #: exponent ``p`` of the effective gap ``(g^p + s^p)^(1/p)`` that the resolved flow's film sees
-#: (fitted with ``s`` to Brenner's drag at 6 cells per diameter: docs/validation.md, "Lubrication")
+#: (fitted with ``s`` to Brenner's drag at 6 cells per diameter: docs/validation/lubrication.md,
+#: "Lubrication")
 BLEND_EXPONENT = 1.75
 
 

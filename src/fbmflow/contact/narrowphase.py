@@ -3,18 +3,18 @@
 For a pair ``(i, j)`` the normal ``n`` points from ``j`` to ``i`` (an impulse ``+lambda n`` on
 ``i`` and ``-lambda n`` on ``j`` pushes them apart) and the gap is the signed surface distance
 (negative when they overlap). With ``s_k(d)`` the support point of particle ``k`` (its surface
-point farthest along ``d``, :meth:`support` of the shapes, in world axes):
+point farthest along ``d``, ``support`` of the shapes, in world axes):
 
 * **sphere–sphere, disk–disk** (exact): ``n = (X_i - X_j) / |X_i - X_j|``,
   ``gap = |X_i - X_j| - R_i - R_j``, point midway between the surfaces.
 * **any other pair** (a documented approximation): the same centre-line normal and
-  ``gap = n . (s_i(-n) - s_j(n))``, the separation of the two shapes' projections on the centre
+  ``gap = n · (s_i(-n) - s_j(n))``, the separation of the two shapes' projections on the centre
   line. It is exact for balls and, by the separating-axis theorem, a *lower bound* of the true
   distance for convex shapes: contacts of ellipsoids or boxes are never detected late, but an
   elongated shape at an angle may feel its neighbour slightly early and along the centre line
   rather than the true normal. Implicit shapes act as their bounding balls.
 * **particle–plane** (exact for every shape with an exact support): the plane normal ``n_w``
-  (into the domain) and ``gap = n_w . (s_i(-n_w) - p_w)``; point at the deepest surface point.
+  (into the domain) and ``gap = n_w · (s_i(-n_w) - p_w)``; point at the deepest surface point.
 
 Along periodic axes a pair meets through the nearest image of ``j``: ``X_j + image`` with
 ``image`` a multiple of the periods (:func:`nearest_image`), and the contact point lies between

@@ -1,5 +1,6 @@
-"""The contact settings: hard contact (:class:`ContactParams`) and the short-range repulsion
-(:class:`RepulsionParams`), each with the ``make`` that builds its model for a mesh."""
+"""The contact settings: hard contact (:class:`~fbmflow.contact.settings.ContactParams`) and the
+short-range repulsion (:class:`~fbmflow.contact.settings.RepulsionParams`), each with the ``make``
+that builds its model for a mesh."""
 from __future__ import annotations
 
 import dataclasses
@@ -21,7 +22,7 @@ class RepulsionParams(Section):
     strength: float = param(10.0, "force at contact over the particle's weight in the fluid", positive=True)
 
     def make(self, mesh, walls=None):
-        """The :class:`~fbmflow.contact.Repulsion` for the walls of ``mesh`` (all faces, or the
+        """The :class:`~fbmflow.contact.repulsion.Repulsion` for the walls of ``mesh`` (all faces, or the
         ``(axis, side)`` pairs in ``walls``); None when off. The range is counted in the
         mesh's finest cells (those of the fine zone of a graded mesh)."""
         if not self.enabled:
@@ -67,7 +68,7 @@ class ContactParams(Section):
                              f"below contact.lubrication_range_cells = {self.lubrication_range_cells}")
 
     def make(self, mesh, viscosity: float, walls=None):
-        """The :class:`~fbmflow.contact.ContactSet` with the walls of ``mesh`` (all faces, or the
+        """The :class:`~fbmflow.contact.contact_set.ContactSet` with the walls of ``mesh`` (all faces, or the
         ``(axis, side)`` pairs in ``walls``); None when off. ``viscosity``: the fluid's, for the
         lubrication correction. Distances are counted in the mesh's finest cells."""
         if not self.enabled:

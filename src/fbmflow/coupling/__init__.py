@@ -1,6 +1,6 @@
 """The only place where fluid meets particles: node ownership, fictitious-boundary constraints,
-hydrodynamic forces (estimators in :data:`FORCE_ESTIMATORS`) and the coupling schemes
-(:data:`COUPLINGS`)."""
+hydrodynamic forces (estimators in :data:`~fbmflow.coupling.estimators.FORCE_ESTIMATORS`) and the
+coupling schemes (:data:`~fbmflow.coupling.schemes.COUPLINGS`)."""
 from .estimators import FORCE_ESTIMATORS, SurfaceForce, TestFunctionForce, VolumeForce, make_force_estimator
 from .forces import (
     SurfaceForces,

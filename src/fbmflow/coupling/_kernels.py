@@ -8,7 +8,7 @@ from .._jit import njit, prange
 
 @njit(parallel=True)
 def volume_force_rows(cells, particles, owner, centres, cell_dofs, dphi, detJw, Jinv, psi, xq, periods):
-    """``F_i = -int sigma . grad alpha_i`` and ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` as
+    """``F_i = -int sigma · grad alpha_i`` and ``T_i = -int (x - X_i) x (sigma · grad alpha_i)`` as
     linear functionals of the flow, one (cut cell, particle) pair at a time.
 
     ``alpha_i`` is the Q2 interpolant of particle ``i``'s indicator (1 on its nodes); ``sigma =

@@ -1,5 +1,6 @@
 """Force estimators: strategies that turn a solved flow into the hydrodynamic force and torque on
-every particle, registered by name in :data:`FORCE_ESTIMATORS` (the parameter ``fbm.force``).
+every particle, registered by name in :data:`~fbmflow.coupling.estimators.FORCE_ESTIMATORS` (the
+parameter ``fbm.force``).
 
 An estimator has
 
@@ -68,8 +69,8 @@ class ForceEstimator:
 
 
 class VolumeForce(ForceEstimator):
-    """``F_i = -int sigma . grad alpha_i`` over the cells the particle cuts
-    (:func:`~fbmflow.coupling.hydrodynamic_forces`); any shape, either boundary. The rule is a
+    """``F_i = -int sigma · grad alpha_i`` over the cells the particle cuts
+    (:func:`~fbmflow.coupling.forces.hydrodynamic_forces`); any shape, either boundary. The rule is a
     :class:`~fbmflow.coupling.forces.ForceFunctional` of all particles."""
 
     name = "volume"
@@ -88,10 +89,10 @@ class VolumeForce(ForceEstimator):
 
 class TestFunctionForce(ForceEstimator):
     """The momentum balance tested with a function that is one on the particle
-    (:class:`~fbmflow.coupling.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
+    (:class:`~fbmflow.coupling.forces.TestFunctionForces`); ``du/dt`` is the step's mean acceleration
     ``(u - u_old) / dt``. Any shape, either boundary; the pressure is taken where the particle is.
     Responses about a flow are evaluated together through the linearisation there
-    (:meth:`~fbmflow.coupling.TestFunctionForces.linearised`)."""
+    (:meth:`~fbmflow.coupling.forces.TestFunctionForces.linearised`)."""
 
     __test__ = False  # not a pytest class
     name = "test-function"
@@ -115,7 +116,7 @@ class TestFunctionForce(ForceEstimator):
 
 
 class SurfaceForce(ForceEstimator):
-    """The traction integrated over the true surface (:class:`~fbmflow.coupling.SurfaceForces`);
+    """The traction integrated over the true surface (:class:`~fbmflow.coupling.forces.SurfaceForces`);
     balls with the sharp boundary only (the nodal boundary's cut cells carry no flow up to the
     surface)."""
 

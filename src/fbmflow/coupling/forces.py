@@ -85,7 +85,7 @@ class ForceFunctional:
     def many(self, U: np.ndarray | None, P: np.ndarray | None, mu: float) -> tuple[np.ndarray, np.ndarray]:
         """Force (k, n, dim) and torque (k, n, 3) of the ``k`` flows ``U (k, dim * n_v)``,
         ``P (k, n_p)`` (row views of a larger array are fine; None: that part left out), in one
-        pass over the functionals (:func:`~fbmflow.coupling._kernels.csr_apply_rows`)."""
+        pass over the functionals (``csr_apply_rows``)."""
         k = (U if U is not None else P).shape[0]
         rows = np.zeros((k, self.G_u.shape[0]))
         for G, X, scale in ((self.G_u, U, mu), (self.G_p, P, 1.0)):
@@ -96,7 +96,7 @@ class ForceFunctional:
     def own_response(self, W: sp.spmatrix, free: np.ndarray, mu: float) -> np.ndarray:
         """Each particle's force and torque on its own unit rigid motions ``W (n_u, k)`` (sparse,
         one column per True entry of ``free (n, r)``, row-major, as
-        :func:`~fbmflow.coupling.rigid_liftings` makes them), the rest of the flow held at zero:
+        :func:`~fbmflow.coupling.indicator.rigid_liftings` makes them), the rest of the flow held at zero:
         ``S (n, r, r)`` float64 with ``S[i, :, b]`` the rows of particle ``i`` of ``mu G_u W``
         in its column ``b`` (zero where ``free`` is False). One sparse product for all
         particles; the other particles' rows of a column are dropped."""
@@ -130,7 +130,7 @@ def _rows_by_particle(particle: np.ndarray, n: int, w: np.ndarray, cols: np.ndar
 def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray) -> ForceFunctional:
     """The cut-cell volume force and torque of every particle (see :func:`hydrodynamic_forces`) as a
     :class:`ForceFunctional`: the (cut cell, particle) pairs of all particles found at once, their
-    coefficients in one kernel pass (:func:`~fbmflow.coupling._kernels.volume_force_rows`)."""
+    coefficients in one kernel pass (``volume_force_rows``)."""
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
     n = len(centres)
     cut = cut_cells(space, owner)
@@ -147,8 +147,8 @@ def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.nda
 def hydrodynamic_forces(space: FlowSpace, owner: np.ndarray, centres: np.ndarray, u: np.ndarray,
                         p: np.ndarray, mu: float):
     """Force (n_particles, dim) [N] and torque (n_particles, 3) [N m] from the flow ``u (dim * n_v,)``,
-    ``p (n_p,)`` with dynamic viscosity ``mu``: ``F_i = -int sigma . grad alpha_i``,
-    ``T_i = -int (x - X_i) x (sigma . grad alpha_i)`` over the cells cut by particle ``i``
+    ``p (n_p,)`` with dynamic viscosity ``mu``: ``F_i = -int sigma · grad alpha_i``,
+    ``T_i = -int (x - X_i) x (sigma · grad alpha_i)`` over the cells cut by particle ``i``
     (``alpha_i`` the Q2 interpolant of its indicator; the arm ``x - X_i`` takes the minimum image
     on periodic axes). For many flows of one particle state build :func:`volume_force_functional`
     once."""
@@ -270,7 +270,7 @@ class TestFunctionForces:
         ``u_old`` and ``dt``: the step's start velocity and length (du/dt = (u - u_old) / dt).
         ``about``: the velocity of a flow to linearise about; ``u, p`` are then a change of it
         (``du, dp``) and the result the change of the force, with ``du / dt`` for the time
-        derivative and ``(about . grad) du + (du . grad) about`` for the convection.
+        derivative and ``(about · grad) du + (du · grad) about`` for the convection.
         """
         uq, gu = self._velocity(u)
         if about is None:
@@ -303,7 +303,7 @@ class TestFunctionForces:
     def linearised(self, about: np.ndarray, mu: float, rho: float,
                    dt: float | None = None) -> ForceFunctional:
         """The change of the force with the flow about the velocity ``about (dim n_v,)`` (what
-        :meth:`__call__` gives with ``about``), as a :class:`ForceFunctional` whose coefficients
+        ``__call__`` gives with ``about``), as a :class:`ForceFunctional` whose coefficients
         hold ``mu`` and ``rho`` (evaluate it with ``mu = 1``): one pass evaluates any number of
         responses. Built from the rule's quadrature by contractions over its Gauss points."""
         d = self.dim
@@ -364,7 +364,7 @@ class SurfaceForces(ForceFunctional):
     as a :class:`ForceFunctional` (linear in ``(u, p)``; tensor-product meshes).
 
     Measured (Stokes flow through a cubic array of spheres with exact drag,
-    ``benchmarks/bench_sphere_array.py``): error +2.5 / -0.6 / +0.5 / +0.3 / -0.2 % at 4 / 6 / 8 /
+    ``benchmarks/studies/sphere_array.py``): error +2.5 / -0.6 / +0.5 / +0.3 / -0.2 % at 4 / 6 / 8 /
     12 / 16 cells per diameter, against +6.1 / +3.2 / +3.0 / +1.9 / +1.2 % for the cut-cell
     volume force and -21 / -13 / -8.3 / -6.1 / -3.9 % for the tested momentum balance.
 
@@ -372,7 +372,7 @@ class SurfaceForces(ForceFunctional):
     ----------
     space : FlowSpace
     centres : (n, dim) float64, ball centres [m]
-    shapes : list of n :class:`~fbmflow.particles.Ball`
+    shapes : list of n :class:`~fbmflow.particles.shapes.Ball`
     points_per_cell : int, default 4
     """
 

@@ -11,7 +11,7 @@ from .sharp import sharp_boundary, supports_sharp_boundary
 
 
 class FixedObstacles:
-    """The ``extra_constraints`` of a :class:`~fbmflow.flow.NavierStokesProblem` for bodies held
+    """The ``extra_constraints`` of a :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` for bodies held
     at their positions: the rigid velocity ``U_i`` (zero: at rest) on their nodes, and with
     ``boundary = "sharp"`` the sharp boundary's changes (:mod:`fbmflow.coupling.sharp`) on the
     finest mesh asked for (coarser multigrid levels get the nodal constraints). A non-zero

@@ -34,9 +34,9 @@ def periodic_drive(mesh, particles: Particles, gravity: np.ndarray, fluid_densit
     weight in the fluid along the periodic axes of ``mesh``: the mean pressure gradient of a
     periodic suspension, zero where gravity has no periodic component.
 
-        f = - sum_i (M_i - rho_f V_i) g_per / |Omega|,
+        f = - sum_i (M_i - rho_f V_i) g_per / Omega,
 
-    ``g_per`` the components of ``gravity`` along periodic axes and ``|Omega|`` the box's volume
+    ``g_per`` the components of ``gravity`` along periodic axes and ``Omega`` the box's volume
     (the particles counted by their share of the box, ``2^-k`` with ``k`` mirror planes through
     their centres). The fluid feels ``f`` and every free particle ``f V_i``, so the net force on
     fluid and particles together vanishes: without it a periodic suspension would accelerate

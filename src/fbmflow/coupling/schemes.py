@@ -1,5 +1,5 @@
 """Fluid–particle coupling schemes: strategies for one time step of flow and particles, registered
-by name in :data:`COUPLINGS` (the parameter ``coupling.scheme``).
+by name in :data:`~fbmflow.coupling.schemes.COUPLINGS` (the parameter ``coupling.scheme``).
 
 * ``explicit`` (staggered): the flow is solved with the particles' current rigid velocities as
   fictitious-boundary constraints, and the hydrodynamic forces of the new flow advance the
@@ -126,7 +126,7 @@ class ExplicitCoupling(CouplingScheme):
 class StabilisedCoupling(CouplingScheme):
     """One flow solve with the particles' current velocities, as :class:`ExplicitCoupling`; the
     particles then take one Newton step of the implicit scheme's fixed point with each particle's
-    own stiffness only (see :meth:`advance`).
+    own stiffness only (see :meth:`~fbmflow.coupling.schemes.StabilisedCoupling.advance`).
 
     Parameters
     ----------
@@ -176,7 +176,7 @@ class StabilisedCoupling(CouplingScheme):
         are the implicit scheme's; it damps the step-to-step oscillation of the explicit scheme,
         whose error is amplified per step by the spectral radius of ``G S`` (added mass and drag
         of all particles; above one for light particles and for many particles in a closed box).
-        Measured against the implicit scheme: docs/validation.md, "Many particles"."""
+        Measured against the implicit scheme: docs/validation/many-particles.md."""
         p = system.particles
         x, reports, force, torque = system.flow_and_forces(dt, rtol=self.flow_rtol,
                                                            linear_rtol=self.flow_rtol)
@@ -204,7 +204,8 @@ class NewtonKrylovCoupling(StabilisedCoupling):
     """The stabilised scheme's step with every particle's pull on the others taken too: one
     Newton step of the implicit scheme's fixed point from the current velocities, its linear
     system solved matrix-free by flexible GMRES, the stabilised scheme's per-particle stiffness
-    its preconditioner (see :meth:`advance`). The parameters as :class:`StabilisedCoupling`'s,
+    its preconditioner (see :meth:`~fbmflow.coupling.schemes.NewtonKrylovCoupling.advance`). The parameters
+    as :class:`StabilisedCoupling`'s,
     and ``params.krylov_rtol`` and ``params.max_subiterations`` (FGMRES's residual reduction and
     iteration limit). No flow fields are kept: each response is used and dropped.
     """
@@ -225,7 +226,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
 
         ``S = d f / d v`` the flow's force response to the particles' rigid motions (added mass,
         drag and every particle's pull on the others through the fluid), ``G = d v / d f`` their
-        gain. FGMRES (:func:`~fbmflow.solvers.fgmres`) solves it to a residual of ``krylov_rtol``
+        gain. FGMRES (:func:`~fbmflow.solvers.krylov.fgmres`) solves it to a residual of ``krylov_rtol``
         times the smaller of ``|Phi(v) - v|`` and the velocities' size (:func:`relative_scale`:
         the residual is an error of the new velocities) in at most ``max_subiterations``
         iterations, each applying ``S`` to one combined motion: one linear solve with the step's
@@ -244,13 +245,12 @@ class NewtonKrylovCoupling(StabilisedCoupling):
         step's end, ``F(X) + dt K v'``, ``K`` its change along the lines of action: the Newton
         equation takes ``S + dt K`` and the preconditioner ``K``'s own blocks. Explicit, a pair
         in range overshoots once ``dt`` times its stiffness exceeds twice its drag (5 times over
-        for spheres at 4 cells per diameter and dt = 0.01 s: docs/validation.md, "Periodic
-        suspensions").
+        for spheres at 4 cells per diameter and dt = 0.01 s: docs/validation/periodic-suspensions.md).
 
         Where the particles pull on each other strongly through the fluid (close neighbours in a
         dense suspension) the per-particle stiffness of :class:`StabilisedCoupling` misses those
         couplings and its steps grow; this scheme takes them all, at the cost of the Krylov
-        iterations' linear solves (measured: docs/validation.md, "Many particles"). Contact is
+        iterations' linear solves (measured: docs/validation/many-particles.md). Contact is
         left out of the map, as in :class:`ImplicitCoupling`."""
         p = system.particles
         x, reports, force, torque = system.flow_and_forces(dt, rtol=self.flow_rtol,
@@ -348,14 +348,16 @@ def flow_rtol(params, newton_rtol: float | None) -> float | None:
     """Newton's residual reduction for a scheme's single flow solve per step: ``params.flow_rtol``
     where it is above ``newton_rtol`` (the solver's), else None (the solver's own). A step's flow
     solve starts from the last step's flow, so its residual is the step's change, and a loose
-    reduction of it errs by a fraction of that change (docs/validation.md, "2 000 disks"). The
+    reduction of it errs by a fraction of that change (docs/validation/many-particles.md, "2 000 disks and 1
+    000 spheres"). The
     schemes ask the solve's linear steps for no more than the same reduction."""
     loose = 0.0 if params is None else float(params.flow_rtol)
     return loose if newton_rtol is not None and loose > newton_rtol else None
 
 
 class ImplicitCoupling(CouplingScheme):
-    """Newton iteration on the particles' new generalised velocities ``v`` (see :meth:`advance`).
+    """Newton iteration on the particles' new generalised velocities ``v``
+    (see :meth:`~fbmflow.coupling.schemes.ImplicitCoupling.advance`).
 
     Parameters
     ----------
@@ -365,8 +367,7 @@ class ImplicitCoupling(CouplingScheme):
         The flow solves' Newton residual reduction: a ``first_rtol`` above it makes each step's
         first flow solve a loose one, which only seeds the iteration (its forces give the first
         velocity update, its linearisation the responses); the step always ends on a solve to
-        ``newton_rtol`` (measured effect: docs/validation.md, "Multigrid with fictitious
-        boundaries").
+        ``newton_rtol`` (measured effect: docs/validation/multigrid-with-fictitious-boundaries.md).
     """
 
     name = "implicit"
@@ -388,7 +389,7 @@ class ImplicitCoupling(CouplingScheme):
 
         Its Jacobian ``I - G S`` is built once per step from the flow's response to unit rigid
         motions of each particle (``S = d f / d v``, the discrete added mass and drag,
-        :meth:`~fbmflow.flow.NavierStokesProblem.lifting_response`) and the particles' gain
+        :meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.lifting_response`) and the particles' gain
         ``G = d v_new / d f``; each sub-iteration then costs one flow solve, whose Newton
         iteration starts from the flow those responses predict (``x + step dX``; its stopping rule
         stays relative to the residual at the step's start). The iteration stops when the error
@@ -486,7 +487,7 @@ def auto_coupling(n_unknowns: int, particles, symmetry=()) -> str:
     keeps (:data:`~fbmflow.solvers.choice.RESPONSE_BYTES` per unknown each, one per free
     rigid-body component) fit :data:`AUTO_RESPONSE_BYTES`, else ``"stabilised"`` (one flow solve
     per step, none kept; less accurate in transients, and at a hard impact it needs half a cell
-    per step: docs/validation.md, "Many particles"). The same for every machine."""
+    per step: docs/validation/many-particles.md). The same for every machine."""
     responses = ImplicitCoupling.stored_responses(particles, symmetry)
     stored = RESPONSE_BYTES * n_unknowns * responses
     if stored <= AUTO_RESPONSE_BYTES:

@@ -1,5 +1,6 @@
-"""The coupling settings: the scheme and particle integrator (:class:`CouplingParams`) and the
-fictitious boundary with its force estimator (:class:`FictitiousBoundaryParams`)."""
+"""The coupling settings: the scheme and particle integrator
+(:class:`~fbmflow.coupling.settings.CouplingParams`) and the fictitious boundary with its force
+estimator (:class:`~fbmflow.coupling.settings.FictitiousBoundaryParams`)."""
 from __future__ import annotations
 
 import dataclasses
@@ -15,7 +16,7 @@ _INTEGRATOR_DOC = ("particle integrator: semi-implicit-euler (first order) or tr
 
 @dataclasses.dataclass(frozen=True)
 class CouplingParams(Section):
-    """Fluid–particle coupling: the scheme (:data:`fbmflow.coupling.COUPLINGS`) and the particle
+    """Fluid–particle coupling: the scheme (:data:`fbmflow.coupling.schemes.COUPLINGS`) and the particle
     integrator."""
 
     scheme: str = param("implicit", "coupling: explicit (staggered), stabilised (explicit with each "
@@ -60,7 +61,7 @@ _BOUNDARY_DOC = ("nodes: every velocity node inside a particle moves rigidly (fi
 @dataclasses.dataclass(frozen=True)
 class FictitiousBoundaryParams(Section):
     """How particles and obstacles meet the mesh (docs/method.md, "Particles as fictitious
-    boundaries"), and the force estimator (:data:`fbmflow.coupling.FORCE_ESTIMATORS`)."""
+    boundaries"), and the force estimator (:data:`fbmflow.coupling.estimators.FORCE_ESTIMATORS`)."""
 
     boundary: str = param("sharp", _BOUNDARY_DOC, choices=("nodes", "sharp"))
     force: str = param("volume", "hydrodynamic force: volume (-int sigma . grad alpha over the cut cells; "

@@ -1,6 +1,6 @@
 """The sharp fictitious boundary: the no-slip condition on the particle's surface itself.
 
-With the nodal constraints (:func:`~fbmflow.coupling.rigid_body_constraints`) every node inside
+With the nodal constraints (:func:`~fbmflow.coupling.indicator.rigid_body_constraints`) every node inside
 a particle moves rigidly, and the discrete flow sees the particle's surface where the
 constrained nodes end, up to a node spacing inside the true one: the particle is
 hydrodynamically smaller, an error of first order in the mesh size. The sharp boundary changes
@@ -99,7 +99,7 @@ class GhostNodes:
 
         ``owner (n_v,)`` is the node ownership of a later particle state (centres
         ``(n, dim)``, velocities ``(n, dim)``, ``angular`` as for
-        :func:`~fbmflow.coupling.rigid_body_constraints`). A ghost node that ``owner`` puts in the
+        :func:`~fbmflow.coupling.indicator.rigid_body_constraints`). A ghost node that ``owner`` puts in the
         fluid was inside its particle a step ago: the material there moved with the solid, at
         ``U + omega x (x - X)``. Its value in the flow, the continuation through the surface
         (far from that near a thin boundary layer, where the continuation extrapolates a steep
@@ -117,7 +117,7 @@ class GhostNodes:
     def liftings(self, free: np.ndarray) -> sp.csr_matrix:
         """How the constraint values ``g`` change with the particles' generalised velocities:
         (dim n_v, k) CSR with rows at :attr:`dofs`, one column per True entry of
-        ``free (n_particles, r)`` in the column order of :func:`~fbmflow.coupling.rigid_liftings`
+        ``free (n_particles, r)`` in the column order of :func:`~fbmflow.coupling.indicator.rigid_liftings`
         (``r = 3`` in 2D: ``U_x, U_y, omega_z``; 6 in 3D)."""
         n, r = free.shape
         d, n_g = self.dim, len(self.nodes)
@@ -185,7 +185,7 @@ def sharp_boundary(space: FlowSpace, owner: np.ndarray, centres: np.ndarray, sha
                    rotations: np.ndarray | None = None) -> SharpBoundary:
     """The sharp boundary of the particles at ``centres (n, dim)`` with body-to-world
     ``rotations (n, dim, dim)`` (identity if omitted) and node ``owner`` from
-    :func:`~fbmflow.coupling.node_owner`, on a tensor-product mesh. Vectorised over nodes and
+    :func:`~fbmflow.coupling.indicator.node_owner`, on a tensor-product mesh. Vectorised over nodes and
     cells; one ``project`` and ``inside`` call per distinct shape."""
     if not supports_sharp_boundary(shapes):
         raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "

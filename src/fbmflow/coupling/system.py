@@ -81,7 +81,7 @@ class ParticleGeometry:
     space : FlowSpace, the fine level's
     particles : Particles, whose positions and orientations this geometry is (copied)
     sharp : bool, the sharp fictitious boundary is on
-    estimator : a force estimator (:data:`~fbmflow.coupling.FORCE_ESTIMATORS`)
+    estimator : a force estimator (:data:`~fbmflow.coupling.estimators.FORCE_ESTIMATORS`)
     wall_nodes : (k,) int64, the velocity nodes the walls hold (for the estimator)
     """
 
@@ -265,14 +265,15 @@ class CoupledSystem:
 
     def repulsion_stiffness(self) -> sp.csr_matrix | None:
         """The repulsive forces' change with the positions at the start of the step,
-        ``(n dim, n dim)`` (:meth:`~fbmflow.contact.Repulsion.stiffness`); None when the repulsion
+        ``(n dim, n dim)`` (:meth:`~fbmflow.contact.repulsion.Repulsion.stiffness`); None when the repulsion
         is off or the particles are frozen (their positions do not change)."""
         if self.repulsion is None or self.frozen:
             return None
         return self.repulsion.stiffness(self.particles, self.gravity, self.flow.rho)
 
     def velocity_gain(self, dt: float) -> np.ndarray:
-        """``d v_new / d f`` of :meth:`integrate` over ``dt`` (:func:`~fbmflow.particles.velocity_gain`),
+        """``d v_new / d f`` of :meth:`integrate` over ``dt``
+        (:func:`~fbmflow.particles.dynamics.velocity_gain`),
         (n, r, r) float64."""
         return velocity_gain(self.particles, dt, self.integrator, history=self.last_force is not None)
 
@@ -281,7 +282,7 @@ class CoupledSystem:
         """The flow's linear response to a unit rigid motion of every free component and its
         force: ``free (n, r)`` bool selects the ``k`` generalised velocity components; returns
         ``dX (k, n_dofs)``, ``dF (k, n, dim)`` and ``dT (k, n, 3)`` about the flow ``x`` solved
-        last (:meth:`~fbmflow.flow.NavierStokesProblem.lifting_response`). With ``motions
+        last (:meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.lifting_response`). With ``motions
         (m, k)``, the responses to those ``m`` combinations of the unit motions instead (one
         linear solve each, to ``rtol`` where the linear solver takes one): ``dX (m, n_dofs)``,
         ``dF (m, n, dim)``, ``dT (m, n, 3)``."""
@@ -307,7 +308,7 @@ class CoupledSystem:
         product for all particles), and ``added_mass`` times the potential-flow added mass of a
         ball, ``-C rho_f V_i / dt`` on the translations with ``C = 1`` for a disk and ``1/2``
         for a sphere (the ball's value for every shape), which the held flow (no pressure) leaves
-        out (how close the sum comes to the exact blocks: docs/validation.md, "Many particles")."""
+        out (how close the sum comes to the exact blocks: docs/validation/many-particles.md)."""
         p, space, geometry = self.particles, self.flow.space, self.geometry()
         W = rigid_liftings(space.V, geometry.owner(space.V), p.position, free)
         S = self.estimator.own_response(geometry.rule(), W, free, self.flow.mu, self.flow.rho, dt=dt,
@@ -419,7 +420,7 @@ class CoupledSystem:
         The drive carries the particles' weight exactly, so the flux would stay zero, but the
         particles move under the estimated hydrodynamic force, whose error the fluid does not
         feel: momentum leaks at that rate, and without this the mixture would drift without
-        bound (docs/validation.md, "Periodic suspensions")."""
+        bound (docs/validation/periodic-suspensions.md)."""
         space = self.flow.space
         shift = mean_velocity(space, self.x[:space.n_u])
         self.x[:space.n_u] -= np.repeat(shift, space.n_v)

@@ -414,7 +414,7 @@ def velocity_coefficients(u, cell_dofs, phi, detJw):
 
 @njit(parallel=True)
 def apply_convection(cells, conv, cell_dofs, phi, dphi, Jinv, w, scale, out):
-    """Add ``scale N(c) w`` to ``out``: ``out[i, a] += scale int phi_a (c . grad) w_i``, for
+    """Add ``scale N(c) w`` to ``out``: ``out[i, a] += scale int phi_a (c · grad) w_i``, for
     ``w (d, n_v)`` and the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
     ``|det J| w_q c_k`` (:func:`velocity_coefficients`); cells as in :func:`apply_reaction`;
     out (d, n_v) float64, updated in place."""

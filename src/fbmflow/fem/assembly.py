@@ -12,12 +12,12 @@ matrix is ever built.
 Weak forms (``phi`` test, ``psi`` trial pressure; velocity components are blocked):
 
 * mass ``M[a, b] = int phi_a phi_b``
-* viscous term in *gradient form* ``L[a, b] = int grad phi_a . grad phi_b`` per component. We use
+* viscous term in *gradient form* ``L[a, b] = int grad phi_a · grad phi_b`` per component. We use
   the gradient form (not the deformation tensor ``2 D(u) : D(v)``) because its natural boundary
   condition ``nu du/dn - p n = 0`` is the classical "do-nothing" outflow that leaves Poiseuille
   flow undisturbed; for divergence-free fields both forms give the same interior operator, and the
   particle forces are evaluated with the full Cauchy stress anyway.
-* convection ``N(w)[a, b] = int phi_a (w . grad phi_b)`` per component,
+* convection ``N(w)[a, b] = int phi_a (w · grad phi_b)`` per component,
 * Newton term ``R_ik(w)[a, b] = int phi_a phi_b d w_i / d x_k`` coupling components,
 * gradient/divergence ``B[(i, a), (c, m)] = -int_c psi_m d phi_a/dx_i``; ``B^T u = 0`` is the
   discrete continuity equation.
@@ -63,7 +63,7 @@ def assemble_mass(space: FlowSpace) -> np.ndarray:
 
 
 def assemble_laplace(space: FlowSpace) -> np.ndarray:
-    """Data (nnz,) of the scalar Q2 stiffness matrix ``int grad phi_a . grad phi_b``."""
+    """Data (nnz,) of the scalar Q2 stiffness matrix ``int grad phi_a · grad phi_b``."""
     coeff = _kernels.laplace_coefficients(space.detJw, space.Jinv)
     return _assemble_scalar(space, coeff, space.table_laplace)
 
@@ -140,7 +140,7 @@ def assemble_load(space: FlowSpace, values: np.ndarray) -> np.ndarray:
 
 
 def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
-    """``int psi_j dx`` for every pressure DOF: (n_p,) float64 (so ``w . p = int p``)."""
+    """``int psi_j dx`` for every pressure DOF: (n_p,) float64 (so ``w · p = int p``)."""
     return np.einsum("cq,cqm->cm", space.detJw, space.psi).ravel()
 
 
@@ -154,9 +154,11 @@ def velocity_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
 def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndarray,
                      conv: np.ndarray | None = None, cells: np.ndarray | None = None,
                      groups: list[np.ndarray] | None = None) -> None:
-    """Add ``scale N(c) u``, ``int phi_a (c . grad) u_i`` per velocity DOF, to ``out``
+    """Add ``scale N(c) u``, ``int phi_a (c · grad) u_i`` per velocity DOF, to ``out``
     (dim * n_v,) float64 in place, without assembling ``N(c)``.
 
+    Parameters
+    ----------
     conv : (n_cells, nq, dim) float64, optional: :func:`velocity_coefficients` of the convecting
         velocity ``c``; default ``u`` itself (``N(u) u``)
     cells : (m,) int64, optional: only these cells' contributions (sequentially)
@@ -206,6 +208,8 @@ def apply_reaction(space: FlowSpace, react: np.ndarray, w: np.ndarray, scale: fl
     """Add ``scale R(u) w`` to ``out`` in place, the Newton term ``R_ik(u)[a, b] = int phi_a phi_b
     d u_i / d x_k`` applied without a matrix (``react``: :func:`reaction_coefficients` of ``u``).
 
+    Parameters
+    ----------
     w, out : (dim * n_v,) float64
     cells : (m,) int64, optional: only these cells' contributions (sequentially), e.g. the cells
         where ``w`` is non-zero; default all cells (in parallel).

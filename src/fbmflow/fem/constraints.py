@@ -92,7 +92,7 @@ class ContinuityRows:
     ----------
     cells : (n_c,) int64
     data : (n_c, dim + 1, width) float64   the cells' rows in the layout of
-        :func:`~fbmflow.fem.assemble_divergence` (``width = dim * nl`` entries per row)
+        :func:`~fbmflow.fem.assembly.assemble_divergence` (``width = dim * nl`` entries per row)
     """
 
     cells: np.ndarray

@@ -18,7 +18,7 @@ from .elements import ElementP1Disc, ElementQ2
 
 
 class DofMap:
-    """Q2 DOF map of a :class:`~fbmflow.mesh.StructuredMesh`, periodic directions identified.
+    """Q2 DOF map of a :class:`~fbmflow.mesh.structured.StructuredMesh`, periodic directions identified.
 
     Attributes
     ----------

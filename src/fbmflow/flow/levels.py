@@ -39,8 +39,8 @@ DRIFT_CUTOFF = 1e-3
 
 class NewtonBlock:
     """The velocity block of a Newton system at ``u``, applied from an assembled block ``A`` of
-    an earlier point ``u0`` plus, without a matrix (:func:`~fbmflow.fem.apply_convection`,
-    :func:`~fbmflow.fem.apply_reaction`) and left out on the ``constrained`` rows, what the
+    an earlier point ``u0`` plus, without a matrix (:func:`~fbmflow.fem.assembly.apply_convection`,
+    :func:`~fbmflow.fem.assembly.apply_reaction`) and left out on the ``constrained`` rows, what the
     Newton linearisation adds or changes at ``u``, ``s = a rho``:
 
     * ``A`` the Picard block ``m rho M + a (mu L + rho N(u0))`` (``newton_base`` False):
@@ -259,7 +259,7 @@ def coarse_levels(fine: FlowLevel, boundary: dict, pressure_fixed: bool, min_cel
 
     Coarsening goes on while every axis has an even cell count and the coarser mesh keeps at
     least ``min_cells`` cells. (Which of them a linearisation uses, the flow problem decides by
-    their cell Reynolds number: :meth:`NavierStokesProblem._resolving_levels`.)
+    their cell Reynolds number: ``_resolving_levels``.)
     """
     levels = [fine]
     mesh = fine.mesh

@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 #: Newton's residual reduction for the Stokes flow that starts a steady solve from rest
 STOKES_START_RTOL = 1e-3
 #: unknowns above which a coarsest multigrid level is kept coarsened further, whatever the cell
-#: Reynolds number of the coarser levels (:meth:`NavierStokesProblem._resolving_levels`)
+#: Reynolds number of the coarser levels (``_resolving_levels``)
 COARSEST_UNKNOWNS = {2: 50_000, 3: 20_000}
 
 
@@ -59,7 +59,7 @@ class NavierStokesProblem:
         False solves the (time-dependent) Stokes equations.
     linear_solver : LinearSolver, optional
         A :class:`~fbmflow.solvers.base.LinearSolver` (e.g. a configured
-        :class:`~fbmflow.solvers.MultigridSolver`); default: the cheaper by measured cost for
+        :class:`~fbmflow.solvers.multigrid.MultigridSolver`); default: the cheaper by measured cost for
         this size and ``newton.linear_rtol`` (:func:`fbmflow.solvers.choice.choose_linear_solver`).
     newton : NewtonSettings
     coarse_cells : int, optional
@@ -114,7 +114,8 @@ class NavierStokesProblem:
         self._orphans = None  # (constraints, their orphaned pressure modes) last computed
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
         #: ``on_linear_solve(report, system)``, called after every linear solve with its
-        #: :class:`~fbmflow.solvers.LinearReport` and the :class:`~fbmflow.solvers.SaddlePointSystem`
+        #: :class:`~fbmflow.solvers.reports.LinearReport` and the
+        #: :class:`~fbmflow.solvers.system.SaddlePointSystem`
         #: it solved (a hook for studies and profiles; None: none)
         self.on_linear_solve = None
 
@@ -137,7 +138,7 @@ class NavierStokesProblem:
     def constraints(self, t: float = 0.0, extra=None) -> DirichletConstraints:
         """Dirichlet constraints at time ``t`` (cached when they do not depend on time); ``extra``:
         the further constraints ``(DofMap, t) -> DirichletConstraints`` of this solve instead of
-        :attr:`extra_constraints` (the same DOFs, other values: a coupling iteration's particle
+        ``extra_constraints`` (the same DOFs, other values: a coupling iteration's particle
         velocities)."""
         extra = extra or self.extra_constraints
         if self._steady_bc and extra is None:
@@ -153,7 +154,7 @@ class NavierStokesProblem:
         return self.fine.close_pockets(con)
 
     def load(self, t: float = 0.0) -> np.ndarray:
-        """``int f . v`` for every velocity DOF, (dim * n_v,) float64."""
+        """``int f · v`` for every velocity DOF, (dim * n_v,) float64."""
         s = self.space
         if self.body_force is None:
             return np.zeros(s.n_u)
@@ -253,7 +254,8 @@ class NavierStokesProblem:
         """Newton linearisation at ``x`` with constraints applied; with a multigrid solver the
         system carries its re-discretisations on the coarser levels (``coarser`` chain), or,
         where the solver builds its hierarchy from the Picard linearisation
-        (:meth:`MultigridSettings.picard_hierarchy`), a ``preconditioner`` system that does.
+        (:meth:`~fbmflow.solvers.multigrid.MultigridSettings.picard_hierarchy`), a ``preconditioner`` system
+        that does.
 
         The velocity blocks live in buffers of the levels and are overwritten by the next call.
         ``extra``: the solve's further constraints (:meth:`constraints`), which the coarser levels
@@ -352,7 +354,7 @@ class NavierStokesProblem:
         ``newton``: settings for this solve instead of ``self.newton``; ``linear_rtol``: the
         relative residual asked of its linear steps where that is looser than the settings' own
         (a loose solve's steps need no more than its own reduction); ``extra``: this solve's
-        further constraints instead of :attr:`extra_constraints` (:meth:`constraints`).
+        further constraints instead of ``extra_constraints`` (:meth:`constraints`).
         Returns x (n_dofs,) and the NewtonReport.
         """
         con = self.constraints(t, extra)
@@ -433,7 +435,7 @@ class NavierStokesProblem:
 
         ``liftings (dim * n_v, k)`` (dense or sparse) are velocity fields, one per column, that
         are non-zero only on constrained DOFs (e.g. a unit rigid-body motion on a particle's nodes,
-        :func:`~fbmflow.coupling.rigid_liftings`). Each response ``dx = w + z`` solves
+        :func:`~fbmflow.coupling.indicator.rigid_liftings`). Each response ``dx = w + z`` solves
         the Newton linearisation ``J dx = 0`` with ``dx = w`` on the constrained DOFs: ``z``
         vanishes there and solves ``J z = -J w``. ``J w`` for all ``k`` liftings at once is the
         product with the Jacobian assembled at ``x`` (one assembly, constrained rows zeroed and
@@ -473,7 +475,7 @@ class NavierStokesProblem:
         ``|F|`` can fail (measured: dfg-3d-1z at level 1); from the Stokes flow it does not.
 
         With an iterative linear solver (multigrid) the Newton steps take Eisenstat–Walker
-        forcing terms (:class:`~fbmflow.solvers.NewtonSettings`). In 3D, inside FGMRES, a
+        forcing terms (:class:`~fbmflow.solvers.newton.NewtonSettings`). In 3D, inside FGMRES, a
         reused hierarchy (``newton.reuse_jacobian``, while Newton contracts the residual at
         least ``reuse_contraction`` times per step) preconditions the Jacobian at each iterate
         (:meth:`~fbmflow.flow.levels.NewtonBlock.relinearise`): Newton keeps converging like

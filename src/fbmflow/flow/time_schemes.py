@@ -35,6 +35,7 @@ _THETA = 1.0 - np.sqrt(0.5)
 _ALPHA = (1.0 - 2.0 * _THETA) / (1.0 - _THETA)
 _BETA = 1.0 - _ALPHA
 
+#: the time schemes by name (the parameter ``time.scheme``): each a sequence of theta-substeps
 TIME_SCHEMES: dict[str, tuple[Substep, ...]] = {
     "backward-euler": (Substep(1.0, 1.0, 0.0),),
     "crank-nicolson": (Substep(1.0, 0.5, 0.5),),
@@ -74,8 +75,9 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
     only; ignored by the others, whose substeps end at other times). The stopping rule, and so
     the result up to it, does not depend on it. ``rtol``: Newton's residual reduction per substep
     (default the problem's); ``linear_rtol``: a looser target for its linear steps
-    (:meth:`~fbmflow.flow.NavierStokesProblem.solve`); ``extra``: the substeps' further constraints
-    instead of the problem's own (:meth:`~fbmflow.flow.NavierStokesProblem.constraints`).
+    (:meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.solve`); ``extra``: the substeps' further
+    constraints
+    instead of the problem's own (:meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.constraints`).
 
     Returns
     -------

@@ -54,7 +54,7 @@ class FieldWriter:
 
     Parameters
     ----------
-    out : directory; space : the :class:`~fbmflow.fem.FlowSpace`; start_step : 0 for a new run,
+    out : directory; space : the :class:`~fbmflow.fem.space.FlowSpace`; start_step : 0 for a new run,
     the checkpoint's step for a resumed one; fmt : ``xdmf`` or ``vtu``
     """
 
@@ -94,7 +94,7 @@ class FieldWriter:
         self._particles = _Collection(self.out / "particles.pvd", keep=start_step > 0)
 
     def vorticity(self, u: np.ndarray) -> np.ndarray:
-        """|curl u| at the nodes from central differences on the lattice, (n_v,)."""
+        """``|curl u|`` at the nodes from central differences on the lattice, (n_v,)."""
         dim, n_v = self.dim, self.space.n_v
         axes = self.space.V.lattice_axes
         comp = [u[a * n_v:(a + 1) * n_v].reshape(self.shape, order="F") for a in range(dim)]

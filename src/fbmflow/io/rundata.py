@@ -20,8 +20,10 @@ import numpy as np
 
 from .checkpoint import CheckpointError
 
+#: the per-step scalars of ``run.h5``, one ``(k,)`` dataset each
 SCALARS = ("step", "t", "newton_iterations", "flow_solves", "linear_solves", "linear_iterations",
            "linear_sweeps", "linear_time_s", "contacts")
+#: the per-step particle arrays of ``run.h5``, ``(k, n, ...)`` datasets
 ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "torque")
 
 

@@ -79,7 +79,7 @@ class Particles:
 
     @property
     def ball_radius(self) -> np.ndarray | None:
-        """(n,) float64 [m] when every shape is a :class:`~fbmflow.particles.Ball`, else None."""
+        """(n,) float64 [m] when every shape is a :class:`~fbmflow.particles.shapes.Ball`, else None."""
         return self._table["ball_radius"]
 
     @property

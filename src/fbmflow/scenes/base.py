@@ -24,9 +24,11 @@ Progress = Callable[..., None]
 class SceneResult:
     """What a scene run produced.
 
+    Attributes
+    ----------
     quantities : flat dict of named results (numbers or lists of numbers)
     linear_solver : the flow's linear solver in words
-        (:attr:`~fbmflow.flow.NavierStokesProblem.linear_solver_description`)
+        (:attr:`~fbmflow.flow.navier_stokes.NavierStokesProblem.linear_solver_description`)
     """
 
     quantities: dict[str, Any]

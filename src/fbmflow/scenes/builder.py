@@ -63,7 +63,7 @@ CONTACT_SECTIONS = {"fbm": NodalBoundaryParams, "contact": ContactParams, "repul
 
 
 def particle_params(name: str, doc: str, validate=None, **sections) -> type:
-    """The parameter tree of a particle scene (:func:`~fbmflow.params.tree`): its own sections
+    """The parameter tree of a particle scene (:func:`~fbmflow.config.tree`): its own sections
     in the order given, then those of :data:`STANDARD_SECTIONS`, each the class given here or the
     default one. The class belongs to the calling module."""
     own = {key: cls for key, cls in sections.items() if key not in STANDARD_SECTIONS}
@@ -86,9 +86,11 @@ class Layout:
 
 
 class ParticleScene(SimulationScene):
-    """A time-dependent scene of rigid particles in a flow, built by :meth:`build`.
+    """A time-dependent scene of rigid particles in a flow, built by
+    :meth:`~fbmflow.scenes.builder.ParticleScene.build`.
 
-    Subclasses give :meth:`layout`, :meth:`observe` and :meth:`quantities`, and override
+    Subclasses give :meth:`layout`, :meth:`~fbmflow.scenes.base.SimulationScene.observe` and
+    :meth:`~fbmflow.scenes.base.SimulationScene.quantities`, and override
     :meth:`time` when their time section leaves values to the set-up.
     """
 
@@ -134,7 +136,7 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     """The flow problem of a scene without particles, with the Newton and linear solver settings
     of ``solver`` (:meth:`~fbmflow.solvers.settings.SolverParams.linear_solver`) and its memory
     checked before the first solve (:func:`~fbmflow.solvers.choice.check_memory`); ``kwargs`` go to
-    :class:`~fbmflow.flow.NavierStokesProblem`."""
+    :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`."""
     linear = solver.linear_solver(mesh.dim, FlowSpace.estimate_dofs(mesh))
     problem = NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,
                                   newton=solver.newton_settings(), **kwargs)

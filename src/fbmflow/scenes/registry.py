@@ -25,6 +25,7 @@ from .tencate import TenCate
 
 log = logging.getLogger(__name__)
 
+#: the built-in scenes by name
 SCENES: dict[str, Scene] = {s.name: s for s in (Cavity2D(), Channel2D(), Channel3D(), TaylorGreen2D(),
                                                 DFG2D1(), DFG3D1Z(), GlowinskiFreeFall(), TenCate(), DKT2D(),
                                                 Sedimentation2D(), Sedimentation3D(), FluidizedBed2D(),

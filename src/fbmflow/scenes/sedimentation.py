@@ -25,7 +25,7 @@ fit; :func:`~fbmflow.coupling.schemes.auto_coupling`). The plain explicit one is
 (measured: at 2 cells per diameter the disks' rotation rates grow by about 3x per step from the
 first steps, with alternating sign); the stabilised one is 3.6 to 12 times faster than the
 implicit one and follows it within about 5 % over the first 0.2 s, but lags it over a whole
-settling (docs/validation.md, "Many particles").
+settling (docs/validation/many-particles.md).
 Quantities:
 ``max_overlap`` (largest overlap of two particles or of a particle with a wall over all steps,
 over the radius; 0 when none; per step in ``overlap``), ``min_height`` / ``max_height`` of the
@@ -101,7 +101,7 @@ BedParticles = derive(ManyParticles, "BedParticles", "The particles.", count=60,
 ManySolver = derive(
     SolverParams, "ManySolver", "Nonlinear and linear solver settings: Newton stops at a 1e-6 residual "
     "reduction, each linear step at 1e-3 (the mean settling velocity the same to 6e-7 of its largest "
-    "value as at 1e-10 / 1e-8; docs/validation.md, \"Many particles\").",
+    "value as at 1e-10 / 1e-8; docs/validation/many-particles.md).",
     newton_rtol=param(1e-6, "Newton stop: residual reduction", positive=True, maximum=1.0),
     linear_rtol=param(1e-3, "relative residual per linear solve (multigrid: its stopping rule; Newton's "
                       "stopping rule decides the accuracy)", positive=True, maximum=0.1))

@@ -21,7 +21,7 @@ The run stops at ``time.t_end`` (by default the time the experiment reached the 
 the gap between sphere and bottom falls below ``stop_gap`` diameters. Contact with the walls
 (``contact.enabled``, with ``coupling.integrator = "semi-implicit-euler"``) is off by default; it
 carries the lubrication correction (``contact.lubrication``; its effect on the approach to the
-bottom: docs/validation.md, "Lubrication").
+bottom: docs/validation/lubrication.md).
 """
 from __future__ import annotations
 

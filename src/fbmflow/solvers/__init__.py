@@ -7,6 +7,7 @@ from .reports import LinearReport
 from .system import SaddlePointSystem
 from .vanka import VANKA_VARIANTS, VankaSmoother
 
+#: the linear solvers by name (the parameter ``solver.linear``, besides ``auto``)
 LINEAR_SOLVERS = {"direct": DirectSolver, "multigrid": MultigridSolver}
 
 

@@ -46,7 +46,7 @@ class Factorization(ABC):
     """A linear solver set up for one saddle-point system.
 
     ``setup_time_s`` is the set-up's wall time [s]; it is charged to the first solve's report
-    (:meth:`_charge_setup`), so that a run's summed solve times include every set-up once.
+    (``_charge_setup``), so that a run's summed solve times include every set-up once.
     """
 
     #: whether :meth:`solve` takes ``k`` right-hand sides at once, ``f (n_u, k)``, ``g (n_p, k)``

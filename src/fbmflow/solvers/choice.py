@@ -108,9 +108,9 @@ def cheapest_solver(dim: int, n_unknowns: int, rtol: float | None, pardiso: bool
 
 def choose_linear_solver(dim: int, n_unknowns: int, rtol: float | None = 1e-8, linear: str = "auto",
                          multigrid: MultigridSettings | None = None, responses: int = 0) -> LinearSolver:
-    """The linear solver of a run: ``linear`` ``"direct"`` (:class:`~fbmflow.solvers.DirectSolver`,
+    """The linear solver of a run: ``linear`` ``"direct"`` (:class:`~fbmflow.solvers.direct.DirectSolver`,
     PARDISO or SuperLU by :func:`~fbmflow.solvers.direct.auto_backend`), ``"multigrid"``
-    (:class:`~fbmflow.solvers.MultigridSolver` with ``multigrid``'s settings and ``rtol`` as its
+    (:class:`~fbmflow.solvers.multigrid.MultigridSolver` with ``multigrid``'s settings and ``rtol`` as its
     default target) or ``"auto"``: the cheaper of the two (:func:`cheapest_solver`, with the
     ``responses`` a coupled step solves besides its Newton steps) among those whose memory
     estimate fits the machine (:func:`estimate_memory`, :func:`available_memory`)."""

@@ -34,7 +34,7 @@ PARDISO_MIN_UNKNOWNS_2D = 40_000
 # is cheaper: MKL's 2 steps made every solve 4x slower), pivot perturbation 1e-13, scaling, no
 # weighted matching (with it, MKL's default for unsymmetric matrices, the Jacobians of 3D
 # periodic suspensions had perturbed pivots, refinement stalled and solves ended in FGMRES; other
-# scenes solve the same, as fast or faster: docs/validation.md); shift of the zero diagonal
+# scenes solve the same, as fast or faster: docs/validation/); shift of the zero diagonal
 # (relative)
 PARDISO_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 1, 13: 0}
 REGULARISE = 1e-12
@@ -71,7 +71,7 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     unit rows, so that the pattern does not change as they come and go.
 
     ``rtol``: with PARDISO, the relative residual to which each solve is refined
-    (:func:`_pardiso`); ``solve(f, g, rtol)`` asks for another one. SuperLU's solves are not
+    (``_pardiso``); ``solve(f, g, rtol)`` asks for another one. SuperLU's solves are not
     refined.
 
     When the pressure is determined only up to a constant (``mean_weights`` given), the constant
@@ -79,7 +79,8 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
     ``mean_weights``: the dense row would fill the LU factors completely (measured: 76 M non-zeros
     instead of a few M for 33 000 unknowns). The mean is removed afterwards, which gives the
     bordered system's solution for compatible data; the continuity right-hand side is made
-    compatible first (:meth:`SaddlePointSystem.balance`), which gives the bordered system's
+    compatible first (:meth:`~fbmflow.solvers.system.SaddlePointSystem.balance`), which gives the bordered
+    system's
     solution for any data.
     """
     if backend not in DIRECT_BACKENDS:
@@ -217,7 +218,7 @@ class PardisoAnalysis:
 
     def factor(self, K: sp.csr_matrix, reserve=None) -> tuple[sp.csr_matrix, bool]:
         """Factorise ``K`` (CSR, sorted indices) with its zero diagonal entries (the pressure
-        block) shifted by ``-REGULARISE max|diag K|`` (see :func:`_pardiso`). ``reserve``:
+        block) shifted by ``-REGULARISE max|diag K|`` (see ``_pardiso``). ``reserve``:
         callable returning a CSR pattern to reserve as well, called only for a new analysis.
         Returns the factorised matrix (``K`` shifted, in the reserved pattern) and whether the
         analysis was reused."""

@@ -12,7 +12,7 @@ transpose, so that a coarse correction never moves a prescribed value and the re
 constraint rows never drive a coarse equation; coarse fixed DOFs and orphaned modes get no
 correction. Near fictitious boundaries the coarse levels either constrain their own nodes inside
 the particles (``coarse_obstacle = "nodes"``) or take Galerkin rows of the truncated prolongation
-(``"galerkin"``, :mod:`fbmflow.solvers.galerkin`). ``benchmarks/bench_multigrid_fbm.py`` compares
+(``"galerkin"``, :mod:`fbmflow.solvers.galerkin`). ``benchmarks/studies/multigrid_fbm.py`` compares
 them.
 
 Cycles: V (gamma = 1), W (gamma = 2) and F. Used stand-alone (cycles until the residual drops by
@@ -90,8 +90,7 @@ class MultigridSettings(Section):
         """Whether the smoothers sweep forwards and backwards in turn: ``"symmetric"``, or
         ``"auto"`` outside time steps, where convection dominates and a sweep against the flow
         is needed as much as one with it; in time steps the mass term dominates, and the cheaper
-        forward sweeps take as many cycles (docs/validation.md, "Multigrid with fictitious
-        boundaries")."""
+        forward sweeps take as many cycles (docs/validation/multigrid-with-fictitious-boundaries.md)."""
         if self.sweeps == "auto":
             return not time_step
         return self.sweeps == "symmetric"

@@ -1,6 +1,7 @@
 """Orders of the unknowns on a structured mesh: the cell patches of a multiplicative
 (Gauss–Seidel) smoother sweep, split into slabs that threads sweep at the same time, and the
-nested dissection that a sparse direct factorisation eliminates in (:func:`nested_dissection`).
+nested dissection that a sparse direct factorisation eliminates in
+(:func:`~fbmflow.solvers.ordering.nested_dissection`).
 
 The cells are cut into ``n_slabs`` (a power of two) slabs of whole cell layers along the axis
 with the most cells. A sweep has two phases, each one parallel loop over the slabs of one

@@ -1,5 +1,6 @@
 """The solver settings a scene or a :class:`~fbmflow.simulation.Simulation` takes: Newton and the
-linear solver (:class:`SolverParams`, with its multigrid table ``[solver.multigrid]``)."""
+linear solver (:class:`~fbmflow.solvers.settings.SolverParams`, with its multigrid table
+``[solver.multigrid]``)."""
 from __future__ import annotations
 
 import dataclasses
@@ -49,7 +50,7 @@ class SolverParams(Section):
 @dataclasses.dataclass(frozen=True)
 class SteadySolverParams(SolverParams):
     """Solver settings of a steady Newton solve: inexact Newton steps (the stopping rule is on the
-    nonlinear residual, so the accuracy is Newton's; measured cost: docs/validation.md)."""
+    nonlinear residual, so the accuracy is Newton's; measured cost: docs/validation/)."""
 
     linear_rtol: float = param(1e-2, "relative residual per linear solve (inexact Newton steps; the "
                                "Newton stop on the nonlinear residual decides the accuracy; multigrid: "

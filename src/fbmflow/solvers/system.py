@@ -33,6 +33,8 @@ MAX_CLUSTER_MODES = 1000  # pressure modes up to which a cluster of cut cells ge
 class SaddlePointSystem:
     """Blocks of one linearised system.
 
+    Attributes
+    ----------
     A : (n_u, n_u) CSR, constrained rows already unit rows
     BT : (n_p, n_u) CSR, constrained columns zeroed; ``B = BT.T``
     mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
@@ -40,7 +42,8 @@ class SaddlePointSystem:
         may eliminate them (their solution is the right-hand side there)
     fixed_always : (n_a,) int64 or None, the constrained DOFs that stay constrained in every
         system of the problem (the domain's walls; the particles' DOFs come and go). A
-        factorisation that reuses its analysis (:class:`PardisoAnalysis`) eliminates only the
+        factorisation that reuses its analysis (:class:`~fbmflow.solvers.direct.PardisoAnalysis`) eliminates
+        only the
         ones of them in ``fixed`` and keeps the other constrained DOFs as unit rows, so that the
         matrix keeps its sparsity pattern while particles move.
     space : FlowSpace or None, the discretisation (cell structure for cell-wise smoothers)
@@ -132,7 +135,7 @@ class SaddlePointSystem:
         return balance_volume(g, self.mean_weights, self.orphans, self.space.dim + 1, self.extension)
 
     def remove_pressure_mean(self, x: np.ndarray) -> None:
-        """Shift the pressure part of ``x`` in place so that ``mean_weights . p = 0`` (no-op when
+        """Shift the pressure part of ``x`` in place so that ``mean_weights · p = 0`` (no-op when
         the pressure is determined)."""
         if self.mean_weights is None:
             return
@@ -163,7 +166,7 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
     """Projector onto the pressure modes that ``B^T`` (constrained columns zeroed) no longer
     couples to any velocity: (n_p, n_p) CSR, or None when there are none. ``closed``: the
     pressure is fixed by its mean (velocities prescribed on the whole boundary), so the constant
-    pressure is not one of them even when it lies in their span (:func:`_without_constant`).
+    pressure is not one of them even when it lies in their span (``_without_constant``).
 
     A mode ``q`` is orphaned when ``B q = 0``. It lives on cells that lost velocity columns
     (candidates; a cell with all its velocities free keeps its pressure in every mode). The
@@ -262,10 +265,10 @@ def _rank_deficient(blocks: np.ndarray, threshold: float) -> np.ndarray:
 def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matrix | None,
                    npl: int, extension=None) -> np.ndarray:
     """Continuity right-hand side(s) ``g`` ((n_p,) or (n_p, k)) made solvable in a closed domain:
-    ``g - lambda w`` with ``lambda = (q . g) / (q . w)``, a copy.
+    ``g - lambda w`` with ``lambda = (q · g) / (q · w)``, a copy.
 
     In a box with velocities prescribed on every face the continuity equations can only be
-    satisfied together if the prescribed fluxes into the fluid add up to zero: ``q . g = 0`` for
+    satisfied together if the prescribed fluxes into the fluid add up to zero: ``q · g = 0`` for
     the saddle-point matrix's left null vector ``q``, the constant pressure ``1`` less its orphaned
     part (``q = 1 - C 1``). A rigid motion is divergence-free, but once a particle is within a
     node layer of a wall (or of another particle) the cells in between have only prescribed
@@ -274,7 +277,7 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     one cell whose pressure is pinned (measured: glowinski level 2, t = 0.728 s, gap 0.4 cells,
     ``|F_p| = 0.087`` for ever). ``lambda w``, with ``w = (1 - C) int psi`` the mean weights less
     their orphaned part, spreads the defect as a uniform expansion rate ``lambda`` [1/s] over the
-    fluid: the Lagrange multiplier that the mean-pressure border row ``w . p = 0`` would carry.
+    fluid: the Lagrange multiplier that the mean-pressure border row ``w · p = 0`` would carry.
     For compatible data ``lambda`` is round-off and nothing changes.
     """
     q = np.zeros(len(mean_weights))

@@ -156,7 +156,7 @@ class FactoredVankaSmoother:
     velocity, fixed or row-constrained, not a wall's) get ``interface_sweeps`` more updates, the
     cell patches among them in slab phases as well and the agglomerated ones after them one after
     the other; then all agglomerated patches one after the other. A cluster of cells whose
-    pressures share an orphaned mode (the pressure block couples them; :func:`_clusters`) is
+    pressures share an orphaned mode (the pressure block couples them; ``_clusters``) is
     agglomerated too, into one patch instead of its cells' patches.
 
     Parameters
@@ -170,7 +170,7 @@ class FactoredVankaSmoother:
     interface_sweeps : int
         Extra sequential updates of the patches at the fictitious boundaries per sweep, where
         the error the constraints leave is local and rough (the cycle counts they buy:
-        docs/validation.md).
+        docs/validation/).
     symmetric : bool, every second sweep backwards (symmetric Gauss–Seidel) instead of forwards
     """
 

@@ -3,7 +3,7 @@
 H. Brenner, "The slow motion of a sphere through a viscous fluid towards a plane surface",
 Chem. Eng. Sci. 16 (1961) 242-251, eqs. (2.19) and (3.13). A sphere of radius ``a`` whose centre
 is ``a + h`` from the plane moves towards it at speed ``U`` in fluid of viscosity ``mu``; the
-fluid resists with ``F = 6 pi mu a U lambda(h / a)``, with ``alpha = arccosh(1 + h / a)`` and
+fluid resists with ``F = 6 pi mu a U lambda(h / a)``, with ``alpha = arccosh(1 + h / a)`` and::
 
     rigid wall (no slip):
     lambda = 4/3 sinh(alpha) sum_n n(n+1)/((2n-1)(2n+3))
