@@ -48,3 +48,15 @@ def test_substitutions_are_cheap_next_to_the_factorisation():
 
     for dim, n, measured in ((2, 35_682, 0.72 / 90), (2, 17_106, 0.22 / 90), (3, 32_707, 1.46 / 90)):
         assert 0.7 * measured <= substitution_time("superlu", dim, n) <= 1.3 * measured
+
+
+def test_the_switch_points_are_where_the_choice_changes():
+    """The documentation's table (docs/parameters.md) comes from ``switch_point``: just below it
+    the direct solver, at it multigrid."""
+    from fbmflow.solvers.choice import switch_point
+
+    for dim, rtol, pardiso, responses in ((2, 1e-2, False, 0), (3, 1e-8, True, 6), (3, 1e-2, False, 60)):
+        n = switch_point(dim, rtol, pardiso, responses)
+        assert cheapest_solver(dim, int(0.99 * n), rtol, pardiso, responses=responses) == "direct"
+        assert cheapest_solver(dim, int(1.01 * n), rtol, pardiso, responses=responses) == "multigrid"
+    assert switch_point(2, 1e-8, True) is None  # PARDISO stays cheaper for tight 2D solves

@@ -106,6 +106,24 @@ def cheapest_solver(dim: int, n_unknowns: int, rtol: float | None, pardiso: bool
     return "multigrid"
 
 
+def switch_point(dim: int, rtol: float | None, pardiso: bool, responses: int = 0) -> int | None:
+    """The number of unknowns from which :func:`cheapest_solver` takes multigrid (memory aside),
+    rounded to three significant digits; None when it takes the direct solver up to 10^9. (The
+    documentation's table of ``solver.linear = "auto"`` is generated from it.)"""
+    def multigrid(n: float) -> bool:
+        return cheapest_solver(dim, int(n), rtol, pardiso, responses=responses) == "multigrid"
+
+    lo, hi = 1.0e2, 1.0e9
+    if not multigrid(hi):
+        return None
+    if multigrid(lo):
+        return int(lo)
+    while hi / lo > 1.0 + 1e-4:
+        mid = (lo * hi) ** 0.5
+        lo, hi = (lo, mid) if multigrid(mid) else (mid, hi)
+    return int(float(f"{hi:.3g}"))
+
+
 def choose_linear_solver(dim: int, n_unknowns: int, rtol: float | None = 1e-8, linear: str = "auto",
                          multigrid: MultigridSettings | None = None, responses: int = 0) -> LinearSolver:
     """The linear solver of a run: ``linear`` ``"direct"`` (:class:`~fbmflow.solvers.direct.DirectSolver`,
