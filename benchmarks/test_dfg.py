@@ -6,15 +6,15 @@ machine: 2D levels 1-4 0.1-18 s, level 5 95 s (7.1 GB, needs the ``pardiso`` ext
 1-2 3-13 s, level 3 72 s on multigrid (2.4 GB; the direct solver: 135 s with ``pardiso``).
 """
 
-import importlib.util
-
 import pytest
 from fbmbench import dfg
 from fbmbench.common import bound
 
+from fbmflow.solvers.direct import pardiso_available
+
 quick = pytest.mark.quick
 needs_pardiso = pytest.mark.skipif(
-    importlib.util.find_spec("pypardiso") is None,
+    not pardiso_available(),
     reason="measured with the pardiso extra only (7-13 GB with it); install fbmflow[pardiso]",
 )
 

@@ -203,7 +203,7 @@ def test_pardiso_solves_a_frozen_periodic_suspension_without_fgmres(monkeypatch)
     from fbmflow.solvers import direct
 
     if not direct.pardiso_available():
-        pytest.skip("optional pypardiso not installed")
+        pytest.skip("the pardiso extra (MKL) is not installed")
     fallbacks, fgmres = [], direct.fgmres
     monkeypatch.setattr(direct, "fgmres", lambda *a, **k: fallbacks.append(1) or fgmres(*a, **k))
     scene = get_scene("suspension-3d")

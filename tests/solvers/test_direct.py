@@ -58,7 +58,7 @@ def test_linear_solver_description(monkeypatch, installed):
             == "multigrid")
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_pardiso_matches_superlu():
     system = fbm_system()
     rng = np.random.default_rng(1)
@@ -72,7 +72,7 @@ def test_pardiso_matches_superlu():
     assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f[:, 0], g[:, 0]]))
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
     """An ill-conditioned system (condition number 1e9, |x| up to 1e9 |b|): the rounding
     error of ``K x`` alone exceeds 1e-12 |b|. The solve stops at that floor, as accurate as the
@@ -94,11 +94,10 @@ def test_pardiso_refinement_stops_at_round_off(monkeypatch, caplog):
     assert not calls and "SuperLU" not in caplog.text
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_pardiso_finds_mkl_once(monkeypatch):
-    """pypardiso searches site-packages for MKL (a recursive glob) on every solver it makes unless
-    told where MKL is; after the first factorisation, later ones must not search again (it cost
-    0.6-3.9 s per factorisation, measured)."""
+    """MKL's runtime is looked for once: later factorisations must not search again (a search on
+    every solver cost 0.6-3.9 s per factorisation with pypardiso, measured)."""
     import glob
 
     import scipy.sparse as sp
@@ -155,7 +154,7 @@ def test_scatter_into_pattern_matches_numpy():
     assert not scatter_into_pattern(outside.indptr, outside.indices, outside.data, P.indptr, P.indices, out)
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_pardiso_reuses_its_analysis_as_the_sphere_moves():
     """The sphere moves: other velocity DOFs are constrained (2037, then 2013), other pressure
     modes orphaned (80 entries, then 32). The second factorisation reuses the first one's
@@ -171,7 +170,7 @@ def test_pardiso_reuses_its_analysis_as_the_sphere_moves():
     def check(system, solve):
         f, g = rng.normal(size=(system.n_u, 2)), rng.normal(size=(system.n_p, 2))
         f[system.fixed] = rng.normal(size=(system.fixed.size, 2))  # values prescribed there
-        u, p, _ = solve(f, g)
+        u, p, _ = solve.solve(f, g)
         u_ref, p_ref = factorize(system, "superlu")(f, g)
         np.testing.assert_allclose(u, u_ref, atol=1e-10 * np.abs(u_ref).max())
         np.testing.assert_allclose(p, p_ref, atol=1e-10 * np.abs(p_ref).max())
@@ -187,7 +186,7 @@ def test_pardiso_reuses_its_analysis_as_the_sphere_moves():
     assert solver.analysis.analyses == 2
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 @pytest.mark.parametrize("spread, analyses", [(0.5, 1), (20.0, 2)])
 def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, analyses):
     """The reused analysis is made to give the factors of a perturbed matrix, its entries scaled
@@ -211,7 +210,7 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     solver.factor(first)
     f, g = np.random.default_rng(1).normal(size=second.n_u), np.random.default_rng(2).normal(size=second.n_p)
     f[second.fixed] = 0.0
-    u, p, _ = solver.factor(second)(f, g)
+    u, p, _ = solver.factor(second).solve(f, g)
     r = second.apply(np.concatenate([u, p])) - np.concatenate([f, second.balance(g)])
     assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(np.concatenate([f, g]))
     assert solver.analysis.analyses == analyses
@@ -220,7 +219,7 @@ def test_poor_factors_from_a_reused_analysis_are_replaced(monkeypatch, spread, a
     assert solver.analysis.analyses == analyses + (analyses == 1)
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
     """``rtol`` is the relative residual PARDISO's solves are refined to: the answer meets it,
     and a loose one saves refinement steps (triangular solves) over the default 1e-12."""
@@ -234,14 +233,14 @@ def test_pardiso_refines_to_the_requested_tolerance(monkeypatch):
     lu_solves = {}
     for rtol in (1e-12, 1e-4):
         calls.clear()
-        u, p, _ = DirectSolver("pardiso", rtol=rtol).factor(system)(f, g)
+        u, p, _ = DirectSolver("pardiso", rtol=rtol).factor(system).solve(f, g)
         lu_solves[rtol] = len(calls)
         r = system.apply(np.concatenate([u, p])) - np.concatenate([f, system.balance(g)])
         assert np.linalg.norm(r) <= rtol * np.linalg.norm(np.concatenate([f, system.balance(g)]))
     assert lu_solves[1e-4] < lu_solves[1e-12]
 
 
-@pytest.mark.skipif(not pardiso_available(), reason="optional pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="the pardiso extra (MKL) is not installed")
 def test_newton_asks_its_linear_rtol_of_pardiso(monkeypatch):
     """NewtonSettings.linear_rtol reaches PARDISO's refinement: a steady Navier-Stokes solve past
     a sphere converges to the same solution (to Newton's tolerance) with fewer triangular solves

@@ -3,18 +3,14 @@ there) or Intel MKL PARDISO (the optional ``pardiso`` extra), with the constrain
 eliminated and, for PARDISO, the symbolic analysis kept between factorisations."""
 from __future__ import annotations
 
-import ctypes
-import importlib.util
 import logging
-import os
 import time
-import weakref
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from . import _kernels
+from . import _kernels, mkl
 from .base import Factorization, LinearSolver
 from .krylov import fgmres
 from .ordering import lattice_points, nested_dissection
@@ -42,8 +38,9 @@ ROUNDOFF = 1e2 * np.finfo(float).eps  # attainable relative accuracy of a residu
 
 
 def pardiso_available() -> bool:
-    """True when the optional PARDISO backend (``pip install fbmflow[pardiso]``) is installed."""
-    return importlib.util.find_spec("pypardiso") is not None
+    """True when the optional PARDISO backend (``pip install fbmflow[pardiso]``: MKL's runtime) is
+    installed."""
+    return mkl.available()
 
 
 def auto_backend(dim: int, n_unknowns: int) -> str:
@@ -61,8 +58,8 @@ def factorize(system: SaddlePointSystem, backend: str = "auto", analysis: "Pardi
 
     ``backend``: ``"superlu"`` (SciPy; always there; COLAMD's ordering in 2D, a geometric nested
     dissection of the mesh in 3D, :func:`~fbmflow.solvers.ordering.nested_dissection`),
-    ``"pardiso"`` (Intel MKL PARDISO through the optional ``pypardiso``: nested-dissection
-    ordering, two threads; in 3D it factorises 200 000 unknowns in about 30 s) or ``"auto"``
+    ``"pardiso"`` (Intel MKL PARDISO, the optional ``pardiso`` extra, :mod:`~fbmflow.solvers.mkl`:
+    nested-dissection ordering, two threads; in 3D it factorises 200 000 unknowns in about 30 s) or ``"auto"``
     (:func:`auto_backend`: PARDISO for 3D and large 2D systems when installed, else SuperLU).
 
     ``analysis``: with PARDISO, factorise with this :class:`PardisoAnalysis`, which keeps the
@@ -207,8 +204,7 @@ class PardisoAnalysis:
     """
 
     def __init__(self):
-        self._solvers: list = []  # the live pypardiso solver (0 or 1); freed with this object
-        weakref.finalize(self, _free_solvers, self._solvers)
+        self._handle: mkl.Pardiso | None = None  # the live MKL handle; freed with this object
         self._pattern: sp.csr_matrix | None = None
         self._ia = self._ja = None  # its indptr and indices, 1-based int32 (MKL's CSR)
         self._diagonal: np.ndarray | None = None  # positions of the diagonal in the pattern
@@ -250,7 +246,7 @@ class PardisoAnalysis:
             _kernels.scatter_into_pattern(K.indptr, K.indices, K.data, P.indptr, P.indices, data)
             M = self._shifted(data)
             self.release()
-            self._solvers.append(_new_pardiso_solver())
+            self._handle = mkl.Pardiso(PARDISO_IPARM)
             t1 = time.perf_counter()
             self._factorise(12, M)
             log.debug("PARDISO analysis: pattern %.1f s, analysis and factorisation %.1f s",
@@ -270,33 +266,19 @@ class PardisoAnalysis:
         self._call(phase, M, np.zeros((M.shape[0], 1)))
 
     def _call(self, phase: int, M: sp.csr_matrix, B: np.ndarray) -> np.ndarray:
-        """One call of MKL's ``pardiso`` with the live solver's handle and settings, ``M`` in the
-        reserved pattern (its 1-based indices converted once per analysis) and ``B (n, k)``.
-
-        pypardiso serves here to load MKL and hold the handle. Its own calls convert the indices
-        and compare the whole matrix with a stored copy on every solve, to choose between phases
-        13 and 33: measured at ten-cate level 1, 16 of 188 s over three steps. pypardiso also
-        offers no phase 22. ``tests/solvers/test_direct.py`` checks the results against SuperLU."""
-        solver = self._solvers[0]
-        B = np.asfortranarray(B, dtype=float)
-        X = np.zeros_like(B)
-        error = ctypes.c_int32(0)
-        int_p, float_p = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
-        one = ctypes.byref(ctypes.c_int32(1))
-        solver._mkl_pardiso(solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])), one, one,
-                            ctypes.byref(ctypes.c_int32(solver.mtype)), ctypes.byref(ctypes.c_int32(phase)),
-                            ctypes.byref(ctypes.c_int32(M.shape[0])), M.data.ctypes.data_as(float_p),
-                            self._ia.ctypes.data_as(int_p), self._ja.ctypes.data_as(int_p),
-                            solver.perm.ctypes.data_as(int_p), ctypes.byref(ctypes.c_int32(B.shape[1])),
-                            solver.iparm.ctypes.data_as(int_p), ctypes.byref(ctypes.c_int32(0)),
-                            B.ctypes.data_as(float_p), X.ctypes.data_as(float_p), ctypes.byref(error))
-        if error.value != 0:
-            raise np.linalg.LinAlgError(f"PARDISO phase {phase} failed with error {error.value}")
-        return X
+        """One call of MKL's ``pardiso`` with the live handle (:class:`~fbmflow.solvers.mkl.Pardiso`),
+        ``M`` in the reserved pattern (its 1-based indices converted once per analysis) and
+        ``B (n, k)``. A wrapper that converted the indices and compared the whole matrix with a
+        stored copy on every solve (pypardiso, which this replaced) cost 16 of 188 s over three
+        ten-cate level-1 steps; ``tests/solvers/test_direct.py`` checks the results against
+        SuperLU."""
+        return self._handle.call(phase, M.data, self._ia, self._ja, B)
 
     def release(self) -> None:
         """Free the factors (MKL memory)."""
-        _free_solvers(self._solvers)
+        if self._handle is not None:
+            self._handle.release()
+            self._handle = None
 
     def forget(self) -> None:
         """Free the factors and drop the analysis: the next factorisation analyses afresh (what a
@@ -314,27 +296,6 @@ class PardisoAnalysis:
 # refinement steps of a first solve above which a reused analysis is stale (measured at ten-cate
 # level 1: 2-4 steps with fresh and with reused analyses alike)
 REUSE_REFINEMENTS = 6
-
-
-def _new_pardiso_solver():
-    """A pypardiso solver with :data:`PARDISO_IPARM` (real unsymmetric, CSR not transposed)."""
-    import pypardiso
-
-    solver = pypardiso.PyPardisoSolver()
-    # pypardiso looks for MKL's runtime on every solver it makes, by a recursive glob over
-    # sys.prefix unless PYPARDISO_MKL_RT names it (measured 0.6-3.9 s per factorisation, 12 % of a
-    # ten-cate level-0 step); the first solver's find is handed on to all later ones
-    os.environ.setdefault("PYPARDISO_MKL_RT", solver.libmkl._name)
-    for key, value in PARDISO_IPARM.items():  # 1-based, as in the MKL documentation
-        solver.iparm[key - 1] = value
-    return solver
-
-
-def _free_solvers(solvers: list) -> None:
-    """Free the MKL memory of the pypardiso solvers in ``solvers`` and empty the list (phase -1:
-    phase 0 leaked 17 MB per factorisation)."""
-    while solvers:
-        solvers.pop().free_memory(True)
 
 
 def _pardiso(K: sp.spmatrix, rtol: float = 1e-12, max_refinements: int = 10, accept: float = 1e-8,
@@ -486,7 +447,7 @@ class DirectSolver(LinearSolver):
             raise ValueError(f"rtol (PARDISO's refinement target per solve) must lie in (0, 1), got {rtol}")
         self.rtol = rtol
         if backend == "pardiso" and not pardiso_available():
-            raise ValueError("the PARDISO backend needs pypardiso: pip install 'fbmflow[pardiso]'")
+            raise ValueError("the PARDISO backend needs MKL's runtime: pip install 'fbmflow[pardiso]'")
         self.backend = backend
         self.analysis = PardisoAnalysis()  # kept between PARDISO factorisations; unused by SuperLU
 
