@@ -170,3 +170,29 @@ def test_progress_on_a_terminal_is_a_bar_that_starts_where_a_resumed_run_does():
     assert progress.bar.n == 26 and progress.bar.initial == 25
     progress(130, 130, 1.3, {"newton": 2})
     assert "130/130" in screen.getvalue() and "newton=2" in screen.getvalue()
+
+
+def test_a_particle_that_leaves_the_box_stops_the_run_with_a_remedy_that_fits(tmp_path, capsys):
+    """Glowinski's disk at dt = 0.1 s falls through the floor (it exited 0, 27 cm below the box);
+    now the step that takes it half its radius into the floor fails: exit 1, the step, the wall,
+    wall contact and a smaller time step as remedies, and a checkpoint of the last state that
+    passed the check."""
+    import h5py
+
+    code = main(["run", "glowinski-free-fall", "--level", "0", "--quiet", "--no-plot", "--set", "time.dt=0.1",
+                 "--set", "time.t_end=1.0", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 1 and "into the wall y = 0" in err and "contact.enabled = true" in err, err
+    assert "reduce time.dt" in err
+    with h5py.File(tmp_path / "checkpoint.h5") as f:
+        y = f["position"][()][0, 1]
+    assert y > 0.125 * (1 - 0.5)  # the disk's centre at most half its radius into the floor
+
+
+def test_a_particle_leaving_a_graded_mesh_s_fine_zone_is_warned_of_once(tmp_path, capsys):
+    """A light disk rises out of Glowinski's fine zone (it ran 2.3 times as fast as on a uniform
+    mesh there, and nothing warned): one warning naming the step, the cells and the remedy."""
+    code = main(["run", "glowinski-free-fall", "--level", "0", "--quiet", "--no-plot", "--set",
+                 "particle.density=0.5", "--set", "time.t_end=0.3", "--out", str(tmp_path)])
+    err = [line for line in capsys.readouterr().err.splitlines() if "fine zone" in line]
+    assert code == 0 and len(err) == 1 and "domain.mesh = uniform" in err[0], err

@@ -22,6 +22,9 @@ from .config import ParamError
 from .solvers import ConvergenceError
 
 log = logging.getLogger("fbmflow")
+#: the remedy of a failed solve that names none (a steady scene's Newton iteration)
+STEADY_REMEDY = ("refine the mesh (--level) or lower the Reynolds number (a steady flow may not exist, "
+                 "or Newton may not reach it from the Stokes start, above a few hundred at coarse levels)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -122,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"fbmflow: error: {err}\n")
         return 2
     except ConvergenceError as err:
-        sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: refine the mesh (--level), reduce the "
-                         "time step, or relax solver.newton_rtol.\n")
+        remedy = err.remedy or STEADY_REMEDY
+        sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: {remedy}.\n")
         return 1
 
 

@@ -184,7 +184,7 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
                 if out is not None:
                     checkpoint(sim.step_count)  # the last good state, for inspection or resumption
                     err = ConvergenceError(f"{err}; the last good state (step {sim.step_count}) is in "
-                                           f"{out / 'checkpoint.h5'}")
+                                           f"{out / 'checkpoint.h5'}", err.remedy)
                 if not stop_on_failure:
                     raise err from None
                 log.warning("run stopped early: %s", err)

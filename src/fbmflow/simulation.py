@@ -280,9 +280,16 @@ class Simulation:
             solved = self.coupling.advance(system, dt)
             shift = system.commit(solved, system.integrate(solved.force, solved.torque, dt), dt)
         except ConvergenceError as err:
-            raise ConvergenceError(f"{where}: {err}") from None
+            raise err.with_remedy(self._remedy(), f"{where}: ") from None
         self.coupling.accept(solved)
         newton = sum(r.iterations for r in solved.reports)
         return StepReport(system.step_count, system.t, newton, solved.force, solved.torque,
                           system.particles.position.copy(), system.particles.velocity.copy(),
                           solved.flow_solves, system.contact_report, self.flow.linear_work.since(work), shift)
+
+    def _remedy(self) -> str:
+        """What to change when a step fails for a cause that did not name its own remedy."""
+        if self.coupling.name == "explicit":
+            return ("use coupling.scheme = implicit or stabilised (the explicit coupling is unstable where "
+                    "the fluid's added mass is comparable to the particles' mass), or reduce time.dt")
+        return "reduce time.dt, refine the mesh (--level), or relax solver.newton_rtol"

@@ -9,7 +9,8 @@ from .broadphase import BROADPHASES, candidate_pairs, plane_candidates
 from .contact_set import ContactReport, ContactSet
 from .lubrication import Lubrication
 from .narrowphase import Contacts, Planes
+from .overlap import Overlap, deepest_overlap
 from .repulsion import Repulsion
 
 __all__ = ["BROADPHASES", "candidate_pairs", "plane_candidates", "ContactReport", "ContactSet",
-           "Contacts", "Lubrication", "Planes", "Repulsion"]
+           "Contacts", "Lubrication", "Overlap", "Planes", "Repulsion", "deepest_overlap"]

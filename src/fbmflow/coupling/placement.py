@@ -101,11 +101,8 @@ def check_placement(mesh, particles: Particles, symmetry: tuple):
                 raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres "
                                  f"{X[i].tolist()} and {X[j].tolist()}){_more(bad)}; place them at least a "
                                  "diameter apart")
-    axes = mesh.axis_coordinates
-    if axes is not None:  # the local cell size where each particle sits
-        h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
-                    for a, ax in enumerate(axes)], axis=0)
-        small = np.flatnonzero(2.0 * particles.bounding_radius < 0.5 * h)  # the Q2 node spacing
+    if mesh.axis_coordinates is not None:
+        small, h = too_small(mesh, particles.position, particles.bounding_radius)
         if small.size:
             k = small[0]
             raise ValueError(f"particle {k} (diameter {2 * particles.bounding_radius[k]:.4g}) is smaller "
@@ -113,6 +110,19 @@ def check_placement(mesh, particles: Particles, symmetry: tuple):
                              f"{h[k]:.4g}){_more(small)}: it can cover no velocity node and feel no drag; "
                              "refine the mesh (cells of at most two diameters; 4 or more cells per diameter "
                              "for accurate forces) or enlarge the particles")
+
+
+def too_small(mesh, X: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The particles at ``X (n, dim)`` with bounding ``radius (n,)`` that span less than the
+    velocity-node spacing (half the cell) where they sit, (k,) int64, and the local cell size
+    (the largest of the cell's sides), (n,) float64; on a uniform mesh its spacing."""
+    axes = mesh.axis_coordinates
+    if axes is None:
+        h = np.full(len(X), float(np.max(mesh.spacing)))
+    else:
+        h = np.max([np.diff(ax)[np.clip(np.searchsorted(ax, X[:, a]) - 1, 0, ax.size - 2)]
+                    for a, ax in enumerate(axes)], axis=0)
+    return np.flatnonzero(2.0 * radius < 0.5 * h), h
 
 
 def _more(indices: np.ndarray) -> str:

@@ -23,7 +23,7 @@ import logging
 import numpy as np
 import scipy.sparse as sp
 
-from ..contact import ContactReport
+from ..contact import ContactReport, Planes, deepest_overlap
 from ..contact.settings import ContactParams, RepulsionParams
 from ..fem.constraints import DirichletConstraints
 from ..fem.functions import mean_velocity
@@ -37,12 +37,19 @@ from ..solvers.reports import LinearWork
 from .estimators import make_force_estimator
 from .forces import mirror_images
 from .indicator import node_owner, rigid_body_constraints, rigid_liftings
-from .placement import check_placement, check_symmetry, periodic_drive, walls, wrap
+from .placement import check_placement, check_symmetry, periodic_drive, too_small, walls, wrap
 from .schemes import CoupledFlow
 from .settings import FictitiousBoundaryParams
 from .sharp import sharp_boundary, supports_sharp_boundary
 
 log = logging.getLogger(__name__)
+
+#: how deep a particle may reach into a wall or another particle, as a fraction of its bounding
+#: radius (of the smaller one for a pair), before the run stops: a particle that deep has passed
+#: what kept it out (or nothing did), and the flow around it no longer means anything
+MAX_OVERLAP = 0.5
+#: cells this many times the finest, where a particle sits, mean it left a graded mesh's fine zone
+COARSE_FACTOR = 1.5
 
 
 @dataclasses.dataclass
@@ -174,6 +181,7 @@ class CoupledSystem:
         #: remove the mixture's mean volume flux after every step (a box periodic along every axis)
         self.zero_flux = bool(np.any(self.drive)) and all(mesh.periodic) and not particles.fixed.any()
         faces = walls(mesh, particles, self.symmetry)
+        self._planes = Planes.box(mesh.lower, mesh.upper, faces)  # what the sanity check sees as walls
         self.contact = None if contact is None else contact.make(mesh, fluid.viscosity, faces)
         self.contact_substeps = 1 if contact is None else contact.substeps
         self.repulsion = None if repulsion is None else repulsion.make(mesh, faces)
@@ -201,6 +209,7 @@ class CoupledSystem:
         self._wall_nodes = np.flatnonzero(np.bincount(fixed % space.n_v, minlength=space.n_v) == space.dim)
         self._geometry = None  # made with the wall nodes from now on
         self._warned_fast = 0.0  # the largest move in cells per step warned about (_warn_if_fast)
+        self._warned_coarse = False  # a particle in cells too coarse for it (_warn_if_coarse)
 
     # -- the configuration ----------------------------------------------------------------------
     def geometry(self) -> ParticleGeometry:
@@ -395,12 +404,15 @@ class CoupledSystem:
         advanced. ConvergenceError when the state is not finite. Returns the mean velocity
         removed, (dim,) float64, or None."""
         if not (np.all(np.isfinite(new.position)) and np.all(np.isfinite(solved.x))):
-            raise ConvergenceError("non-finite state")
+            raise ConvergenceError("non-finite state", "reduce time.dt (the step diverged)")
         if self.frozen:
             new.position, new.orientation = self.particles.position.copy(), self.particles.orientation.copy()
         sharp = self.geometry().sharp(self.flow.space.V)  # of the positions the flow was solved with
-        self._warn_if_fast(new.position - self.particles.position, dt)
+        moved = new.position - self.particles.position
+        self._warn_if_fast(moved, dt)
         new.position = wrap(self.flow.mesh, new.position)
+        self._check_overlap(new, moved, dt)
+        self._warn_if_coarse(new)
         self.x, self.particles = solved.x, new
         if sharp is not None:  # uncovered ghost nodes start the next step with the solid's velocity
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
@@ -411,6 +423,52 @@ class CoupledSystem:
         self.t += dt
         self.step_count += 1
         return shift
+
+    def _check_overlap(self, new: Particles, moved: np.ndarray, dt: float) -> None:
+        """Stop (ConvergenceError with a remedy that fits) when the step's end ``new`` has a
+        particle deeper than :data:`MAX_OVERLAP` of its radius in a wall or another particle
+        (:func:`~fbmflow.contact.deepest_overlap`); ``moved (n, dim)`` the step's displacements."""
+        mesh = self.flow.mesh
+        periods = mesh.periods if any(mesh.periodic) else None
+        overlap = deepest_overlap(new, self._planes, periods, np.asarray(mesh.lower, dtype=float))
+        if overlap is None or overlap.fraction <= MAX_OVERLAP:
+            return
+        k = overlap.particle
+        cells = float(np.linalg.norm(moved[k])) / float(np.min(mesh.finest_spacing))
+        if overlap.other < 0:
+            axis, side = overlap.wall
+            where = f"{overlap.fraction:.2f} of its radius into the wall {'xyz'[axis]} = " \
+                    f"{(mesh.lower, mesh.upper)[side][axis]:g}"
+            keeper = "wall contact (contact.enabled = true), which stops a particle at the wall,"
+        else:
+            where = f"{overlap.fraction:.2f} of the smaller radius into particle {overlap.other}"
+            keeper = "hard contact (contact.enabled = true), which keeps particles apart,"
+        remedy = f"reduce time.dt (this step moved it {cells:.2g} cells; the repulsion needs several steps " \
+                 "within its range to stop a particle)"
+        if self.contact is None:
+            remedy = f"turn on {keeper} or {remedy}"
+        raise ConvergenceError(f"particle {k} reaches {where} (depth {overlap.depth:.3g})", remedy)
+
+    def _warn_if_coarse(self, new: Particles) -> None:
+        """Warn, once per run, when a particle leaves the fine zone of a graded mesh: where it
+        sits the cells are more than :data:`COARSE_FACTOR` times the finest (a light disk rising
+        out of ``glowinski-free-fall``'s fine zone ran 2.3 times as fast as on a uniform mesh);
+        where it spans less than a velocity-node spacing the placement check would have refused
+        it at the start (:func:`~fbmflow.coupling.placement.too_small`)."""
+        mesh = self.flow.mesh
+        if self._warned_coarse or mesh.axis_coordinates is None:
+            return
+        small, h = too_small(mesh, new.position, new.bounding_radius)
+        ratio = h / float(np.min(mesh.finest_spacing))
+        out = np.flatnonzero(ratio > COARSE_FACTOR)
+        if out.size:
+            self._warned_coarse = True
+            k = int(small[0]) if small.size else int(out[np.argmax(ratio[out])])
+            worse = " (it spans less than a velocity-node spacing there)" if small.size else ""
+            log.warning("step %d: particle %d left the graded mesh's fine zone: cells of %.3g there, %.1f "
+                        "times the finest%s; its motion loses accuracy: use a uniform mesh (domain.mesh = "
+                        "uniform) or a fine zone that holds its path", self.step_count + 1, k, h[k], ratio[k],
+                        worse)
 
     def _remove_mean_flux(self) -> np.ndarray:
         """Subtract the mixture's mean velocity (:func:`~fbmflow.fem.functions.mean_velocity`, the

@@ -91,7 +91,8 @@ class TaylorGreen2D(Scene):
             try:
                 x, reports = advance(problem, x, t, dt, params.time.scheme)
             except ConvergenceError as err:
-                raise ConvergenceError(f"step {step} (t = {t:.6g} -> {t + dt:.6g}): {err}") from None
+                raise err.with_remedy("reduce time.dt or refine the mesh (--level)",
+                                      f"step {step} (t = {t:.6g} -> {t + dt:.6g}): ") from None
             t = step * dt
             newton_its += sum(r.iterations for r in reports)
             times.append(t)

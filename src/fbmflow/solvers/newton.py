@@ -11,7 +11,18 @@ log = logging.getLogger(__name__)
 
 
 class ConvergenceError(RuntimeError):
-    """A nonlinear or linear solver did not converge; the message says how far it got."""
+    """A nonlinear or linear solver did not converge, or a run left the physically possible; the
+    message says how far it got. ``remedy``: what to change, in the user's terms, where the
+    raising code knows it (None: the caller that knows the context adds one, :meth:`with_remedy`).
+    """
+
+    def __init__(self, message: str, remedy: str | None = None):
+        super().__init__(message)
+        self.remedy = remedy
+
+    def with_remedy(self, remedy: str, prefix: str = "") -> "ConvergenceError":
+        """The same error with ``prefix`` before its message and ``remedy`` where it had none."""
+        return type(self)(f"{prefix}{self.args[0]}", self.remedy or remedy)
 
 
 @dataclass(frozen=True)
