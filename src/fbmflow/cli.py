@@ -7,7 +7,9 @@
     fbmflow plot DIR
 
 User errors (and unusable checkpoints) exit with status 2 and one line on stderr; a run that fails
-to converge exits with status 1 and a message naming a remedy.
+to converge, or leaves the physically possible, exits with status 1 and a message naming a remedy;
+a run stopped by a signal exits with ``128 + signal`` (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP) after
+the step under way, with a checkpoint (:mod:`fbmflow.interrupt`).
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import logging
 import sys
 from pathlib import Path
 
-from . import __version__
+from . import __version__, interrupt
 from .config import ParamError
 from .solvers import ConvergenceError
 
@@ -63,15 +65,26 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line; ``argv`` None: the process's own arguments (as the ``fbmflow`` program,
+    which keeps its signal handlers to the end), else these (as from Python)."""
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
                         format="%(message)s", stream=sys.stderr)
-    from .io import CheckpointError
-    from .run import Progress, RunInterrupted, output_folder
-    from .scenes import SCENES, get_scene, load_scene, resume, run_scene
+    from .run import Progress
 
     progress = None if getattr(args, "quiet", False) else Progress()
+    with interrupt.handling(restore=argv is not None):
+        return _command(args, progress)
+
+
+def _command(args, progress) -> int:
+    """The command ``args`` under the signal handlers; its exit status."""
+    from .io import CheckpointError
+    from .run import RunInterrupted, output_folder
+
     try:
+        from .scenes import SCENES, get_scene, load_scene, resume, run_scene
+
         if args.command == "scenes":
             for name, scene in SCENES.items():
                 print(f"{name}  {scene.description}")
@@ -117,7 +130,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except RunInterrupted as err:
         sys.stderr.write(f"fbmflow: {err}\n")
-        return 130
+        return err.exit_status
+    except interrupt.StopRequested as err:
+        sys.stderr.write(f"fbmflow: {err}; nothing to resume from (no time loop had started)\n")
+        return err.exit_status
     except KeyboardInterrupt:
         sys.stderr.write("fbmflow: aborted; the last checkpoint (if any) is in the output directory\n")
         return 130

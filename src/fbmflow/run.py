@@ -7,8 +7,9 @@ folder (:class:`RunFiles`) it writes
 * ``run.h5``: one row per step (:class:`~fbmflow.io.rundata.RunData`: positions, velocities, forces,
   solver work), row 0 the state it starts from;
 * ``checkpoint.h5`` every ``checkpoint_every`` steps, when a step fails (the last good state), and
-  when the run is stopped by Ctrl-C or SIGTERM (:class:`RunInterrupted`; a second signal aborts at
-  once); a run resumed from it repeats the uninterrupted run's iterations exactly, because the
+  when the run is stopped by Ctrl-C, SIGTERM or SIGHUP (:class:`RunInterrupted`; a second signal
+  aborts at once: :mod:`fbmflow.interrupt`); a run resumed from it repeats the uninterrupted
+  run's iterations exactly, because the
   stored Newton factorisation is dropped at every checkpoint in both;
 * ParaView output every ``fields_every`` steps (:class:`~fbmflow.io.fields.FieldWriter`).
 
@@ -22,7 +23,6 @@ import logging
 import pickle
 import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import interrupt
 from .config import ParamError
 from .io import FieldWriter, RunData, save_checkpoint
 from .solvers import ConvergenceError
@@ -69,12 +70,17 @@ class RunResult:
 
 
 class RunInterrupted(RuntimeError):
-    """A run stopped on request (Ctrl-C, SIGTERM) after a completed step, its state saved."""
+    """A run stopped on request (Ctrl-C, SIGTERM, SIGHUP: the signal ``signum``) after a completed
+    step, its state saved; ``exit_status`` is ``128 + signum``."""
 
-    def __init__(self, step: int, out):
-        self.step, self.out = step, out
+    def __init__(self, step: int, out, signum: int = signal.SIGINT):
+        self.step, self.out, self.signum = step, out, int(signum)
         where = f"; `fbmflow resume {out}` continues" if out is not None else ""
         super().__init__(f"interrupted at step {step}{where}")
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
 
 
 class Progress:
@@ -111,33 +117,6 @@ class Progress:
             self.stream.flush()
 
 
-class _Signals:
-    """Ctrl-C and SIGTERM ask the run to stop after the step under way; a second one aborts at
-    once (KeyboardInterrupt). Installed only in the main thread, for the loop's duration."""
-
-    def __init__(self):
-        self.asked: list[int] = []
-        self.previous: dict = {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self.previous[sig] = signal.signal(sig, self._handler)
-        return self
-
-    def _handler(self, signum, frame):
-        if self.asked:
-            raise KeyboardInterrupt
-        self.asked.append(signum)
-        sys.stderr.write(f"fbmflow: {signal.Signals(signum).name}: stopping after this step "
-                         "(again to abort at once)\n")
-
-    def __exit__(self, *exc):
-        for sig, old in self.previous.items():
-            signal.signal(sig, old)
-        return False
-
-
 def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
              observe: Callable | None = None, until: Callable | None = None,
              progress: Callable | None = None, callback: Callable | None = None,
@@ -152,7 +131,8 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
     checkpoint the state was restored from recorded (``series``, ``newton_iterations``). A step
     that fails (ConvergenceError) raises after saving the last good state (with files), or with
     ``stop_on_failure`` ends the run there, its error in the result. Ctrl-C or SIGTERM (with
-    files) ends the run after the step with a checkpoint: :class:`RunInterrupted`.
+    files) ends the run after the step with a checkpoint: :class:`RunInterrupted`
+    (:mod:`fbmflow.interrupt`).
     """
     files = files or RunFiles()
     out = Path(files.out) if files.out is not None else None
@@ -176,7 +156,7 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
                         {"series": series, "newton_iterations": newton})
 
     reports, failure = [], None
-    with _Signals() as signals:
+    with interrupt.handling(), interrupt.safe_point("step"):
         for k in range(sim.step_count + 1, n_steps + 1):
             try:
                 report = sim.step(dt)
@@ -208,10 +188,11 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
                                                 "linear": report.linear.iterations, "max|U|": float(speed)})
             if until is not None and until(row):
                 break
-            if signals.asked:
+            signum = interrupt.requested()
+            if signum is not None:
                 if out is not None:
                     checkpoint(k)
-                raise RunInterrupted(k, out)
+                raise RunInterrupted(k, out, signum)
             if files.checkpoint_every and k % files.checkpoint_every == 0 and k < n_steps:
                 sim.flow.forget_linearisation()
                 if out is not None:

@@ -138,27 +138,20 @@ def test_damaged_or_missing_run_data_and_a_bad_level_are_refused(tmp_path, capsy
 
 def test_an_interrupted_run_saves_its_step_and_resumes(tmp_path, capsys, monkeypatch):
     """Ctrl-C / SIGTERM stop the run after the step under way: a checkpoint of that step, one
-    line naming it and the resume command, exit 130; resume then finishes the run."""
-    from fbmflow import run
+    line naming it and the resume command, exit 128 + the signal; resume then finishes the run."""
+    from fbmflow import interrupt
 
     before = signal.getsignal(signal.SIGTERM)
-    with run._Signals() as signals:
-        assert not signals.asked
+    with interrupt.handling(), interrupt.safe_point("step"):
+        assert interrupt.requested() is None
         os.kill(os.getpid(), signal.SIGTERM)  # the handler only records it
-        assert signals.asked == [signal.SIGTERM]
+        assert interrupt.requested() == signal.SIGTERM
     assert signal.getsignal(signal.SIGTERM) is before  # restored after the loop
     assert "SIGTERM: stopping after this step" in capsys.readouterr().err  # at once: a step can be long
-
-    class Asked(run._Signals):  # a signal during the first step
-        def __enter__(self):
-            super().__enter__()
-            self.asked.append(signal.SIGTERM)
-            return self
-
-    monkeypatch.setattr(run, "_Signals", Asked)
+    monkeypatch.setattr(interrupt, "requested", lambda: signal.SIGTERM)  # as if it came in step 1
     args = ["glowinski-free-fall", "--level", "0", "--set", "time.t_end=0.03", "--set", "time.dt=0.005",
             "--quiet", "--no-plot"]
-    assert main(["run", *args, "--out", str(tmp_path)]) == 130
+    assert main(["run", *args, "--out", str(tmp_path)]) == 128 + signal.SIGTERM
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "interrupted at step 1" in err[0] and f"fbmflow resume {tmp_path}" in err[0]
     assert _checkpoint_step(tmp_path / "checkpoint.h5") == 1

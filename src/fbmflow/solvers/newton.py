@@ -7,6 +7,8 @@ from typing import Callable
 
 import numpy as np
 
+from .. import interrupt
+
 log = logging.getLogger(__name__)
 
 
@@ -99,7 +101,16 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     ------
     ConvergenceError
         when the iteration count is exhausted or a residual is not finite.
+    StopRequested
+        after an iteration, when a signal asked the run to stop and no run loop will stop it
+        after its step instead (:mod:`fbmflow.interrupt`).
     """
+    with interrupt.safe_point("iteration"):
+        return _iterate(residual, linear_step, x0, settings, reference)
+
+
+def _iterate(residual, linear_step, x0, settings, reference):
+    """:func:`solve_newton`'s iteration."""
     x = x0.copy()
     report = NewtonReport()
     F = residual(x)
@@ -109,6 +120,7 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
     fresh = not settings.reuse_jacobian
     eta = None  # the forcing term of the last step (adaptive_linear_rtol)
     while norm > target:
+        interrupt.check()
         if report.iterations >= settings.max_iterations or not np.isfinite(norm):
             raise ConvergenceError(
                 f"Newton did not converge: residual {norm:.3e} after {report.iterations} iterations "
