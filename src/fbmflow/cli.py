@@ -74,7 +74,10 @@ def main(argv: list[str] | None = None) -> int:
 
     progress = None if getattr(args, "quiet", False) else Progress()
     with interrupt.handling(restore=argv is not None):
-        return _command(args, progress)
+        status = _command(args, progress)
+    if argv is None:  # the program: its work is done, a late signal must not kill its exit
+        interrupt.ignore()
+    return status
 
 
 def _command(args, progress) -> int:

@@ -86,6 +86,15 @@ def safe_point(kind: str):
         _points.pop()
 
 
+def ignore() -> None:
+    """Ignore :data:`SIGNALS` from now on: a program that has finished its work and only exits
+    (where Python restores the default handlers while it shuts down, and a late second signal
+    would kill it)."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+
+
 def requested() -> int | None:
     """The signal received (its number), None while none was."""
     return _received[0] if _received else None
