@@ -1,7 +1,7 @@
 """The ``fbmflow`` command line::
 
     fbmflow scenes
-    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--checkpoint-every N]
+    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--overwrite] [--checkpoint-every N]
                       [--fields-every N] [--fields-format xdmf|vtu] [--quiet] [--no-plot]
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
@@ -53,6 +53,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="time-dependent scenes: write DIR/checkpoint.h5 every N steps (0: never)")
     run.add_argument("--fields-every", type=int, default=0, metavar="N",
                      help="time-dependent scenes: ParaView output (fields.xdmf, particles.pvd) every N steps")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the results of an earlier run in --out (refused without it)")
     run.add_argument("--fields-format", choices=("xdmf", "vtu"), default="xdmf",
                      help="field output as one XDMF+HDF5 series (default) or one VTU per output")
     resume = sub.add_parser("resume", help="continue a stopped or killed run from its checkpoint")
@@ -83,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 def _command(args, progress) -> int:
     """The command ``args`` under the signal handlers; its exit status."""
     from .io import CheckpointError
-    from .run import RunInterrupted, output_folder
+    from .run import OutputError, RunInterrupted, output_folder
 
     try:
         from .scenes import SCENES, get_scene, load_scene, resume, run_scene
@@ -125,7 +127,7 @@ def _command(args, progress) -> int:
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
             summary = run_scene(scene, params, level, out, progress, plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
-                                fields_format=args.fields_format)
+                                fields_format=args.fields_format, overwrite=args.overwrite)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations (%s); summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], summary.get("linear_solver") or "linear solver not recorded",
@@ -143,6 +145,13 @@ def _command(args, progress) -> int:
     except (ParamError, CheckpointError) as err:
         sys.stderr.write(f"fbmflow: error: {err}\n")
         return 2
+    except OutputError as err:
+        sys.stderr.write(f"fbmflow: error: {err}\n")
+        return 1
+    except OSError as err:  # a file the run reads or writes, outside the guarded paths
+        where = f"{err.filename}: " if err.filename else ""
+        sys.stderr.write(f"fbmflow: error: {where}{err.strerror or err}\n")
+        return 1
     except ConvergenceError as err:
         remedy = err.remedy or STEADY_REMEDY
         sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: {remedy}.\n")

@@ -2,7 +2,7 @@
 
 The handlers (:func:`handling`) only record a signal while a *safe point* lies ahead: the run loop
 (:func:`fbmflow.run.run_loop`) ends the run after the step under way, with a checkpoint, and a
-Newton iteration outside a run loop (a steady scene's solve, :func:`fbmflow.solvers.solve_newton`)
+Newton iteration outside a run loop (a steady scene's solve, :func:`fbmflow.solvers.newton.solve_newton`)
 stops after the iteration under way (:func:`check`). Where none lies ahead (a scene's set-up) the
 first signal interrupts at once (:class:`StopRequested`). A second signal aborts at once, wherever
 the run is, with one line on stderr: checkpoints and run files are written whole or not at all,

@@ -18,10 +18,14 @@ plain lines (a log file), at most one every few seconds.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import os
 import pickle
+import shutil
 import signal
+import socket
 import sys
 import time
 from dataclasses import dataclass, field
@@ -45,7 +49,8 @@ class RunFiles:
     out : folder; checkpoint_every : steps between checkpoints (0: only on failure and stop);
     resume : the run continues from ``out/checkpoint.h5`` (``run.h5`` is cut after its step);
     fields_every : ParaView output every that many steps (0: none); fields_format : ``xdmf`` or
-    ``vtu``; meta : what identifies the run in its files (scene, level, params, version).
+    ``vtu``; meta : what identifies the run in its files (scene, level, params, version); setup :
+    what makes a script's simulation again (:func:`write_run_info`).
     """
 
     out: Path | None = None
@@ -54,6 +59,7 @@ class RunFiles:
     fields_every: int = 0
     fields_format: str = "xdmf"
     meta: dict = field(default_factory=dict)
+    setup: dict | None = None  # a script's simulation arguments (setup.pickle; None for a scene)
 
 
 @dataclass
@@ -141,19 +147,42 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
     if resumed is not None:
         series, newton = resumed.get("series", series), int(resumed.get("newton_iterations", 0))
     data = fields = None
+    saved = {"step": sim.step_count if files.resume else None}  # the last checkpoint's step
+
+    def guarded(path, action, nbytes: float = 0.0):
+        """``action()``, a write of ``path``: a full disk or any OS error an OutputError naming
+        the file, the cause and the last checkpoint, which stays intact."""
+        try:
+            if nbytes:
+                room(out, nbytes, path.name)
+            return action()
+        except (OSError, OutputError) as err:
+            cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+            kept = f"; the last checkpoint (step {saved['step']}) in {out / 'checkpoint.h5'} is intact: " \
+                   f"fix the cause and `fbmflow resume {out}`" if saved["step"] is not None else ""
+            raise OutputError(f"cannot write {path}: {cause}{kept}") from None
+
     if out is not None:
-        data = RunData(out / "run.h5", files.meta, resume_step=sim.step_count if files.resume else None)
+        if not files.resume:  # written once the set-up has passed its checks: a refused run leaves nothing
+            guarded(out / "run.json", lambda: write_run_info(files, files.setup))
+        state_bytes = float(sim.x.nbytes) + 64.0 * sim.particles.n * sim.particles.dim * 8
+        data = guarded(out / "run.h5", lambda: RunData(out / "run.h5", files.meta,
+                                                       sim.step_count if files.resume else None,
+                                                       particles=sim.particles.n))
         if not files.resume:
-            data.append(_row(sim, None))
+            guarded(out / "run.h5", lambda: data.append(_row(sim, None)))
         if files.fields_every:
             fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
             if not files.resume:
                 zero = np.zeros_like(sim.particles.position)
-                fields.write(0, sim.t, sim.x, sim.owner(), sim.particles, zero)
+                guarded(out / "fields", lambda: fields.write(0, sim.t, sim.x, sim.owner(), sim.particles,
+                                                            zero), 4.0 * state_bytes)
 
     def checkpoint(step: int) -> None:
-        save_checkpoint(out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
-                        {"series": series, "newton_iterations": newton})
+        guarded(out / "checkpoint.h5", lambda: save_checkpoint(
+            out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
+            {"series": series, "newton_iterations": newton}), 2.0 * state_bytes)
+        saved["step"] = step
 
     reports, failure = [], None
     with interrupt.handling(), interrupt.safe_point("step"):
@@ -176,9 +205,10 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
             for key, value in row.items():
                 series[key].append(value)
             if data is not None:
-                data.append(_row(sim, report))
+                guarded(out / "run.h5", lambda: data.append(_row(sim, report)))
             if fields is not None and k % files.fields_every == 0:
-                fields.write(k, sim.t, sim.x, sim.owner(), sim.particles, report.force)
+                guarded(out / "fields", lambda: fields.write(k, sim.t, sim.x, sim.owner(), sim.particles,
+                                                            report.force), 4.0 * state_bytes)
             if callback is not None:
                 callback(report)
             if progress is not None:
@@ -224,9 +254,9 @@ def output_folder(out) -> Path:
     if str(out).strip() == "":
         raise ParamError("the output directory is empty; give --out DIR")
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ParamError(f"output directory {out} is a file; give another --out")
     try:
+        if out.exists() and not out.is_dir():
+            raise ParamError(f"output directory {out} is a file; give another --out")
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".fbmflow-write-test"
         probe.touch()
@@ -274,3 +304,92 @@ def read_run_info(out) -> tuple[dict, dict | None]:
     setup_path = out / "setup.pickle"
     setup = pickle.loads(setup_path.read_bytes()) if setup_path.is_file() else None
     return info, setup
+
+
+class OutputError(RuntimeError):
+    """A file of a run could not be written; the message names it, the cause, and what is intact."""
+
+
+#: the files a run leaves in its folder (glob patterns), which ``overwrite`` replaces
+RUN_FILES = ("run.json", "run.h5", "checkpoint.h5", "checkpoint.h5.tmp", "summary.json", "setup.pickle",
+             "particles.csv", "fields*.xdmf", "fields*.h5", "fields_*.vtu", "fields.pvd", "particles_*.vtu",
+             "particles.pvd")
+#: the lock a run holds on its folder while it writes there
+LOCK = ".fbmflow.lock"
+
+
+@contextlib.contextmanager
+def claim(out: Path, resume: bool = False, overwrite: bool = False):
+    """Own the folder ``out`` for the block: a lock file with this process's id and host, so that a
+    second run or resume into it refuses while this one writes (a lock whose process is gone
+    from this host is taken over). A new run (not ``resume``) refuses a folder holding another
+    run's results unless ``overwrite``, which deletes them first (:data:`RUN_FILES`).
+    ParamError naming the owner, or the results and the ways on."""
+    out = Path(out)
+    lock = out / LOCK
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "since": time.strftime("%Y-%m-%d %H:%M:%S")}
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            owner = _owner(lock)
+            if owner is not None and not _alive(owner):
+                log.warning("taking over %s from process %s on %s, which is gone", out, owner.get("pid"),
+                            owner.get("host"))
+                lock.unlink(missing_ok=True)
+                continue
+            who = "another process" if owner is None else \
+                f"process {owner.get('pid')} on {owner.get('host')} (since {owner.get('since')})"
+            raise ParamError(f"{out} is being written by {who}; wait for it to end or give another --out "
+                             f"(delete {lock} if that process is gone)") from None
+        except OSError as err:
+            raise ParamError(f"cannot write to output directory {out}: {err.strerror or err}; give another "
+                             "--out") from None
+        with os.fdopen(fd, "w") as f:
+            json.dump(me, f)
+        break
+    try:
+        if not resume:
+            found = sorted({p.name for pattern in RUN_FILES for p in out.glob(pattern)})
+            if found and not overwrite:
+                raise ParamError(f"{out} holds another run's results ({', '.join(found[:3])}"
+                                 f"{', ...' if len(found) > 3 else ''}); give --overwrite to replace them, "
+                                 f"`fbmflow resume {out}` to continue that run, or another --out")
+            for name in found:
+                (out / name).unlink(missing_ok=True)
+        yield out
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def _owner(lock: Path) -> dict | None:
+    try:
+        owner = json.loads(lock.read_text())
+        return owner if isinstance(owner, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _alive(owner: dict) -> bool:
+    """Whether the lock's process may still run: on another host always (it cannot be asked)."""
+    if owner.get("host") != socket.gethostname():
+        return True
+    try:
+        os.kill(int(owner.get("pid", -1)), 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, ValueError, TypeError, OverflowError):
+        return True
+    return True
+
+
+def room(out: Path, nbytes: float, what: str) -> None:
+    """OutputError when the disk holding ``out`` has less than twice ``nbytes`` (and 16 MB) free:
+    a write stopped by a full disk can leave a broken file, or worse (HDF5)."""
+    try:
+        free = shutil.disk_usage(out).free
+    except OSError:
+        return
+    if free < 2.0 * nbytes + 16e6:
+        raise OutputError(f"the disk holding {out} is full: {free / 1e6:.0f} MB free, {what} needs about "
+                          f"{nbytes / 1e6:.0f} MB")

@@ -28,7 +28,7 @@ from .flow import NoSlip
 from .io import load_checkpoint
 from .params import FluidParams, TimeParams
 from .particles import Particles
-from .run import Progress, RunFiles, output_folder, run_loop, write_run_info
+from .run import Progress, RunFiles, claim, output_folder, run_loop
 from .solvers import ConvergenceError
 from .solvers.choice import check_memory
 from .solvers.settings import SolverParams
@@ -241,30 +241,33 @@ class Simulation:
 
     # -- stepping -------------------------------------------------------------------------------
     def run(self, out=None, *, checkpoint_every: int = 0, fields_every: int = 0, fields_format: str = "xdmf",
-            resume: bool = False, progress: bool = False, callback=None) -> list[StepReport]:
+            resume: bool = False, overwrite: bool = False, progress: bool = False,
+            callback=None) -> list[StepReport]:
         """Step from the current step to ``time.t_end`` in steps of :attr:`dt`; returns the steps'
         reports (ConvergenceError names a failing step).
 
         With an output folder ``out`` the run writes ``run.h5`` (a row per step), a checkpoint
-        every ``checkpoint_every`` steps (and on a failed step, Ctrl-C or SIGTERM), ParaView
-        output every ``fields_every`` steps, and its set-up (``setup.pickle``), so that
-        :func:`fbmflow.scenes.registry.resume` continues it bit-exactly (:func:`fbmflow.run.run_loop`).
-        ``resume``:
-        continue from ``out``'s checkpoint instead (this simulation made as the run's was).
-        ``progress``: show progress on stderr; ``callback(report)`` after every step.
+        every ``checkpoint_every`` steps (and on a failed step or a signal), ParaView output
+        every ``fields_every`` steps, and its set-up, so that ``fbmflow.resume``
+        (:func:`~fbmflow.scenes.registry.resume`) continues it bit-exactly
+        (:func:`fbmflow.run.run_loop`); it owns the folder while it writes, and a
+        folder holding another run's results is refused unless ``overwrite``
+        (:func:`fbmflow.run.claim`). ``resume``: continue from ``out``'s checkpoint instead (this
+        simulation made as the run's was). ``progress``: show progress on stderr;
+        ``callback(report)`` after every step.
         """
-        files, resumed = None, None
-        if out is not None:
-            files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,
-                             {"kind": "simulation", "fbmflow_version": __version__})
+        if out is None:
+            return run_loop(self, self.n_steps, self.dt, None, callback=callback,
+                            progress=Progress() if progress else None).reports
+        files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,
+                         {"kind": "simulation", "fbmflow_version": __version__}, self._setup)
+        with claim(files.out, resume, overwrite):
+            resumed = None
             if resume:
                 state, _, resumed = load_checkpoint(files.out / "checkpoint.h5", expect=files.meta)
                 self.set_state(state)
-            else:
-                write_run_info(files, setup=self._setup)
-        result = run_loop(self, self.n_steps, self.dt, files, callback=callback, resumed=resumed,
-                          progress=Progress() if progress else None)
-        return result.reports
+            return run_loop(self, self.n_steps, self.dt, files, callback=callback, resumed=resumed,
+                            progress=Progress() if progress else None).reports
 
     def step(self, dt: float | None = None) -> StepReport:
         """Advance flow and particles over ``dt`` [s] (default :attr:`dt`) by the coupling

@@ -28,28 +28,41 @@ ARRAYS = ("position", "velocity", "orientation", "angular_velocity", "force", "t
 
 
 class RunData:
-    """Appends rows to ``path`` (created with ``meta`` attributes unless ``resume_step`` is given,
-    in which case rows after that step are dropped; CheckpointError when the file is missing or
-    damaged then)."""
+    """Appends rows to ``path``: created with ``meta`` attributes, or with ``resume_step`` the
+    file of the run being resumed, whose rows after that step are dropped. CheckpointError when
+    that file is missing, damaged, another run's (its ``meta`` differs, naming the key), holds
+    another number of particles (``particles``) or stops short of ``resume_step``."""
 
-    def __init__(self, path, meta: dict, resume_step: int | None = None):
+    def __init__(self, path, meta: dict, resume_step: int | None = None, particles: int | None = None):
         import h5py
 
         self.path = Path(path)
         if resume_step is None:
             with h5py.File(self.path, "w") as f:
                 for key, value in meta.items():
-                    f.attrs[key] = value if isinstance(value, (int, float, str)) else json.dumps(value)
-        else:
-            try:
-                with h5py.File(self.path, "r+") as f:
-                    if "step" in f:
-                        keep = int(np.searchsorted(f["step"][()], resume_step, side="right"))
-                        for key in f.keys():
-                            f[key].resize(keep, axis=0)
-            except (OSError, KeyError) as err:
-                raise CheckpointError(f"{self.path} cannot be read ({err}); restore it or start the run "
-                                      "again") from None
+                    f.attrs[key] = _attribute(value)
+            return
+        try:
+            with h5py.File(self.path, "r+") as f:
+                for key, value in meta.items():
+                    differs = difference(_value(f.attrs.get(key)), value, key)
+                    if differs:
+                        raise CheckpointError(f"{self.path} belongs to another run: {differs}; restore the "
+                                              "run's own file or start the run again")
+                steps = f["step"][()] if "step" in f else np.zeros(0, dtype=np.int64)
+                if steps.size == 0 or steps.max() < resume_step:
+                    last = int(steps.max()) if steps.size else "none"
+                    raise CheckpointError(f"{self.path} ends at step {last}, before the checkpoint's step "
+                                          f"{resume_step}; restore the run's own file or start the run again")
+                if particles is not None and f["position"].shape[1] != particles:
+                    raise CheckpointError(f"{self.path} holds {f['position'].shape[1]} particles, the run "
+                                          f"{particles}; restore the run's own file or start the run again")
+                keep = int(np.searchsorted(steps, resume_step, side="right"))
+                for key in f.keys():
+                    f[key].resize(keep, axis=0)
+        except (OSError, KeyError) as err:
+            raise CheckpointError(f"{self.path} cannot be read ({err}); restore it or start the run "
+                                  "again") from None
 
     def append(self, row: dict) -> None:
         """One row: the keys of :data:`SCALARS` and :data:`ARRAYS`."""
@@ -64,6 +77,45 @@ class RunData:
                     d = f[key]
                     d.resize(d.shape[0] + 1, axis=0)
                     d[-1] = value
+
+
+def _attribute(value):
+    """A ``meta`` value as stored in the file's attributes: numbers and strings as they are, the
+    rest as JSON."""
+    return value if isinstance(value, (int, float, str)) else json.dumps(value)
+
+
+def _value(stored):
+    """An attribute read back: JSON parsed where it is JSON of a table or list."""
+    if isinstance(stored, bytes):
+        stored = stored.decode()
+    if isinstance(stored, str) and stored[:1] in "{[":
+        try:
+            return json.loads(stored)
+        except ValueError:
+            return stored
+    return stored.item() if isinstance(stored, np.generic) else stored
+
+
+def difference(have, want, key: str) -> str | None:
+    """The first dotted key under which ``have`` (what a file holds) and ``want`` (this run's)
+    differ, in words (``"params.fluid.viscosity is 0.1 there, 0.2 here"``), None where they
+    agree (tuples and lists alike)."""
+    if isinstance(have, dict) and isinstance(want, dict):
+        for k in sorted(set(have) | set(want), key=str):
+            if k not in have or k not in want:
+                return f"{key}.{k} is {'missing' if k not in have else 'unknown'} there"
+            found = difference(have[k], want[k], f"{key}.{k}")
+            if found:
+                return found
+        return None
+    if isinstance(have, (list, tuple)) and isinstance(want, (list, tuple)) and len(have) == len(want):
+        for i, (a, b) in enumerate(zip(have, want)):
+            found = difference(a, b, f"{key}[{i}]")
+            if found:
+                return found
+        return None
+    return None if have == want else f"{key} is {have!r} there, {want!r} here"
 
 
 def export_csv(h5_path, csv_path) -> Path:

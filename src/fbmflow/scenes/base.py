@@ -142,6 +142,7 @@ class SimulationScene(Scene):
         the behaviour of the code that wrote it."""
         from ..config import ParamError, from_dict, to_dict
         from ..io import CheckpointError, load_checkpoint
+        from ..io.rundata import difference
 
         state, saved, extra = load_checkpoint(path, expect={k: v for k, v in meta.items() if k != "params"})
         if "params" in meta:
@@ -149,7 +150,8 @@ class SimulationScene(Scene):
                 resolved = to_dict(from_dict(type(params), saved.get("params")))
             except ParamError as err:
                 resolved = f"<not valid today: {err}>"
-            if resolved != meta["params"]:
-                raise CheckpointError(f"checkpoint {path} is for another params ({resolved!r}, this run has "
-                                      f"{meta['params']!r}); resume it with its own settings or start afresh")
+            differs = difference(resolved, meta["params"], "params")
+            if differs:
+                raise CheckpointError(f"checkpoint {path} is for other parameters: {differs}; resume it with "
+                                      "its own settings or start afresh")
         return state, extra

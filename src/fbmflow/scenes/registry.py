@@ -3,14 +3,18 @@ from __future__ import annotations
 
 import json
 import logging
+import math
+import os
 import time
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
-from ..run import RunFiles, output_folder, read_run_info, write_run_info
+from ..run import OutputError, RunFiles, claim, output_folder, read_run_info
 from ..simulation import Simulation
 from .base import Scene, SimulationScene
 from .cavity import Cavity2D
@@ -92,7 +96,7 @@ def check_level(scene: Scene, level) -> int:
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
               checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0,
-              fields_format: str = "xdmf") -> dict:
+              fields_format: str = "xdmf", overwrite: bool = False) -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
@@ -100,30 +104,70 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     ``particles.csv``, with ``checkpoint_every > 0`` a checkpoint every that many steps and with
     ``fields_every > 0`` ParaView output (:func:`~fbmflow.run.run_loop`); ``resume`` continues
     from the checkpoint in ``out``. Ctrl-C and SIGTERM end such a run after the step under way
-    with a checkpoint (:class:`~fbmflow.run.RunInterrupted`).
+    with a checkpoint (:class:`~fbmflow.run.RunInterrupted`). The run owns ``out`` while it
+    writes (:func:`~fbmflow.run.claim`): a folder that holds another run's results is refused
+    unless ``overwrite``. ``summary.json`` is written before the plot, which only warns when it
+    fails.
     """
     out = output_folder(out)
+    if not isinstance(scene, SimulationScene) and (checkpoint_every or resume or fields_every):
+        raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
     meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
-    t0 = time.perf_counter()
-    if isinstance(scene, SimulationScene):
-        files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
-        if not resume:
-            write_run_info(files)
-        result = scene.run(params, level, progress, files)
-        export_csv(out / "run.h5", out / "particles.csv")
-    else:
-        if checkpoint_every or resume or fields_every:
-            raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
-        result = scene.run(params, level, progress)
-    wall = time.perf_counter() - t0
-    summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
-               "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
-               "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
-               "newton_iterations": result.newton_iterations, "quantities": result.quantities}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    if plot and scene.plot(summary, out / f"{scene.name}.png"):
-        log.info("plot written to %s", out / f"{scene.name}.png")
+    with claim(out, resume, overwrite):
+        t0 = time.perf_counter()
+        if isinstance(scene, SimulationScene):
+            files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
+            result = scene.run(params, level, progress, files)
+            _write(out / "particles.csv", lambda: export_csv(out / "run.h5", out / "particles.csv"))
+        else:
+            result = scene.run(params, level, progress)
+        wall = time.perf_counter() - t0
+        summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
+                   "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
+                   "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
+                   "newton_iterations": result.newton_iterations, "quantities": finite(result.quantities)}
+        text = json.dumps(summary, indent=1, allow_nan=False)
+        _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
+    if plot:
+        try:
+            if scene.plot(summary, out / f"{scene.name}.png"):
+                log.info("plot written to %s", out / f"{scene.name}.png")
+        except Exception as err:  # the results are written; a plot that fails loses nothing
+            log.warning("the plot %s could not be drawn (%s: %s); the results are in %s",
+                        out / f"{scene.name}.png", type(err).__name__, err, out / "summary.json")
     return summary
+
+
+def finite(value):
+    """``value`` (nested dicts and lists of numbers) with what JSON cannot hold as a number made
+    ``None``: NaN, infinities and complex numbers (a quantity that could not be computed)."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    if isinstance(value, (complex, np.complexfloating)):
+        return None
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _replace(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` whole or not at all (a temporary file renamed over it)."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _write(path: Path, action) -> None:
+    """``action()``, a write of ``path``; an OS error an OutputError naming the file and the cause."""
+    try:
+        action()
+    except OSError as err:
+        raise OutputError(f"cannot write {path}: {err.strerror or err}") from None
 
 
 def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
