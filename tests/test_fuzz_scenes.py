@@ -70,6 +70,8 @@ def test_any_scene_file_loads_or_gives_a_param_error(tmp_path_factory, data, sce
     (["particle.diameter=-0.1"], "particle.diameter: must be positive"),
     (["fluid.viscosity=0"], "fluid.viscosity: must be positive"),
     (["time.dt=-1"], "time.dt: must be positive"),
+    (["time.t_end=1e308"], "steps, more than 1e+08"),  # was an OverflowError traceback
+    (["fluid.viscosity=1e308"], "outside 1e-100 to 1e100"),  # was a singular factorisation
 ])
 def test_bad_physical_setups_exit_2_before_the_first_step(overrides, needle, capsys, tmp_path):
     argv = ["run", "glowinski-free-fall", "--out", str(tmp_path), "--quiet"]
@@ -92,3 +94,22 @@ def test_particles_that_do_not_fit_are_refused(capsys, tmp_path):
                  "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "GB available" in err and err.count("\n") == 1
+
+
+def test_a_box_too_large_for_the_machine_is_refused_before_it_is_made(capsys, tmp_path):
+    """A tiny volume fraction grew the periodic box until a 5.7 TiB MemoryError; now the cells it
+    asks for are refused with the figure and the parameter that asked for them."""
+    assert main(["run", "suspension-3d", "--set", "particles.volume_fraction=1e-9", "--out", str(tmp_path),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "particles.volume_fraction = 1e-09" in err and "GB available" in err, err
+
+
+def test_a_light_sphere_s_terminal_velocity_is_real_and_upwards():
+    """``suspension-3d`` with ``particles.density = 0.5`` computed a complex Reynolds number and
+    died writing summary.json."""
+    from fbmflow.scenes.suspension import terminal_velocity
+
+    v_up, re_up = terminal_velocity(0.1, 0.5, 1.0, 0.01, 980.0)
+    v_down, re_down = terminal_velocity(0.1, 1.5, 1.0, 0.01, 980.0)
+    assert v_up == -v_down and re_up == re_down and isinstance(re_up, float) and re_up > 0

@@ -109,3 +109,27 @@ def test_the_implicit_coupling_s_responses_count_and_are_refused_with_a_remedy(m
         Simulation(mesh, disks, FluidParams(), coupling=CouplingParams(scheme=scheme))
     one = Particles.at_rest([Ball(0.25, 2)], 1.25, [[1.0, 4.0]])
     Simulation(mesh, one, FluidParams(), coupling=CouplingParams(scheme="implicit"))  # 3 fit
+
+
+def test_the_address_space_limit_and_the_cgroup_limit_count(tmp_path, monkeypatch):
+    """What a batch scheduler sets (``ulimit -v``, a cgroup) bounds the memory available, not only
+    the machine's free memory (before: a MemoryError traceback under ``ulimit -v 4000000``)."""
+    import resource
+
+    status = tmp_path / "status"
+    status.write_text("VmSize:  1000000 kB\n")
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (4_000_000 * 1024, resource.RLIM_INFINITY))
+    assert choice.address_space_left(status) == (4_000_000 - 1_000_000) * 1024.0
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+    assert choice.address_space_left(status) is None
+    cgroup = tmp_path / "cgroup"
+    cgroup.mkdir()
+    (cgroup / "memory.max").write_text("2000000000\n")
+    (cgroup / "memory.current").write_text("500000000\n")
+    assert choice.cgroup_left(cgroup) == 1.5e9
+    (cgroup / "memory.max").write_text("max\n")
+    assert choice.cgroup_left(cgroup) is None
+    info = tmp_path / "meminfo"
+    info.write_text("MemAvailable:    9000000 kB\n")
+    monkeypatch.setattr(choice, "cgroup_left", lambda: 1.5e9)
+    assert available_memory(info) == 1.5e9  # the least of the three

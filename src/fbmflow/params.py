@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from .config import Section, param
+from .config import ParamError, Section, param
 
 
 # -- sections shared by scenes and the Simulation ------------------------------------------------
@@ -21,6 +21,14 @@ class FluidParams(Section):
     gravity: float = param(9.81, "gravitational acceleration, pointing along the last axis downwards",
                            "m/s^2", nonnegative=True)
 
+    def validate(self):
+        """Values whose products overflow (or vanish) in double precision: no fluid is that."""
+        for name in ("density", "viscosity", "gravity"):
+            value = getattr(self, name)
+            if value and not 1e-100 <= value <= 1e100:
+                raise ParamError(f"fluid.{name} = {value!r} is outside 1e-100 to 1e100, where the flow's "
+                                 "matrices overflow or vanish; use consistent units of a real fluid")
+
     def gravity_vector(self, dim: int):
         """Gravity as a vector, ``(dim,)`` float: ``(0, ..., 0, -gravity)``."""
         g = [0.0] * dim
@@ -28,6 +36,9 @@ class FluidParams(Section):
         return g
 
 
+#: the most time steps a run may take (a larger count is a typo: it would not end, and its step count
+#: overflows what a run stores)
+MAX_STEPS = 10**8
 #: the time schemes a ``scheme`` parameter may name: the names of
 #: :data:`fbmflow.flow.time_schemes.TIME_SCHEMES` (a test keeps the two equal; this module sits below
 #: the flow package)
@@ -41,6 +52,11 @@ class TimeParams(Section):
     dt: float = param(0.01, "time step", "s", positive=True)
     t_end: float = param(1.0, "final time", "s", positive=True)
     scheme: str = param("fractional-step-theta", "implicit time scheme", choices=SCHEMES)
+
+    def validate(self):
+        if self.dt > 0 and self.t_end / self.dt > MAX_STEPS:  # (a scene may leave dt 0 to its set-up)
+            raise ParamError(f"time.t_end / time.dt = {self.t_end / self.dt:.3g} steps, more than "
+                             f"{MAX_STEPS:.0e}: use a larger time.dt or a shorter time.t_end")
 
     @property
     def n_steps(self) -> int:

@@ -7,6 +7,7 @@ local entry in it (so re-assembly scatters straight into ``csr.data``), the patt
 """
 from __future__ import annotations
 
+import math
 from functools import cached_property
 
 import numpy as np
@@ -60,8 +61,15 @@ class FlowSpace:
     @staticmethod
     def estimate_dofs(mesh: StructuredMesh) -> int:
         """Number of unknowns (velocity + pressure) a FlowSpace on ``mesh`` would have."""
-        nodes = int(np.prod([2 * n if p else 2 * n + 1 for n, p in zip(mesh.shape, mesh.periodic)]))
-        return mesh.dim * nodes + (mesh.dim + 1) * mesh.n_cells
+        return FlowSpace.count_dofs(mesh.shape, mesh.periodic)
+
+    @staticmethod
+    def count_dofs(shape, periodic=None) -> int:
+        """Number of unknowns of a FlowSpace on a mesh of ``shape`` cells (``periodic`` axes), the
+        mesh not made (Python integers: no overflow, however large)."""
+        periodic = periodic or (False,) * len(shape)
+        nodes = math.prod(2 * int(n) if p else 2 * int(n) + 1 for n, p in zip(shape, periodic))
+        return len(shape) * nodes + (len(shape) + 1) * math.prod(int(n) for n in shape)
 
     # -- sparsity -----------------------------------------------------------------------------
     def _build_pattern(self):

@@ -17,7 +17,7 @@ import math
 import sys
 from dataclasses import dataclass
 
-from ..config import Section, param, tree
+from ..config import ParamError, Section, param, tree
 from ..contact.settings import ContactParams, ContactRepulsionParams, RepulsionParams
 from ..coupling.settings import CouplingParams, FictitiousBoundaryParams, NodalBoundaryParams
 from ..fem import FlowSpace
@@ -129,6 +129,20 @@ class ParticleScene(SimulationScene):
                     "contact stops the particles that far apart and contact times and distances lose their "
                     "meaning; %s (a skin of at most %.2g radii) or lower contact.skin_cells", self.name,
                     level, sim.contact.skin, sim.contact.skin / cell, cell, ratio, remedy, SKIN_FRACTION)
+
+
+def check_mesh_size(shape, periodic, dim: int, cause: str) -> None:
+    """Refuse, before the mesh is made, a mesh of ``shape`` cells whose flow would not fit the
+    machine even on multigrid (the solver that needs least, :func:`~fbmflow.solvers.choice.check_memory`):
+    ParamError with the figure, naming ``cause`` (the parameter that made it that large)."""
+    from ..solvers.choice import InsufficientMemory
+
+    n = FlowSpace.count_dofs(shape, periodic)
+    try:
+        check_memory(n, dim, "multigrid")
+    except InsufficientMemory as err:
+        cells = " x ".join(str(int(s)) for s in shape)
+        raise ParamError(f"{cause} asks for a mesh of {cells} cells: {err}") from None
 
 
 def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,

@@ -50,7 +50,7 @@ from ..params import TimeParams
 from ..particles import Ball, Particles
 from ..solvers.settings import SolverParams
 from .base import pyplot, save_figure
-from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, particle_params
+from .builder import CONTACT_SECTIONS, CgsFluid, Layout, ParticleScene, check_mesh_size, particle_params
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ ManyCoupling = derive(CouplingParams, "ManyCoupling", CouplingParams.__doc__, sc
 class ManyParticles(Section):
     """The particles."""
 
-    count: int = param(100, "number of particles", minimum=1)
+    count: int = param(100, "number of particles", minimum=1, maximum=10**6)
     diameter: float = param(0.1, "particle diameter", "cm", positive=True)
     density: float = param(2.0, "particle density", "g/cm^3", positive=True)
     seed: int = param(0, "seed of the random jitter of the initial lattice", minimum=0)
@@ -196,8 +196,11 @@ class _ManyParticles(ParticleScene):
         return lower, upper
 
     def mesh(self, level: int, scale: float = 1.0) -> StructuredMesh:
-        """The box of size ``scale`` (a multiple of 1/2) with the level's cells."""
+        """The box of size ``scale`` (a multiple of 1/2) with the level's cells (refused before it
+        is made where its flow cannot fit the machine)."""
         cells = tuple(int(round(n * scale)) * 2**level for n in self.cells_level0)
+        check_mesh_size(cells, None, self.dim,
+                        f"the box grown {scale:g} times (particles.count) at level {level}")
         return StructuredMesh.box(cells, upper=tuple(scale * b for b in self.box))
 
     def boundary(self, mesh, params) -> dict | None:

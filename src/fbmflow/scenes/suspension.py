@@ -50,7 +50,7 @@ from ..mesh import StructuredMesh
 from ..params import TimeParams
 from ..particles import Ball, Particles
 from .base import pyplot, save_figure
-from .builder import CgsFluid, Layout, ParticleScene, particle_params
+from .builder import CgsFluid, Layout, ParticleScene, check_mesh_size, particle_params
 
 SuspensionFluid = derive(CgsFluid, "SuspensionFluid", "Fluid and gravity (CGS units).", viscosity=0.2)
 SuspensionBoundary = derive(FictitiousBoundaryParams, "SuspensionBoundary",
@@ -66,7 +66,7 @@ SphereSuspensionTime = derive(SuspensionTime, "SphereSuspensionTime", "Time step
 class SuspensionParticles(Section):
     """The particles."""
 
-    count: int = param(16, "number of particles", minimum=1)
+    count: int = param(16, "number of particles", minimum=1, maximum=10**6)
     volume_fraction: float = param(0.1, "volume (2D: area) fraction of the particles; sets the box size",
                                    positive=True, maximum=0.4)
     diameter: float = param(0.1, "particle diameter", "cm", positive=True)
@@ -136,14 +136,15 @@ def sangani_acrivos_velocity(dim: int, c: float, weight: float, mu: float, d: fl
 
 
 def terminal_velocity(d: float, rho_s: float, rho_f: float, mu: float, g: float) -> tuple[float, float]:
-    """Terminal velocity [cm/s] and Reynolds number of one sphere in unbounded fluid with Schiller &
-    Naumann's drag ``C_D = 24 / Re (1 + 0.15 Re^0.687)`` (fixed-point iteration from Stokes' law)."""
+    """Terminal velocity [cm/s] (downwards positive: a light sphere's is negative, it rises) and
+    Reynolds number (of the speed) of one sphere in unbounded fluid with Schiller & Naumann's drag
+    ``C_D = 24 / Re (1 + 0.15 Re^0.687)`` (fixed-point iteration from Stokes' law)."""
     stokes = (rho_s - rho_f) * g * d**2 / (18.0 * mu)
-    v = stokes
+    speed = abs(stokes)
     for _ in range(200):
-        re = rho_f * v * d / mu
-        v = stokes / (1.0 + 0.15 * re**0.687)
-    return v, rho_f * v * d / mu
+        re = rho_f * speed * d / mu
+        speed = abs(stokes) / (1.0 + 0.15 * re**0.687)
+    return math.copysign(speed, stokes), rho_f * speed * d / mu
 
 
 def garside_al_dibouni(re: float) -> float:
@@ -170,6 +171,8 @@ class _Suspension(ParticleScene):
     def layout(self, params, level: int) -> Layout:
         pp = params.particles
         n, side = self.box(params, level)
+        check_mesh_size((n,) * self.dim, (True,) * self.dim, self.dim,
+                        f"particles.volume_fraction = {pp.volume_fraction:g} with {pp.count} particles")
         mesh = StructuredMesh.box((n,) * self.dim, upper=(side,) * self.dim, periodic=(True,) * self.dim)
         X = random_positions(pp.count, pp.diameter, np.full(self.dim, side), pp.min_gap * pp.diameter,
                              pp.seed)

@@ -192,14 +192,59 @@ def estimate_memory(n_unknowns: int, dim: int, solver: LinearSolver | str) -> tu
 
 
 def available_memory(meminfo="/proc/meminfo") -> float | None:
-    """Memory available to a new process [bytes]: ``MemAvailable`` of ``meminfo`` (Linux); None
-    where it cannot be read (no check is made then)."""
+    """Memory a run may still take [bytes]: the least of ``MemAvailable`` of ``meminfo`` (Linux),
+    what is left of the process's address-space limit (``ulimit -v``, what batch schedulers set:
+    :func:`address_space_left`) and of its cgroup's memory limit (containers, Slurm:
+    :func:`cgroup_left`); None where none can be read (no check is made then)."""
+    found = []
     try:
         for line in Path(meminfo).read_text().splitlines():
             if line.startswith("MemAvailable:"):
-                return float(line.split()[1]) * 1024.0
+                found.append(float(line.split()[1]) * 1024.0)
+                break
     except (OSError, ValueError, IndexError):
+        pass
+    for left in (address_space_left(), cgroup_left()):
+        if left is not None:
+            found.append(left)
+    return min(found) if found else None
+
+
+def address_space_left(status="/proc/self/status") -> float | None:
+    """The soft ``RLIMIT_AS`` less the process's address space now (``VmSize``) [bytes]; None
+    without a limit (or where it cannot be read)."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, OSError, ValueError):
         return None
+    if soft == resource.RLIM_INFINITY or soft < 0:
+        return None
+    used = 0.0
+    try:
+        for line in Path(status).read_text().splitlines():
+            if line.startswith("VmSize:"):
+                used = float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return max(float(soft) - used, 0.0)
+
+
+def cgroup_left(root="/sys/fs/cgroup") -> float | None:
+    """The memory limit of the process's cgroup less its usage [bytes] (cgroup v2 ``memory.max``
+    and ``memory.current``, or v1 ``memory.limit_in_bytes`` and ``memory.usage_in_bytes``); None
+    without a limit."""
+    for limit_name, usage_name in (("memory.max", "memory.current"),
+                                   ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes")):
+        try:
+            limit = Path(root, limit_name).read_text().strip()
+            if limit == "max" or float(limit) >= 2.0**60:  # no limit (v1 writes a huge number)
+                return None
+            usage = float(Path(root, usage_name).read_text().strip())
+            return max(float(limit) - usage, 0.0)
+        except (OSError, ValueError):
+            continue
     return None
 
 
