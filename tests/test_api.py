@@ -1,5 +1,7 @@
 """The typed Python API: sections checked when made, registries behind the choices, a simulation
 built, stepped and read through public names only."""
+import re
+
 import numpy as np
 import pytest
 
@@ -105,3 +107,37 @@ def test_a_renamed_key_names_its_new_name(old, new):
         load_scene("cavity-2d", 0, [f"solver.{old}=2"])
     _, params, _ = load_scene("cavity-2d", 0, ["solver.multigrid.cycle=W"])
     assert params.solver.multigrid.cycle == "W"
+
+
+@pytest.mark.parametrize("shapes, position, needle", [
+    ([fb.Ball(0.1, 2)], [[0.5, 0.5, 0.5]], "shape 0 (Ball) is not 3D"),
+    ([fb.Ball(0.1, 2)] * 2, [[0.5, 0.5]], "2 shapes for 1 positions"),
+    ([fb.Ball(0.1, 2)], [[np.nan, 0.5]], "non-finite entries"),
+    ([fb.Ball(0.1, 2)], [[[0.5, 0.5]]], "must be (n, 2) or (n, 3)"),
+])
+def test_particles_say_what_is_wrong_with_their_input(shapes, position, needle):
+    """Wrong shapes and NaN positions were rejected from deep inside NumPy, or not at all."""
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        fb.Particles.at_rest(shapes, 1.5, position)
+
+
+@pytest.mark.parametrize("shapes, centres, needle", [
+    ([fb.Ball(0.1, 3)], [[0.5, 0.5, 0.5]], "the particles are 3D and the mesh 2D"),
+    ([fb.Box((0.1, 0.3))], [[0.5, 0.25]], "reaches outside the domain along axis 1"),  # its centre is inside
+    ([fb.Box((0.1, 0.1))] * 2, [[0.5, 1.0], [0.65, 1.0]], "overlap by"),
+])
+def test_every_shape_is_placed_inside_and_apart(shapes, centres, needle):
+    """Boxes through walls or overlapping were accepted (only balls were checked)."""
+    mesh = fb.StructuredMesh.box((16, 32), upper=(1.0, 2.0))
+    particles = fb.Particles.at_rest(shapes, 1.5, centres)
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        fb.Simulation(mesh, particles, fb.FluidParams())
+
+
+def test_a_file_named_like_a_scene_does_not_shadow_it(tmp_path, monkeypatch):
+    from fbmflow.scenes import load_scene
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cavity-2d").write_text("not a scene file")
+    scene, _, _ = load_scene("cavity-2d", 0)
+    assert scene.name == "cavity-2d"

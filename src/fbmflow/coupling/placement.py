@@ -6,8 +6,9 @@ they solve nothing."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from ..contact import Planes, candidate_pairs
+from ..contact.narrowphase import pair_contacts, plane_contacts
 from ..particles import Particles
 
 
@@ -61,44 +62,46 @@ def wrap(mesh, X: np.ndarray) -> np.ndarray:
 
 
 def check_placement(mesh, particles: Particles, symmetry: tuple):
-    """Particles must lie in the domain (balls wholly, other shapes with their centre; along
-    periodic axes anywhere; not across symmetry planes), balls must not overlap (across periodic
-    sides with the nearest image), and
-    every particle must span the velocity-node spacing (half a cell) where it sits: a smaller one
-    can cover no node and feel no drag. ValueError naming the particles and the remedy."""
+    """The particles must fit the domain: of the same dimension, inside it (every shape by its
+    support, :func:`~fbmflow.contact.narrowphase.plane_contacts`; along periodic axes anywhere;
+    the walls' faces only, not symmetry planes; fixed particles, obstacles, may cross the walls),
+    apart from each other (balls exactly, other shapes by their projections on the centre line,
+    :func:`~fbmflow.contact.narrowphase.pair_contacts`; across periodic sides through the nearest
+    image), and each must span the velocity-node spacing (half a cell) where it sits: a smaller
+    one can cover no node and feel no drag. ValueError naming the particles and the remedy."""
     X, n = particles.position, particles.n
     if n == 0:
         return
-    radius = particles.ball_radius
-    reach = np.zeros(n) if radius is None else radius
-    for a in range(mesh.dim):
-        lo, hi = float(mesh.lower[a]), float(mesh.upper[a])
-        tol = 1e-9 * (hi - lo)
-        if mesh.periodic[a]:
-            continue
-        r = np.zeros(n) if a in symmetry else reach
-        out = np.flatnonzero((X[:, a] - r < lo - tol) | (X[:, a] + r > hi + tol))
+    if particles.dim != mesh.dim:
+        raise ValueError(f"the particles are {particles.dim}D and the mesh {mesh.dim}D; make the shapes and "
+                         f"positions {mesh.dim}D (e.g. Ball(r, dim={mesh.dim}))")
+    R = particles.bounding_radius
+    free = np.flatnonzero(~particles.fixed)
+    faces = walls(mesh, particles, symmetry)
+    planes = Planes.box(mesh.lower, mesh.upper, faces)
+    if planes.n and free.size:
+        part, plane = np.repeat(free, planes.n), np.tile(np.arange(planes.n), free.size)
+        c = plane_contacts(particles, part, plane, planes)
+        out = np.flatnonzero(c.gap < -1e-9 * R[c.i])
         if out.size:
-            k = out[0]
-            raise ValueError(f"particle {k} (centre {X[k].tolist()}, radius {reach[k]:.4g}) reaches outside "
-                             f"the domain along axis {a} ([{lo:.4g}, {hi:.4g}]){_more(out)}; move it inside")
-    if radius is not None and n > 1:
-        L, lower = mesh.periods, np.array(mesh.lower, dtype=float)
-        reach_pairs = 2.0 * float(radius.max())
-        extent = np.array(mesh.upper, dtype=float) - lower
-        # periodic axes wrap (cKDTree's boxsize); the others get a box too wide to wrap within reach
-        box = np.where(L > 0, L, extent + 2.0 * reach_pairs + 1.0)
-        Xb = wrap(mesh, X) - lower
-        pairs = cKDTree(np.clip(Xb, 0.0, np.nextafter(box, 0.0)), boxsize=box).query_pairs(
-            reach_pairs, output_type="ndarray")
-        if pairs.size:
-            diff = X[pairs[:, 0]] - X[pairs[:, 1]]
-            diff -= L * np.round(diff / np.where(L > 0, L, 1.0))
-            gap = np.linalg.norm(diff, axis=1) - radius[pairs].sum(axis=1)
-            bad = np.flatnonzero(gap < -1e-9 * radius[pairs].sum(axis=1))
+            k, w = int(c.i[out[0]]), plane[out[0]]
+            axis = int(np.argmax(np.abs(planes.normals[w])))
+            lo, hi = float(mesh.lower[axis]), float(mesh.upper[axis])
+            raise ValueError(f"particle {k} (centre {X[k].tolist()}, bounding radius {R[k]:.4g}) reaches "
+                             f"outside the domain along axis {axis} "
+                             f"([{lo:.4g}, {hi:.4g}]) by {-c.gap[out[0]]:.4g}"
+                             f"{_more(np.unique(c.i[out]))}; move it inside")
+    if n > 1:
+        periods = mesh.periods if any(mesh.periodic) else None
+        pairs = candidate_pairs(X, R, 0.0, periods=periods, origin=np.array(mesh.lower, dtype=float))
+        pairs = pairs[~(particles.fixed[pairs[:, 0]] & particles.fixed[pairs[:, 1]])] if len(pairs) else pairs
+        if len(pairs):
+            c = pair_contacts(particles, pairs, periods)
+            scale = np.minimum(R[c.i], R[c.j])
+            bad = np.flatnonzero(c.gap < -1e-9 * scale)
             if bad.size:
-                i, j = pairs[bad[0]]
-                raise ValueError(f"particles {i} and {j} overlap by {-gap[bad[0]]:.4g} (centres "
+                i, j = int(c.i[bad[0]]), int(c.j[bad[0]])
+                raise ValueError(f"particles {i} and {j} overlap by {-c.gap[bad[0]]:.4g} (centres "
                                  f"{X[i].tolist()} and {X[j].tolist()}){_more(bad)}; place them at least a "
                                  "diameter apart")
     if mesh.axis_coordinates is not None:

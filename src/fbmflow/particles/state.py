@@ -36,13 +36,30 @@ class Particles:
     @classmethod
     def at_rest(cls, shapes: list, density, position) -> "Particles":
         """Particles released from rest with identity orientation."""
-        position = np.atleast_2d(np.asarray(position, dtype=float))
+        shapes = list(shapes)
+        try:
+            position = np.atleast_2d(np.asarray(position, dtype=float))
+        except (TypeError, ValueError):
+            raise ValueError(f"position must be numbers, (n, dim), got {position!r}") from None
+        if position.ndim != 2 or position.shape[1] not in (2, 3):
+            raise ValueError(f"position must be (n, 2) or (n, 3), one row per particle; got shape "
+                             f"{position.shape}")
         n, dim = position.shape
         if len(shapes) != n:
-            raise ValueError(f"{len(shapes)} shapes for {n} positions")
-        density = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
-        if np.any(density <= 0):
-            raise ValueError("particle densities must be positive")
+            raise ValueError(f"{len(shapes)} shapes for {n} positions; give one shape per position")
+        if not np.all(np.isfinite(position)):
+            raise ValueError(f"position has non-finite entries (particles "
+                             f"{np.flatnonzero(~np.isfinite(position).all(axis=1)).tolist()})")
+        wrong = [k for k, s in enumerate(shapes) if getattr(s, "dim", None) != dim]
+        if wrong:
+            raise ValueError(f"shape {wrong[0]} ({type(shapes[wrong[0]]).__name__}) is not {dim}D like the "
+                             f"positions; make it with dim={dim}")
+        try:
+            density = np.broadcast_to(np.asarray(density, dtype=float), (n,)).copy()
+        except (TypeError, ValueError):
+            raise ValueError(f"density must be a number or one per particle ({n}), got {density!r}") from None
+        if not np.all(np.isfinite(density) & (density > 0)):
+            raise ValueError("particle densities must be positive and finite")
         orientation = np.zeros(n) if dim == 2 else np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
         angular = np.zeros(n) if dim == 2 else np.zeros((n, 3))
         return cls(list(shapes), density, position, np.zeros((n, dim)), orientation, angular,

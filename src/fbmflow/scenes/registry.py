@@ -58,7 +58,7 @@ def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
     Returns ``(scene, params, level)``; raises ParamError on any bad input.
     """
     data: dict = {}
-    if spec.endswith(".toml") or Path(spec).is_file():
+    if spec.endswith(".toml") or (spec not in SCENES and Path(spec).is_file()):  # a built-in name wins
         path = Path(spec)
         if not path.is_file():
             raise ParamError(f"scene file {spec!r} not found")
