@@ -48,7 +48,8 @@ def test_the_docs_site_builds_strictly_and_links_the_api(tmp_path):
     assert 'href="fbmflow.coupling.system.html#fbmflow.coupling.system.CoupledSystem"' in page
     public = (out / "api" / "index.html").read_text()
     assert 'href="generated/fbmflow.simulation.html#fbmflow.simulation.Simulation"' in public
-    for name in ("tutorial", "method", "design", "parameters", "troubleshooting", "validation/ten-cate-e1-e4"):
+    pages = ("tutorial", "method", "design", "parameters", "troubleshooting", "validation/ten-cate-e1-e4")
+    for name in pages:
         assert (out / f"{name}.html").is_file(), name
 
 
