@@ -42,13 +42,16 @@ def save_checkpoint(path, state: dict, meta: dict, extra: dict) -> None:
     arrays = {k: np.asarray(v) for k, v in state.items()}
     meta_s, extra_s = json.dumps(meta, sort_keys=True), json.dumps(extra)
     tmp = path.with_name(path.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
-        for key, a in arrays.items():
-            f.create_dataset(key, data=a)
-        f.attrs["meta"] = meta_s
-        f.attrs["extra"] = extra_s
-        f.attrs["sha256"] = _digest(arrays, meta_s, extra_s)
-    os.replace(tmp, path)
+    try:
+        with h5py.File(tmp, "w") as f:
+            for key, a in arrays.items():
+                f.create_dataset(key, data=a)
+            f.attrs["meta"] = meta_s
+            f.attrs["extra"] = extra_s
+            f.attrs["sha256"] = _digest(arrays, meta_s, extra_s)
+        os.replace(tmp, path)
+    finally:  # a write that failed (a full disk) leaves no temporary file behind
+        tmp.unlink(missing_ok=True)
 
 
 def load_checkpoint(path, expect: dict | None = None) -> tuple[dict, dict, dict]:
