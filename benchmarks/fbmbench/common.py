@@ -150,7 +150,8 @@ def run_scene(
     if resumable:
         args = ["resume", str(out), "--no-plot"]
     else:
-        args = ["run", scene, "--level", str(level), "--out", str(out), "--no-plot"]
+        # the harness owns its run folders: a finished run of the same configuration is replaced
+        args = ["run", scene, "--level", str(level), "--out", str(out), "--no-plot", "--overwrite"]
         args += [a for k, v in settings.items() for a in ("--set", f"{k}={cli_value(v)}")]
         if checkpoint_every:
             args += ["--checkpoint-every", str(checkpoint_every)]

@@ -26,14 +26,16 @@ SCENES = ("dfg-2d-1", "dfg-3d-1z")
 QUANTITIES = ("drag_coefficient", "lift_coefficient", "pressure_difference")
 
 
-def run(scene: str, level: int, solver: str = "direct") -> dict:
-    """One steady solve; the row."""
-    warm_up(scene, **{"solver.linear": solver})
-    s = run_scene(scene, level, {"solver.linear": solver})
+def run(scene: str, level: int, solver: str = "direct", boundary: str | None = None) -> dict:
+    """One steady solve (``boundary``: fbm.boundary, None: the scene's default); the row."""
+    settings = {"solver.linear": solver, **({"fbm.boundary": boundary} if boundary else {})}
+    warm_up(scene, **settings)
+    s = run_scene(scene, level, settings)
     q = s["quantities"]
     row = dict(
         level=level,
         solver=solver,
+        boundary=s["params"]["fbm"]["boundary"],
         cells_per_diameter=q["cells_per_diameter"],
         n_dofs=s["n_dofs"],
         wall_s=s["wall_s"],
@@ -47,23 +49,26 @@ def run(scene: str, level: int, solver: str = "direct") -> dict:
     )
     print(
         f"{scene} level {level}: {row['n_dofs']} unknowns, {row['wall_s']:.1f} s, "
-        f"C_D {row['drag_coefficient']:.4f} "
-        f"({percent(row['drag_coefficient_error'])}), dp {percent(row['pressure_difference_error'])}",
+        f"C_D {row['drag_coefficient']:.4f} ({percent(row['drag_coefficient_error'])}), "
+        f"C_L {row['lift_coefficient']:+.4f}, dp {percent(row['pressure_difference_error'])}",
         flush=True,
     )
     return row
 
 
+def _key(r: dict) -> tuple:
+    """Rows from before the boundary was recorded ran the nodal one."""
+    return r["level"], r.get("solver", "direct"), r.get("boundary", "nodes")
+
+
 def record(scene: str, row: dict) -> list[dict]:
-    rows = merge_row(
-        scene, row, lambda a, b: (a["level"], a.get("solver", "direct")) == (b["level"], b["solver"])
-    )
+    rows = merge_row(scene, row, lambda a, b: _key(a) == _key(b))
     write(scene, rows)
     return rows
 
 
 def write(scene: str, rows: list[dict]) -> None:
-    rows = sorted(rows, key=lambda r: (r.get("solver", "direct"), r["level"]))
+    rows = sorted(rows, key=lambda r: (r.get("boundary", "nodes"), r.get("solver", "direct"), r["level"]))
     the_scene = load_scene(scene)[0]
     refs = ", ".join(f"{k} = {v}" for k, v in the_scene.reference.items())
     lines = [
@@ -75,15 +80,16 @@ def write(scene: str, rows: list[dict]) -> None:
         "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python -m fbmbench dfg "
         f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`.",
         "",
-        "| level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L | dp "
-        "| err dp | measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| boundary | level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L "
+        "| err C_L | dp | err dp | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
-        f"| {r['level']} | {r['cells_per_diameter']:.1f} | {r['n_dofs']} | {r['linear_solver']} | "
+        f"| {r.get('boundary', 'nodes')} | {r['level']} | {r['cells_per_diameter']:.1f} | {r['n_dofs']} | {r['linear_solver']} | "
         f"{r['wall_s']:.1f} | {cpu(r)} | "
         f"{r['newton']} | {r['drag_coefficient']:.4f} | {percent(r['drag_coefficient_error'], '.2f')} | "
-        f"{r['lift_coefficient']:.4f} | {r['pressure_difference']:.4f} | "
+        f"{r['lift_coefficient']:+.4f} | {signed(r['lift_coefficient'], the_scene.reference['lift_coefficient'])} | "
+        f"{r['pressure_difference']:.4f} | "
         f"{percent(r.get('pressure_difference_error'), '.2f')} | {r.get('date', 'earlier session')} "
         f"{r.get('commit', '')} |"
         for r in rows
@@ -92,7 +98,7 @@ def write(scene: str, rows: list[dict]) -> None:
     plot(scene, rows)
     curves = {}
     for r in rows:
-        curves.setdefault(f"{scene}, {r.get('solver', 'direct')} solver", []).append(
+        curves.setdefault(f"{scene}, {r.get('boundary', 'nodes')}, {r.get('solver', 'direct')} solver", []).append(
             (r["wall_s"], abs(r["drag_coefficient_error"]), f"{r['cells_per_diameter']:g}/D")
         )
     tradeoff_plot(
@@ -101,6 +107,13 @@ def write(scene: str, rows: list[dict]) -> None:
         "|C_D error|",
         f"{scene}: drag against cost (labels: cells per diameter)",
     )
+
+
+def signed(value: float, reference: float) -> str:
+    """The relative error with its sign, or 'wrong sign'."""
+    if value * reference <= 0:
+        return "wrong sign"
+    return f"{100 * (value / reference - 1):+.1f} %"
 
 
 def plot(scene: str, rows: list[dict]) -> None:
@@ -113,17 +126,20 @@ def plot(scene: str, rows: list[dict]) -> None:
 
     rows = [r for r in rows if r.get("solver", "direct") == "direct"] or rows
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
-    err = [100 * abs(r["drag_coefficient_error"]) for r in rows]
-    cells = [r["cells_per_diameter"] for r in rows]
-    a.loglog(cells, err, "o-")
-    a.set_xticks(cells, [f"{c:g}" for c in cells])
+    for boundary in sorted({r.get("boundary", "nodes") for r in rows}):
+        these = [r for r in rows if r.get("boundary", "nodes") == boundary]
+        err = [100 * abs(r["drag_coefficient_error"]) for r in these]
+        cells = [r["cells_per_diameter"] for r in these]
+        a.loglog(cells, err, "o-", label=f"{boundary} boundary")
+        a.set_xticks(cells, [f"{c:g}" for c in cells])
+        b.loglog([r["wall_s"] for r in these], err, "s-", label=f"{boundary} boundary")
+        for r, e in zip(these, err):
+            b.annotate(
+                f"level {r['level']}", (r["wall_s"], e), textcoords="offset points", xytext=(4, 4), fontsize=8
+            )
     a.xaxis.set_minor_formatter(NullFormatter())
     a.set(xlabel="cells per diameter", ylabel="|C_D error| (%)", title=scene)
-    b.loglog([r["wall_s"] for r in rows], err, "s-")
-    for r, e in zip(rows, err):
-        b.annotate(
-            f"level {r['level']}", (r["wall_s"], e), textcoords="offset points", xytext=(4, 4), fontsize=8
-        )
+    a.legend(fontsize=8)
     b.set(xlabel="wall time (s)", ylabel="|C_D error| (%)", title="accuracy against cost")
     for ax in (a, b):
         ax.grid(True, which="both", alpha=0.3)

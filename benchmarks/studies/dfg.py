@@ -20,7 +20,8 @@ from fbmbench import dfg
 
 
 def run(*, scene: Literal["dfg-2d-1", "dfg-3d-1z"] = "dfg-2d-1", levels: list[int] = (1, 2, 3, 4),
-        solver: Literal["direct", "multigrid", "auto"] = "direct") -> None:
+        solver: Literal["direct", "multigrid", "auto"] = "direct",
+        boundary: Literal["default", "nodes", "sharp"] = "default") -> None:
     """Run ``scene`` at each level and record the rows.
 
     Parameters
@@ -28,6 +29,7 @@ def run(*, scene: Literal["dfg-2d-1", "dfg-3d-1z"] = "dfg-2d-1", levels: list[in
     scene : the DFG scene
     levels : mesh levels, each halving the cells
     solver : the linear solver
+    boundary : fbm.boundary (default: the scene's)
     """
     for level in levels:
-        dfg.record(scene, dfg.run(scene, level, solver))
+        dfg.record(scene, dfg.run(scene, level, solver, None if boundary == "default" else boundary))

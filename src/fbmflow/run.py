@@ -203,7 +203,7 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
             newton += report.newton_iterations
             row = observe(sim) if observe is not None else {}
             for key, value in row.items():
-                series[key].append(value)
+                series.setdefault(key, []).append(value)  # (a key added since a checkpoint)
             if data is not None:
                 guarded(out / "run.h5", lambda: data.append(_row(sim, report)))
             if fields is not None and k % files.fields_every == 0:

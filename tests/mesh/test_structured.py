@@ -390,3 +390,11 @@ def test_graded_axis_rounds_the_cell_count_to_a_multiple():
     assert zone.size - 1 == 12 and np.allclose(np.diff(zone), 1 / 12)
     with pytest.raises(ValueError, match="even multiple"):
         graded_axis(0.0, 1.0, (0.2, 0.4), 0.1, multiple=3)
+
+
+def test_cell_size_at_reads_the_cell_that_holds_each_point():
+    mesh = StructuredMesh.rectilinear([np.array([0.0, 1.0, 1.5, 1.75]), np.array([0.0, 2.0, 3.0])])
+    sizes = mesh.cell_size_at([[0.5, 2.5], [1.6, 0.1], [9.0, -1.0]])
+    assert np.array_equal(sizes, [[1.0, 1.0], [0.25, 2.0], [0.25, 2.0]])
+    box = StructuredMesh.box((4, 2), upper=(2.0, 3.0))
+    assert np.array_equal(box.cell_size_at([[0.1, 0.1]]), [[0.5, 1.5]])

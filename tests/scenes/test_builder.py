@@ -4,7 +4,7 @@ import logging
 import pytest
 
 import fbmflow.solvers.choice as choice
-from fbmflow.config import from_dict
+from fbmflow.config import ParamError, from_dict
 from fbmflow.scenes import SCENES, get_scene
 from fbmflow.scenes.base import SimulationScene
 from fbmflow.scenes.builder import STANDARD_SECTIONS, ParticleScene
@@ -23,7 +23,8 @@ def test_every_particle_scene_is_built_by_the_builder_from_its_sections(name, mo
     standard = {k for k, cls in STANDARD_SECTIONS.items() if cls is not None}
     assert standard <= set(scene.Params.__dataclass_fields__)
     setup = scene.build(params, 0)
-    sim, time = setup.sim, scene.time(params)
+    sim = setup.sim
+    time = scene.time(params, scene.layout(params, 0))
     assert (sim.coupling.name, sim.system.estimator.name) == ("explicit", "test-function")
     assert (sim.system.integrator, sim.system.time_scheme) == (params.coupling.integrator, time.scheme)
     assert setup.n_steps == time.n_steps and setup.dt * setup.n_steps == pytest.approx(time.t_end)
@@ -45,3 +46,27 @@ def test_a_contact_skin_of_a_diameter_warns_and_names_the_level(caplog):
         scene.build(params, 2)
         scene.build(from_dict(scene.Params, {"contact": {"skin_cells": 0.25}}), 0)  # a thinner skin
     assert not caplog.records
+
+
+@pytest.mark.parametrize("name", ["glowinski-free-fall", "ten-cate"])
+def test_the_default_time_step_follows_the_mesh_and_an_explicit_one_wins(name):
+    """dt = courant h / U: each level halves it; time.dt set by hand is kept at every level."""
+    scene = get_scene(name)
+    params = from_dict(scene.Params, {})
+    dts = []
+    for level in (0, 1, 2):
+        place = scene.layout(params, level)
+        t = scene.time(params, place)
+        h = float(place.mesh.cell_size_at(place.particles.position).min())
+        assert t.dt == pytest.approx(params.time.courant * h / scene.velocity_scale(params), rel=1e-12)
+        dts.append(t.dt)
+    assert dts[0] / dts[1] == pytest.approx(2.0) and dts[1] / dts[2] == pytest.approx(2.0)
+    fixed = from_dict(scene.Params, {"time": {"dt": 0.003}})
+    assert {scene.time(fixed, scene.layout(fixed, level)).dt for level in (0, 2)} == {0.003}
+
+
+def test_a_particle_expected_not_to_move_asks_for_a_time_step():
+    scene = get_scene("glowinski-free-fall")
+    params = from_dict(scene.Params, {"particle": {"density": 1.0}})
+    with pytest.raises(ParamError, match="set time.dt"):
+        scene.time(params, scene.layout(params, 0))

@@ -23,10 +23,13 @@ class FixedObstacles:
     shapes : list of shapes, one per body
     centres : (n, dim) float64, the bodies' centres [m]
     boundary : ``"nodes"`` or ``"sharp"``
-    velocities : (n, dim) float64 or None, the bodies' translational velocities [m/s] (no rotation)
+    velocities : (n, dim) float64 or None, the bodies' translational velocities [m/s]
+    angular_velocities : (n,) float64 in 2D, (n, 3) in 3D, or None: the bodies' angular
+        velocities [rad/s] about their centres (a body turning in place)
     """
 
-    def __init__(self, shapes: list, centres, boundary: str = "nodes", velocities=None):
+    def __init__(self, shapes: list, centres, boundary: str = "nodes", velocities=None,
+                 angular_velocities=None):
         if boundary not in ("nodes", "sharp"):
             raise ValueError(f"unknown fictitious boundary {boundary!r}; choose nodes or sharp")
         if boundary == "sharp" and not supports_sharp_boundary(shapes):
@@ -39,11 +42,15 @@ class FixedObstacles:
         self.velocities = np.zeros((n, dim)) if velocities is None else np.array(velocities, dtype=float)
         if self.velocities.shape != (n, dim):
             raise ValueError(f"velocities must have shape {(n, dim)}, got {self.velocities.shape}")
+        spin = (n,) if dim == 2 else (n, 3)
+        self.angular_velocities = (np.zeros(spin) if angular_velocities is None
+                                   else np.array(angular_velocities, dtype=float))
+        if self.angular_velocities.shape != spin:
+            raise ValueError(f"angular_velocities must have shape {spin}, got {self.angular_velocities.shape}")
         self._finest: tuple | None = None  # (DOF map, its FlowSpace, the sharp boundary there)
 
     def __call__(self, V: DofMap, t: float) -> DirichletConstraints:
-        n, dim = len(self.shapes), V.mesh.dim
-        motion = (self.velocities, np.zeros(n) if dim == 2 else np.zeros((n, 3)))  # U, omega
+        motion = (self.velocities, self.angular_velocities)
         owner = node_owner(V, self.centres, self.shapes)
         rigid = rigid_body_constraints(V, owner, self.centres, *motion)
         if self.boundary == "nodes":

@@ -129,6 +129,19 @@ class StructuredMesh:
             return self.spacing
         return np.array([float(np.diff(a).min()) for a in axes])
 
+    def cell_size_at(self, points) -> np.ndarray:
+        """Size per axis of the cell holding each point, (n, dim) float64 for ``points`` (n, dim)
+        (a point outside the mesh: the nearest boundary cell's)."""
+        points = np.atleast_2d(np.asarray(points, dtype=float))
+        axes = self.axis_coordinates
+        if axes is None:
+            return np.broadcast_to(self.spacing, points.shape).copy()
+        sizes = np.empty_like(points)
+        for d, a in enumerate(axes):
+            k = np.clip(np.searchsorted(a, points[:, d]) - 1, 0, a.size - 2)
+            sizes[:, d] = a[k + 1] - a[k]
+        return sizes
+
     @property
     def periods(self) -> np.ndarray:
         """Period of every axis, (dim,) float64: ``upper - lower`` on a periodic axis, 0 elsewhere."""

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from ..run import RunFiles, run_loop
 
 log = logging.getLogger(__name__)
@@ -101,6 +103,12 @@ class SimulationScene(Scene):
     def stop(self, params, row: dict) -> bool:
         return False
 
+    def _observe(self, params, sim) -> dict[str, float]:
+        """:meth:`observe` and the fastest particle's speed, ``_speed`` (the Courant number the
+        run met: ``courant_number = max speed * dt / h`` with h the finest cell)."""
+        v = sim.particles.velocity
+        return {**self.observe(params, sim), "_speed": float(np.sqrt((v**2).sum(axis=1)).max(initial=0.0))}
+
     def quantities(self, params, series: dict[str, list], sim) -> dict:
         raise NotImplementedError
 
@@ -126,10 +134,14 @@ class SimulationScene(Scene):
             state, resumed = self._resume_checkpoint(Path(files.out) / "checkpoint.h5", params, files.meta)
             sim.set_state(state)
             log.info("resumed from step %d (t = %.6g)", sim.step_count, sim.t)
-        done = run_loop(sim, setup.n_steps, setup.dt, files, observe=lambda s: self.observe(params, s),
+        done = run_loop(sim, setup.n_steps, setup.dt, files, observe=lambda s: self._observe(params, s),
                         until=lambda row: self.stop(params, row), progress=progress, resumed=resumed,
                         stop_on_failure=stop_on_failure)
-        return SceneResult(self.quantities(params, done.series, sim), sim.flow.mesh.n_cells, sim.flow.n_dofs,
+        speed = max(done.series.pop("_speed", []), default=0.0)
+        cell = float(min(sim.flow.mesh.finest_spacing))
+        quantities = {**self.quantities(params, done.series, sim), "time_step": setup.dt,
+                      "courant_number": speed * setup.dt / cell}
+        return SceneResult(quantities, sim.flow.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=done.newton_iterations,
                            extra={} if done.failure is None else {"failure": done.failure},
                            linear_solver=sim.flow.linear_solver_description)

@@ -12,6 +12,7 @@ coarse for the particles. The steady scenes build their flow problem with :func:
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import sys
@@ -53,6 +54,20 @@ class DomainParams(Section):
                       choices=("graded", "uniform"))
 
 
+@dataclass(frozen=True)
+class MeshTime(TimeParams):
+    """Time stepping that follows the mesh: with ``dt = 0`` (the default) the time step is
+    ``dt = courant h / U``, with h the cell that holds the particle and U the scene's velocity scale
+    (:meth:`ParticleScene.velocity_scale`: the terminal velocity of its particle by a drag
+    correlation, :mod:`fbmflow.particles.drag`), so that each level halves it; an explicit ``dt``
+    wins. The run reports the time step and the Courant number it met (``time_step``,
+    ``courant_number`` in ``summary.json``)."""
+
+    dt: float = param(0.0, "time step (0: courant * h / U, halving with each level)", "s", nonnegative=True)
+    courant: float = param(0.25, "Courant number U dt / h of the time step when dt = 0 (U: the scene's "
+                           "velocity scale, h: the cell that holds the particle)", positive=True, maximum=10.0)
+
+
 #: the sections every particle scene has, after its own, with their default classes (``contact``:
 #: only where the scene passes one)
 STANDARD_SECTIONS = {"time": TimeParams, "coupling": CouplingParams, "fbm": FictitiousBoundaryParams,
@@ -90,22 +105,41 @@ class ParticleScene(SimulationScene):
     :meth:`~fbmflow.scenes.builder.ParticleScene.build`.
 
     Subclasses give :meth:`layout`, :meth:`~fbmflow.scenes.base.SimulationScene.observe` and
-    :meth:`~fbmflow.scenes.base.SimulationScene.quantities`, and override
-    :meth:`time` when their time section leaves values to the set-up.
+    :meth:`~fbmflow.scenes.base.SimulationScene.quantities`, :meth:`velocity_scale` when their
+    time section is a :class:`MeshTime`, and override :meth:`time` when it leaves other values
+    to the set-up.
     """
 
     def layout(self, params, level: int) -> Layout:
         raise NotImplementedError
 
-    def time(self, params) -> TimeParams:
-        """The time stepping of a run: ``params.time``."""
-        return params.time
+    def velocity_scale(self, params) -> float:
+        """The fastest velocity the run is expected to reach [length/s], which a time step that
+        follows the mesh is made for (:class:`MeshTime`)."""
+        raise NotImplementedError(f"{self.name} gives no velocity scale: its time section needs a dt")
+
+    def time(self, params, place: Layout) -> TimeParams:
+        """The time stepping of a run laid out as ``place``: ``params.time``, with ``dt = courant h
+        / U`` where it leaves ``dt`` 0 (:class:`MeshTime`; h the smallest side of the cells that
+        hold the particles at the start)."""
+        t = params.time
+        if t.dt:
+            return t
+        speed = self.velocity_scale(params)
+        h = float(place.mesh.cell_size_at(place.particles.position).min())
+        if not speed > 0:
+            raise ParamError(f"{self.name}: the particles are expected not to move (velocity scale {speed:g}), "
+                             "so the time step cannot follow the mesh; set time.dt")
+        dt = t.courant * h / speed
+        log.info("%s: time step %.4g s = Courant %.3g x cell %.4g / velocity scale %.4g (time.dt to choose "
+                 "another)", self.name, dt, t.courant, h, speed)
+        return dataclasses.replace(t, dt=dt)
 
     def build(self, params, level: int) -> Setup:
         place = self.layout(params, level)
         frozen = getattr(getattr(params, "particles", None), "frozen", False)  # suspension scenes only
         sim = Simulation(place.mesh, place.particles, place.fluid, boundary=place.boundary,
-                         time=self.time(params), solver=params.solver, coupling=params.coupling,
+                         time=self.time(params, place), solver=params.solver, coupling=params.coupling,
                          fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
                          symmetry=place.symmetry, frozen=frozen)
         self._check_contact_skin(sim, level)

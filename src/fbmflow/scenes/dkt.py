@@ -99,7 +99,7 @@ class DKT2D(ParticleScene):
         fluid = FluidParams(density=s["rho_f"], viscosity=s["nu"] * s["rho_f"], gravity=c.gravity)
         return Layout(self.mesh(c.setup, level), Particles.at_rest([disk, disk], s["rho_s"], centres), fluid)
 
-    def time(self, params: DktParams) -> TimeParams:
+    def time(self, params: DktParams, place) -> TimeParams:
         """``params.time`` with the set-up's time step and final time where it leaves them 0."""
         default, t = DEFAULTS[params.case.setup], params.time
         return dataclasses.replace(t, dt=t.dt or default["dt"], t_end=t.t_end or default["t_end"])

@@ -37,9 +37,10 @@ from ..flow import NoSlip, Slip
 from ..mesh import StructuredMesh, graded_axis
 from ..params import SCHEMES, FluidParams, TimeParams
 from ..particles import Ball, Particles
+from ..particles.drag import terminal_velocity
 from ..solvers.settings import SolverParams
 from .base import pyplot, save_figure
-from .builder import DomainParams, Layout, ParticleScene, particle_params
+from .builder import DomainParams, Layout, MeshTime, ParticleScene, particle_params
 from .data import tencate2002
 
 CASES = {"E1": (970.0, 0.373), "E2": (965.0, 0.212), "E3": (962.0, 0.113), "E4": (960.0, 0.058)}
@@ -76,8 +77,10 @@ class TenCateDomain(DomainParams):
 
 
 TenCateTime = derive(
-    TimeParams, "TenCateTime",
-    "Time stepping (``t_end = 0``: the time the experiment's sphere reached the bottom).",
+    MeshTime, "TenCateTime",
+    "Time stepping (``dt = 0``: ``courant h / U`` with U the sphere's terminal velocity by the "
+    "Schiller–Naumann drag, so that each level halves it; ``t_end = 0``: the time the experiment's "
+    "sphere reached the bottom).",
     t_end=param(0.0, "final time (0: by case, 1.3 s for E4 to 4 s for E1)", "s", nonnegative=True),
     scheme=param("crank-nicolson", "implicit time scheme (crank-nicolson with the trapezoidal particle "
                  "integrator: second order for a fixed boundary, lower with the sphere crossing the mesh)",
@@ -154,9 +157,19 @@ class TenCate(ParticleScene):
         fluid = FluidParams(density=rho_f, viscosity=mu, gravity=params.fluid.gravity)
         return Layout(mesh, particles, fluid, bc, (0, 1) if quarter else ())
 
-    def time(self, params: TenCateParams) -> TimeParams:
-        """``params.time`` with the case's final time where it leaves it 0."""
-        return dataclasses.replace(params.time, t_end=params.time.t_end or T_END[params.fluid.case])
+    def velocity_scale(self, params: TenCateParams) -> float:
+        """The sphere's terminal velocity in unbounded fluid (Schiller–Naumann drag,
+        :func:`~fbmflow.particles.drag.terminal_velocity`): 0.129 m/s for E4, Table II's 0.128."""
+        rho_f, mu = CASES[params.fluid.case]
+        pp = params.particle
+        return terminal_velocity(pp.diameter, pp.density, rho_f, mu, params.fluid.gravity, 3)
+
+    def time(self, params: TenCateParams, place) -> TimeParams:
+        """The time step that follows the mesh (:meth:`ParticleScene.time
+        <fbmflow.scenes.builder.ParticleScene.time>`) and the case's final time where
+        ``params.time`` leaves it 0."""
+        t = super().time(params, place)
+        return dataclasses.replace(t, t_end=t.t_end or T_END[params.fluid.case])
 
     def observe(self, params: TenCateParams, sim) -> dict:
         d, p = params.particle.diameter, sim.particles
