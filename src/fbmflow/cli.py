@@ -1,8 +1,9 @@
 """The ``fbmflow`` command line::
 
     fbmflow scenes
-    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--overwrite] [--checkpoint-every N]
-                      [--fields-every N] [--fields-format xdmf|vtu] [--quiet] [--no-plot]
+    fbmflow run SCENE [--level L] [--set KEY=VALUE ...] [--out DIR] [--overwrite] [--estimate-error]
+                      [--checkpoint-every N] [--fields-every N] [--fields-format xdmf|vtu] [--quiet]
+                      [--no-plot]
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
@@ -53,6 +54,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="time-dependent scenes: write DIR/checkpoint.h5 every N steps (0: never)")
     run.add_argument("--fields-every", type=int, default=0, metavar="N",
                      help="time-dependent scenes: ParaView output (fields.xdmf, particles.pvd) every N steps")
+    run.add_argument("--estimate-error", action="store_true",
+                     help="run the one or two coarser levels too and write the Richardson error estimate of "
+                          "every quantity into summary.json and error_estimate.png")
     run.add_argument("--overwrite", action="store_true",
                      help="replace the results of an earlier run in --out (refused without it)")
     run.add_argument("--fields-format", choices=("xdmf", "vtu"), default="xdmf",
@@ -89,6 +93,7 @@ def _command(args, progress) -> int:
 
     try:
         from .scenes import SCENES, get_scene, load_scene, resume, run_scene
+        from .scenes.registry import check_estimate
 
         if args.command == "scenes":
             for name, scene in SCENES.items():
@@ -123,11 +128,14 @@ def _command(args, progress) -> int:
             if args.checkpoint_every < 0 or args.fields_every < 0:
                 raise ParamError("--checkpoint-every and --fields-every must be >= 0")
             scene, params, level = load_scene(args.scene, args.level, args.overrides)
+            if args.estimate_error:
+                check_estimate(scene, level)
             out = Path("fbmflow-out") / scene.name if args.out is None else output_folder(args.out)
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
             summary = run_scene(scene, params, level, out, progress, plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
-                                fields_format=args.fields_format, overwrite=args.overwrite)
+                                fields_format=args.fields_format, overwrite=args.overwrite,
+                                estimate_error=args.estimate_error)
         log.info("done in %.2f s: %d cells, %d unknowns, %d Newton iterations (%s); summary in %s",
                  summary["wall_time_s"], summary["n_cells"], summary["n_dofs"],
                  summary["newton_iterations"], summary.get("linear_solver") or "linear solver not recorded",

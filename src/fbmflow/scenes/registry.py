@@ -16,6 +16,7 @@ from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
 from ..run import OutputError, RunFiles, claim, output_folder, read_run_info
 from ..simulation import Simulation
+from . import richardson
 from .base import Scene, SimulationScene
 from .cavity import Cavity2D
 from .channel import Channel2D, Channel3D
@@ -96,7 +97,7 @@ def check_level(scene: Scene, level) -> int:
 
 def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: bool = True,
               checkpoint_every: int = 0, resume: bool = False, fields_every: int = 0,
-              fields_format: str = "xdmf", overwrite: bool = False) -> dict:
+              fields_format: str = "xdmf", overwrite: bool = False, estimate_error: bool = False) -> dict:
     """Run ``scene`` and write ``out/summary.json`` (and ``out/<scene>.png``); returns the summary.
 
     Time-dependent scenes (:class:`~fbmflow.scenes.base.SimulationScene`) also write ``run.json``
@@ -108,7 +109,15 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     writes (:func:`~fbmflow.run.claim`): a folder that holds another run's results is refused
     unless ``overwrite``. ``summary.json`` is written before the plot, which only warns when it
     fails.
+
+    With ``estimate_error`` the scene then runs at the one or two coarser levels too (in
+    ``out/coarser/level-K``, the time step following the mesh where the scene's does), and
+    ``summary.json`` gets ``error_estimate``: per quantity the Richardson estimate of its error,
+    the extrapolated value and the observed order, or why the levels are not yet in the
+    asymptotic range (:mod:`fbmflow.scenes.richardson`); ``out/error_estimate.png`` draws them.
     """
+    if estimate_error:
+        check_estimate(scene, level)
     out = output_folder(out)
     if not isinstance(scene, SimulationScene) and (checkpoint_every or resume or fields_every):
         raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
@@ -128,6 +137,8 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
                    "newton_iterations": result.newton_iterations, "quantities": finite(result.quantities)}
         text = json.dumps(summary, indent=1, allow_nan=False)
         _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
+    if estimate_error:
+        summary = _estimate_error(scene, params, level, out, progress, plot, summary)
     if plot:
         try:
             if scene.plot(summary, out / f"{scene.name}.png"):
@@ -135,6 +146,46 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
         except Exception as err:  # the results are written; a plot that fails loses nothing
             log.warning("the plot %s could not be drawn (%s: %s); the results are in %s",
                         out / f"{scene.name}.png", type(err).__name__, err, out / "summary.json")
+    return summary
+
+
+def check_estimate(scene: Scene, level: int) -> None:
+    """ParamError unless an error estimate of ``scene`` at ``level`` has a coarser level to run."""
+    if level == 0:
+        raise ParamError(f"--estimate-error needs a coarser level than {level}: run {scene.name} at level 1 or more")
+
+
+def _estimate_error(scene: Scene, params, level: int, out: Path, progress, plot: bool, summary: dict) -> dict:
+    """Run ``scene`` at the (up to) two levels below ``level`` and add the Richardson estimates
+    to ``summary`` and ``out/summary.json`` (:func:`run_scene`)."""
+    from ..solvers import ConvergenceError
+
+    levels, coarser, failed = [], [], {}
+    for k in range(max(level - 2, 0), level):
+        log.info("error estimate: %s at level %d", scene.name, k)
+        try:
+            coarser.append(run_scene(scene, params, k, out / "coarser" / f"level-{k}", progress, plot=False,
+                                     overwrite=True))
+            levels.append(k)
+        except ConvergenceError as err:  # a level too coarse to solve: the estimate does without it
+            log.warning("error estimate: level %d failed (%s); it is left out", k, err)
+            failed[k] = str(err)
+    if not coarser or levels[-1] != level - 1:
+        coarser, levels = [], []  # the levels must be consecutive
+    estimates = richardson.estimate([*coarser, summary]) if coarser else {}
+    summary["error_estimate"] = {"levels": [*levels, level], "quantities": finite(estimates),
+                                 "failed_levels": failed,
+                                 "wall_time_s": sum(s["wall_time_s"] for s in coarser)}
+    text = json.dumps(summary, indent=1, allow_nan=False)
+    _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
+    log.info("error estimates (levels %s):\n%s", ", ".join(map(str, [*levels, level])), richardson.table(estimates))
+    if plot:
+        try:
+            richardson.plot(estimates, [*levels, level], out / "error_estimate.png",
+                            f"{scene.name}: Richardson error estimate at level {level}")
+        except Exception as err:  # the estimates are written; a plot that fails loses nothing
+            log.warning("the plot %s could not be drawn (%s: %s)", out / "error_estimate.png",
+                        type(err).__name__, err)
     return summary
 
 
