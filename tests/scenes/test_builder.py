@@ -70,3 +70,16 @@ def test_a_particle_expected_not_to_move_asks_for_a_time_step():
     params = from_dict(scene.Params, {"particle": {"density": 1.0}})
     with pytest.raises(ParamError, match="set time.dt"):
         scene.time(params, scene.layout(params, 0))
+
+
+@pytest.mark.parametrize("name, expected", [("ten-cate", "surface"), ("glowinski-free-fall", "volume"),
+                                            ("sedimentation-3d", "volume")])
+def test_the_automatic_force_is_the_surface_force_for_balls_with_the_sharp_boundary_in_3d(name, expected,
+                                                                                           monkeypatch):
+    """fbm.force = auto: the surface force where the sphere array measured it the most accurate
+    (balls, sharp boundary, 3D), the volume force elsewhere (2D, nodal boundary)."""
+    monkeypatch.setattr(choice, "available_memory", lambda: None)
+    scene = get_scene(name)
+    params = from_dict(scene.Params, {})
+    assert params.fbm.force == "auto"
+    assert scene.build(params, 0).sim.system.estimator.name == expected

@@ -64,11 +64,13 @@ class FictitiousBoundaryParams(Section):
     boundaries"), and the force estimator (:data:`fbmflow.coupling.estimators.FORCE_ESTIMATORS`)."""
 
     boundary: str = param("sharp", _BOUNDARY_DOC, choices=("nodes", "sharp"))
-    force: str = param("volume", "hydrodynamic force: volume (-int sigma . grad alpha over the cut cells; "
+    force: str = param("auto", "hydrodynamic force: auto (surface for balls with the sharp boundary in 3D, "
+                       "volume otherwise: the most accurate measured, coupling.estimators.auto_force) or "
+                       "volume (-int sigma . grad alpha over the cut cells; "
                        "first order with the sharp boundary) or test-function (the momentum balance "
                        "tested with a function that is one on the particle, its gradient in the fluid "
                        "cells beyond the cut ones) or surface (the traction integrated over the true "
-                       "surface; balls with the sharp boundary)", choices=tuple(FORCE_ESTIMATORS))
+                       "surface; balls with the sharp boundary)", choices=("auto", *FORCE_ESTIMATORS))
 
 
 @dataclasses.dataclass(frozen=True)

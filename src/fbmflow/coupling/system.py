@@ -34,7 +34,7 @@ from ..particles import Particles, accelerations, integrate, velocity_gain
 from ..solvers import ConvergenceError, NewtonSettings
 from ..solvers.base import LinearSolver
 from ..solvers.reports import LinearWork
-from .estimators import make_force_estimator
+from .estimators import auto_force, make_force_estimator
 from .forces import mirror_images
 from .indicator import node_owner, rigid_body_constraints, rigid_liftings
 from .placement import check_placement, check_symmetry, periodic_drive, too_small, walls, wrap
@@ -169,7 +169,8 @@ class CoupledSystem:
         if sharp and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                              "(Ball, Box, Cylinder); use fbm.boundary = 'nodes' for the others")
-        self.estimator = make_force_estimator(fbm.force)
+        self.estimator = make_force_estimator(auto_force(particles.shapes, sharp, mesh.dim)
+                                              if fbm.force == "auto" else fbm.force)
         self.estimator.check(particles.shapes, sharp)
         self.sharp = sharp
         self.symmetry, self.frozen, self.integrator = tuple(symmetry), bool(frozen), integrator
