@@ -29,7 +29,7 @@ QUANTITIES = ("drag_coefficient", "lift_coefficient", "pressure_difference")
 def run(scene: str, level: int, solver: str = "direct", boundary: str | None = None) -> dict:
     """One steady solve (``boundary``: fbm.boundary, None: the scene's default); the row."""
     settings = {"solver.linear": solver, **({"fbm.boundary": boundary} if boundary else {})}
-    warm_up(scene, **settings)
+    warm_up(scene, 1, **settings)  # (level 0, one cell per diameter, may not converge)
     s = run_scene(scene, level, settings)
     q = s["quantities"]
     row = dict(

@@ -37,11 +37,13 @@ DEFAULT_SCHEME = DEFAULTS.time.scheme
 
 
 def run(case: str, level: int, dt: float, settings: dict | None = None, checkpoint_every: int = 5) -> dict:
-    """One run (continued from its checkpoint if an earlier call was interrupted); the row."""
+    """One run (continued from its checkpoint if an earlier call was interrupted); the row.
+    ``dt = 0``: the scene's time step, which follows the mesh (the row's ``time_step``)."""
     settings = dict(settings or {})
     warm_up(SCENE, **{"time.dt": 0.02, "time.t_end": 0.04})
     s = run_scene(
-        SCENE, level, {"fluid.case": case, "time.dt": dt, **settings}, checkpoint_every=checkpoint_every
+        SCENE, level, {"fluid.case": case, **({"time.dt": dt} if dt else {}), **settings},
+        checkpoint_every=checkpoint_every,
     )
     q = s["quantities"]
     row = dict(
@@ -51,6 +53,8 @@ def run(case: str, level: int, dt: float, settings: dict | None = None, checkpoi
         cells_per_diameter=q["cells_per_diameter"],
         n_dofs=s["n_dofs"],
         dt=dt,
+        time_step=q["time_step"],
+        courant=q["courant_number"],
         steps=s["steps"],
         wall_s=s["wall_s"],
         stopped_s=s["stopped_s"],
@@ -67,6 +71,7 @@ def run(case: str, level: int, dt: float, settings: dict | None = None, checkpoi
         settling_velocity=q["settling_velocity"],
         failure="",
         pressure_lag=pressure_lag(s["params"]["time"]["scheme"]),
+        force=q["force_estimator"],
         newton_rtol=s["params"]["solver"]["newton_rtol"],
         **provenance(),
     )
@@ -122,7 +127,8 @@ SHORT = {
 
 def describe(row: dict) -> str:
     """A run's settings in a few words ("defaults" for none): "nodal, BE" for the nodal
-    boundary with backward Euler, else ``key=value``; "pressure unlagged" for a run that took the
+    boundary with backward Euler, else ``key=value``; "volume force" for a run with the sharp
+    boundary from before the surface force became its default; "pressure unlagged" for a run that took the
     pressure's force where today's code lags it; "Newton 1e-10" for a run whose Newton stop
     differs from the scene's default."""
     words = []
@@ -132,6 +138,10 @@ def describe(row: dict) -> str:
             words.append(short)
     if row.get("pressure_lag", 0.0) != scheme_lag(row["settings"]):
         words.append("pressure unlagged")
+    force = row.get("force", "volume")  # (the default before fbm.force = auto chose the surface force)
+    if row["settings"].get("fbm.boundary", "sharp") == "sharp" and "fbm.force" not in row["settings"] \
+            and force != "surface":
+        words.append(f"{force} force")
     if newton_rtol(row) != DEFAULT_RTOL:
         words.append(f"Newton {newton_rtol(row):g}")
     return ", ".join(words) or "defaults"
@@ -201,6 +211,13 @@ def _velocity_gap(row: dict) -> float:
     )
 
 
+def _dt(row: dict) -> str:
+    """The time step of a row; one that followed the mesh (requested as 0) with its Courant number."""
+    if row["dt"]:
+        return f"{row['dt']}"
+    return f"{row['time_step']:.4g} (Courant {row['courant']:.2f})"
+
+
 def write(rows: list[dict]) -> None:
     """``tencate.md``, ``tencate.png`` and ``tencate-tradeoff.png`` from all rows."""
     lines = [
@@ -222,7 +239,8 @@ def write(rows: list[dict]) -> None:
         "residual reduction (the same peak to 3e-7 in E4 at level 0). 'curve to 0.3 s': the largest "
         "deviation of the velocity from the experiment's samples up to t = 0.3 s (or the run's end), over "
         "Table II's u_max: the acceleration (E1's first PIV samples scatter by about 15 %). "
-        "Reproduce a row: `python -m fbmbench tencate --cases C "
+        "A time step with its Courant number followed the mesh (`--dt 0`, the scene's default: courant 0.25 at "
+        "the terminal velocity). Reproduce a row: `python -m fbmbench tencate --cases C "
         "--levels L --dt DT [--set KEY=VALUE ...]`, or `python -m pytest benchmarks -k tencate`.",
         "",
         "| case | level | settings | linear solver | cells/d | unknowns | dt s | steps | wall s | CPU s "
@@ -230,10 +248,10 @@ def write(rows: list[dict]) -> None:
         "| u_max error | gap deviation | vs exp. velocity | curve to 0.3 s | end | measured |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in sorted(rows, key=lambda r: (r["case"], r["level"], -r["dt"], r["t"][-1])):
+    for r in sorted(rows, key=lambda r: (r["case"], r["level"], -(r["dt"] or r["time_step"]), r["t"][-1])):
         lines.append(
             f"| {r['case']} | {r['level']} | {describe(r)} | {solver(r)} | {r['cells_per_diameter']:.0f} | "
-            f"{r['n_dofs']} | {r['dt']} | {r['steps']} | {r['wall_s']:.0f} | {cpu(r)} | "
+            f"{r['n_dofs']} | {_dt(r)} | {r['steps']} | {r['wall_s']:.0f} | {cpu(r)} | "
             f"{r['u_max']:.5f} | "
             f"{100 * r['u_max_error']:+.2f} % | {100 * r['gap_deviation']:.1f} % | "
             f"{100 * _velocity_gap(r):.1f} % | {100 * curve_deviation(r):.1f} % | {_end(r)} | "
@@ -261,7 +279,7 @@ def plot(rows: list[dict]) -> None:
         ax[1, j].axhline(tencate2002.U_MAX[case], ls="--", c="k", lw=0.8, label="u_max, Table II")
         for k, r in enumerate(r for r in rows if r["case"] == case):
             style = dict(color=f"C{k % 10}", ls=("-", "--", "-.")[k // 10 % 3])  # distinct beyond 10 runs
-            label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {r['dt']}, {describe(r)}"
+            label = f"level {r['level']} ({r['cells_per_diameter']:.0f} cells/d), dt {_dt(r)}, {describe(r)}"
             ax[0, j].plot(r["t"], r["gap_over_d"], **style)
             ax[1, j].plot(r["t"], r["settling_velocity"], label=label, **style)
         ax[0, j].set_title(case)
@@ -292,7 +310,7 @@ def plot_tradeoff(rows: list[dict] | None = None) -> None:
     for r in sorted(rows, key=lambda r: r["level"]):
         if r["t"][-1] < 0.5:  # short runs stop before the peak
             continue
-        label = f"{r['case']}, dt {r['dt']}, {describe(r)}, {solver(r).split(' ')[0]}"
+        label = f"{r['case']}, dt {_dt(r)}, {describe(r)}, {solver(r).split(' ')[0]}"
         curves.setdefault(label, []).append(
             (r["wall_s"], abs(r["u_max_error"]), f"{r['cells_per_diameter']:.0f}/d")
         )

@@ -41,7 +41,7 @@ def run(
     ----------
     cases : the cases, of E1 E2 E3 E4
     levels : mesh levels, each halving the cells
-    dt : the time step
+    dt : the time step (0: the scene's, which follows the mesh)
     set : further scene parameters KEY=VALUE, e.g. fbm.force=surface
     runs : where the runs keep their checkpoints (out/bench)
     checkpoint_every : steps between checkpoints (>= 1)

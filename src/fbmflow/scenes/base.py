@@ -140,7 +140,7 @@ class SimulationScene(Scene):
         speed = max(done.series.pop("_speed", []), default=0.0)
         cell = float(min(sim.flow.mesh.finest_spacing))
         quantities = {**self.quantities(params, done.series, sim), "time_step": setup.dt,
-                      "courant_number": speed * setup.dt / cell}
+                      "courant_number": speed * setup.dt / cell, "force_estimator": sim.system.estimator.name}
         return SceneResult(quantities, sim.flow.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=done.newton_iterations,
                            extra={} if done.failure is None else {"failure": done.failure},
