@@ -5,8 +5,8 @@ import pytest
 
 from fbmflow.particles.drag import drag_coefficient, terminal_velocity
 
-# ten Cate et al. (2002), Table II: fluid (density, viscosity) and the terminal velocity in
-# unbounded fluid, u_inf [m/s]
+# ten Cate et al. (2002): fluid (density, viscosity) and the terminal velocity in unbounded
+# fluid they give, u_inf [m/s]
 TEN_CATE = {"E1": (970.0, 0.373, 0.038), "E2": (965.0, 0.212, 0.060), "E3": (962.0, 0.113, 0.091),
             "E4": (960.0, 0.058, 0.128)}
 
@@ -19,7 +19,7 @@ def test_the_sphere_drag_tends_to_stokes_and_the_terminal_velocity_to_stokes_vel
 
 
 @pytest.mark.parametrize("case", TEN_CATE)
-def test_the_sphere_terminal_velocity_is_ten_cate_table_two_within_8_percent(case):
+def test_the_sphere_terminal_velocity_is_ten_cates_within_8_percent(case):
     rho_f, mu, u_inf = TEN_CATE[case]
     u = terminal_velocity(0.015, 1120.0, rho_f, mu, 9.81, 3)
     assert abs(u / u_inf - 1) < 0.08

@@ -14,8 +14,8 @@ Circular cylinder per unit length (``dim = 2``), White (1991, eq. 3-225), ``1e-4
 ``d`` (cylinder, per unit length). The terminal velocity balances it with the net weight
 ``|rho_s - rho_f| g V``. Walls slow a particle: in Glowinski's 2 cm channel the disk's
 correlation velocity (6.59 cm/s) is 18 % above the computed peak (5.6 cm/s); ten Cate's sphere
-reads 0.0409 / 0.0635 / 0.0939 / 0.1290 m/s for E1-E4 against Table II's 0.038 / 0.060 / 0.091 /
-0.128 m/s in the unbounded fluid (tests/particles/test_drag.py).
+reads 0.0409 / 0.0635 / 0.0939 / 0.1290 m/s for E1-E4 against the unbounded terminal
+velocities ten Cate et al. give, 0.038 / 0.060 / 0.091 / 0.128 m/s (tests/particles/test_drag.py).
 """
 from __future__ import annotations
 

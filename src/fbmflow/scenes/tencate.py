@@ -159,7 +159,8 @@ class TenCate(ParticleScene):
 
     def velocity_scale(self, params: TenCateParams) -> float:
         """The sphere's terminal velocity in unbounded fluid (Schiller–Naumann drag,
-        :func:`~fbmflow.particles.drag.terminal_velocity`): 0.129 m/s for E4, Table II's 0.128."""
+        :func:`~fbmflow.particles.drag.terminal_velocity`): 0.129 m/s for E4, whose unbounded
+        terminal velocity ten Cate et al. give as 0.128 m/s."""
         rho_f, mu = CASES[params.fluid.case]
         pp = params.particle
         return terminal_velocity(pp.diameter, pp.density, rho_f, mu, params.fluid.gravity, 3)
