@@ -41,7 +41,8 @@ def spinning_torque(dim: int, cells_per_diameter: int, width: float, boundary: s
     owner = node_owner(space.V, centre, [ball])
     _, volume = hydrodynamic_forces(space, owner, centre, u, p, mu)
     walls = problem.constraints().fixed
-    _, tested = TestFunctionForces(space, owner, centre, [ball], walls=walls[walls < space.n_v])(u, p, mu, 1e-3)
+    tested_force = TestFunctionForces(space, owner, centre, [ball], walls=walls[walls < space.n_v])
+    _, tested = tested_force(u, p, mu, 1e-3)
     radii = np.array([L / 2, L / 2 * np.sqrt(dim)])
     if dim == 2:
         container = -4 * np.pi * mu * a**2 * radii**2 / (radii**2 - a**2)

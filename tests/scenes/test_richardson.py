@@ -17,8 +17,10 @@ def test_three_levels_of_a_power_law_give_its_limit_and_order_exactly(p):
     assert e["error"] == pytest.approx(q_star - values[-1], rel=1e-10)
 
 
-@pytest.mark.parametrize("values, reason", [([1.0, 1.2, 1.1], "change sign"), ([1.0, 1.1, 1.3], "not smaller"),
-                                            ([1.0, 1.9, 1.9001], "outside")])
+CASES = [([1.0, 1.2, 1.1], "change sign"), ([1.0, 1.1, 1.3], "not smaller"), ([1.0, 1.9, 1.9001], "outside")]
+
+
+@pytest.mark.parametrize("values, reason", CASES)
 def test_levels_outside_the_asymptotic_range_give_no_number_but_the_reason(values, reason):
     e = richardson(values)
     assert e["asymptotic"] is False and e["error"] is None and reason in e["reason"]
@@ -41,7 +43,8 @@ def test_only_physical_scalars_are_estimated():
 def test_estimate_error_runs_the_coarser_levels_and_writes_the_estimates(tmp_path):
     """dfg-2d-1 at level 3 (levels 1-3: 2, 4 and 8 cells per diameter, seconds): summary.json holds
     an estimate or a reason for every quantity, the coarser runs and the plot are written."""
-    assert main(["run", "dfg-2d-1", "--level", "3", "--estimate-error", "--out", str(tmp_path), "--quiet"]) == 0
+    argv = ["run", "dfg-2d-1", "--level", "3", "--estimate-error", "--out", str(tmp_path), "--quiet"]
+    assert main(argv) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     est = summary["error_estimate"]
     assert est["levels"] == [1, 2, 3]
@@ -53,11 +56,13 @@ def test_estimate_error_runs_the_coarser_levels_and_writes_the_estimates(tmp_pat
         else:
             assert e["extrapolated"] == pytest.approx(e["value"] + e["error"])
     for level in (1, 2):
-        assert json.loads((tmp_path / "coarser" / f"level-{level}" / "summary.json").read_text())["level"] == level
+        coarser = json.loads((tmp_path / "coarser" / f"level-{level}" / "summary.json").read_text())
+        assert coarser["level"] == level
     assert (tmp_path / "error_estimate.png").stat().st_size > 0
 
 
 def test_estimate_error_at_level_zero_is_refused_before_any_run(tmp_path, capsys):
-    code = main(["run", "dfg-2d-1", "--level", "0", "--estimate-error", "--out", str(tmp_path / "x"), "--quiet"])
+    code = main(["run", "dfg-2d-1", "--level", "0", "--estimate-error", "--out", str(tmp_path / "x"),
+                 "--quiet"])
     assert code == 2 and "level 1 or more" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()

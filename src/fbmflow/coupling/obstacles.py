@@ -46,7 +46,8 @@ class FixedObstacles:
         self.angular_velocities = (np.zeros(spin) if angular_velocities is None
                                    else np.array(angular_velocities, dtype=float))
         if self.angular_velocities.shape != spin:
-            raise ValueError(f"angular_velocities must have shape {spin}, got {self.angular_velocities.shape}")
+            raise ValueError(f"angular_velocities must have shape {spin}, "
+                             f"got {self.angular_velocities.shape}")
         self._finest: tuple | None = None  # (DOF map, its FlowSpace, the sharp boundary there)
 
     def __call__(self, V: DofMap, t: float) -> DirichletConstraints:

@@ -65,7 +65,8 @@ class MeshTime(TimeParams):
 
     dt: float = param(0.0, "time step (0: courant * h / U, halving with each level)", "s", nonnegative=True)
     courant: float = param(0.25, "Courant number U dt / h of the time step when dt = 0 (U: the scene's "
-                           "velocity scale, h: the cell that holds the particle)", positive=True, maximum=10.0)
+                           "velocity scale, h: the cell that holds the particle)", positive=True,
+                           maximum=10.0)
 
 
 #: the sections every particle scene has, after its own, with their default classes (``contact``:
@@ -128,8 +129,8 @@ class ParticleScene(SimulationScene):
         speed = self.velocity_scale(params)
         h = float(place.mesh.cell_size_at(place.particles.position).min())
         if not speed > 0:
-            raise ParamError(f"{self.name}: the particles are expected not to move (velocity scale {speed:g}), "
-                             "so the time step cannot follow the mesh; set time.dt")
+            raise ParamError(f"{self.name}: the particles are expected not to move (velocity scale "
+                             f"{speed:g}), so the time step cannot follow the mesh; set time.dt")
         dt = t.courant * h / speed
         log.info("%s: time step %.4g s = Courant %.3g x cell %.4g / velocity scale %.4g (time.dt to choose "
                  "another)", self.name, dt, t.courant, h, speed)

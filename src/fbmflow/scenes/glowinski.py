@@ -50,10 +50,10 @@ class GlowinskiParticle(Section):
 GlowinskiTime = derive(MeshTime, "GlowinskiTime", "Time stepping (``dt = 0``: ``courant h / U`` with U the "
                        "disk's terminal velocity by White's cylinder drag, 6.59 cm/s, so that each level "
                        "halves it).",
-                       courant=param(0.1, "Courant number U dt / h of the time step when dt = 0 (U: the disk's "
-                                     "terminal velocity, h: its cell); the peak moves -0.71 / -0.55 % from "
-                                     "Courant 0.4 to 0.2 to 0.1 at level 2 (benchmarks/results/glowinski.md)",
-                                     positive=True, maximum=10.0),
+                       courant=param(0.1, "Courant number U dt / h of the time step when dt = 0 (U: the "
+                                     "disk's terminal velocity, h: its cell); the peak moves -0.71 / -0.55 % "
+                                     "from Courant 0.4 to 0.2 to 0.1 at level 2 "
+                                     "(benchmarks/results/glowinski.md)", positive=True, maximum=10.0),
                        t_end=param(0.65, "final time (the settling velocity peaks between about 0.45 and "
                                    "0.6 s; the disk lands at about 0.75 s)", "s", positive=True),
                        scheme=param("crank-nicolson", "implicit time scheme (crank-nicolson with the "

@@ -152,7 +152,8 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
 def check_estimate(scene: Scene, level: int) -> None:
     """ParamError unless an error estimate of ``scene`` at ``level`` has a coarser level to run."""
     if level == 0:
-        raise ParamError(f"--estimate-error needs a coarser level than {level}: run {scene.name} at level 1 or more")
+        raise ParamError(f"--estimate-error needs a coarser level than {level}: run {scene.name} at level 1 "
+                         "or more")
 
 
 def _estimate_error(scene: Scene, params, level: int, out: Path, progress, plot: bool, summary: dict) -> dict:
@@ -178,7 +179,8 @@ def _estimate_error(scene: Scene, params, level: int, out: Path, progress, plot:
                                  "wall_time_s": sum(s["wall_time_s"] for s in coarser)}
     text = json.dumps(summary, indent=1, allow_nan=False)
     _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
-    log.info("error estimates (levels %s):\n%s", ", ".join(map(str, [*levels, level])), richardson.table(estimates))
+    log.info("error estimates (levels %s):\n%s", ", ".join(map(str, [*levels, level])),
+             richardson.table(estimates))
     if plot:
         try:
             richardson.plot(estimates, [*levels, level], out / "error_estimate.png",
