@@ -34,10 +34,9 @@ def test_derive_changes_defaults_and_keeps_the_rest():
 
 @pytest.mark.parametrize("registry, key", [(fb.COUPLINGS, "scheme"), (fb.FORCE_ESTIMATORS, "force")])
 def test_the_registries_are_the_parameter_choices(registry, key):
-    """Every registered name is a choice; the coupling's choices add ``auto`` (which picks one)."""
+    """Every registered name is a choice, and ``auto`` (which picks one)."""
     section = fb.CouplingParams if key == "scheme" else fb.FictitiousBoundaryParams
-    extra = ("auto",) if key == "scheme" else ()
-    assert tuple(registry) + extra == section.__dataclass_fields__[key].metadata["choices"]
+    assert tuple(registry) + ("auto",) == section.__dataclass_fields__[key].metadata["choices"]
 
 
 def _falling_disk(**sections):

@@ -70,7 +70,7 @@ class FictitiousBoundaryParams(Section):
                        "first order with the sharp boundary) or test-function (the momentum balance "
                        "tested with a function that is one on the particle, its gradient in the fluid "
                        "cells beyond the cut ones) or surface (the traction integrated over the true "
-                       "surface; balls with the sharp boundary)", choices=("auto", *FORCE_ESTIMATORS))
+                       "surface; balls with the sharp boundary)", choices=(*FORCE_ESTIMATORS, "auto"))
 
 
 @dataclasses.dataclass(frozen=True)
