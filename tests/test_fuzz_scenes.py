@@ -69,7 +69,7 @@ def test_any_scene_file_loads_or_gives_a_param_error(tmp_path_factory, data, sce
     (["particle.x=5.0"], "is not inside the 2 x 6 cm box"),
     (["particle.diameter=-0.1"], "particle.diameter: must be positive"),
     (["fluid.viscosity=0"], "fluid.viscosity: must be positive"),
-    (["time.dt=-1"], "time.dt: must be positive"),
+    (["time.dt=-1"], "time.dt: must be zero or positive"),  # (0: the time step follows the mesh)
     (["time.t_end=1e308"], "steps, more than 1e+08"),  # was an OverflowError traceback
     (["fluid.viscosity=1e308"], "outside 1e-100 to 1e100"),  # was a singular factorisation
 ])
