@@ -135,8 +135,7 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
                    "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
                    "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
                    "newton_iterations": result.newton_iterations, "quantities": finite(result.quantities)}
-        text = json.dumps(summary, indent=1, allow_nan=False)
-        _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
+        _save_summary(out, summary)
     if estimate_error:
         summary = _estimate_error(scene, params, level, out, progress, plot, summary)
     if plot:
@@ -147,6 +146,12 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
             log.warning("the plot %s could not be drawn (%s: %s); the results are in %s",
                         out / f"{scene.name}.png", type(err).__name__, err, out / "summary.json")
     return summary
+
+
+def _save_summary(out: Path, summary: dict) -> None:
+    """Write ``out/summary.json`` whole (strict JSON) or raise OutputError."""
+    text = json.dumps(summary, indent=1, allow_nan=False)
+    _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
 
 
 def check_estimate(scene: Scene, level: int) -> None:
@@ -177,8 +182,7 @@ def _estimate_error(scene: Scene, params, level: int, out: Path, progress, plot:
     summary["error_estimate"] = {"levels": [*levels, level], "quantities": finite(estimates),
                                  "failed_levels": failed,
                                  "wall_time_s": sum(s["wall_time_s"] for s in coarser)}
-    text = json.dumps(summary, indent=1, allow_nan=False)
-    _write(out / "summary.json", lambda: _replace(out / "summary.json", text))
+    _save_summary(out, summary)
     log.info("error estimates (levels %s):\n%s", ", ".join(map(str, [*levels, level])),
              richardson.table(estimates))
     if plot:
