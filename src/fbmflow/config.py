@@ -39,6 +39,16 @@ def param(default, doc: str, unit: str = "", *, positive: bool = False, nonnegat
     return dataclasses.field(default=default, metadata=meta)
 
 
+def check_types(owner: str, **arguments) -> None:
+    """TypeError naming the argument, unless every ``name=(value, cls)`` in ``arguments`` has
+    ``isinstance(value, cls)``; ``name=(value, cls, None)`` also accepts None."""
+    for name, (value, cls, *none) in arguments.items():
+        if not (isinstance(value, cls) or (none and value is None)):
+            expected = cls.__name__ + (" or None" if none else "")
+            raise TypeError(f"{owner}: {name} must be a {expected}, got {type(value).__name__}; "
+                            f"make it with {cls.__name__}(...) or fbmflow.config.from_dict")
+
+
 def section(cls, doc: str = ""):
     """A nested parameter section with its default instance."""
     return dataclasses.field(default_factory=cls, metadata=dict(doc=doc or (cls.__doc__ or "").strip()))

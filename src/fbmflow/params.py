@@ -52,6 +52,12 @@ class TimeParams(Section):
     dt: float = param(0.01, "time step", "s", positive=True)
     t_end: float = param(1.0, "final time", "s", positive=True)
     scheme: str = param("fractional-step-theta", "implicit time scheme", choices=SCHEMES)
+    adaptive: bool = param(False, "choose each step by a local error estimate of the particles' paths "
+                           "(fbmflow.adaptive; dt: the first step)")
+    tolerance: float = param(1e-3, "adaptive: the largest local error of a particle's path in a step, a "
+                             "fraction of the cell that holds it", positive=True, maximum=1.0)
+    max_courant: float = param(0.5, "adaptive: the largest U dt / h of a step (U: the fastest particle's "
+                               "speed, h: the cell that holds it)", positive=True, maximum=10.0)
 
     def validate(self):
         if self.dt > 0 and self.t_end / self.dt > MAX_STEPS:  # (a scene may leave dt 0 to its set-up)

@@ -123,11 +123,12 @@ class Progress:
             self.stream.flush()
 
 
-def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
+def run_loop(sim, n_steps: int, dt: float | None, files: RunFiles | None = None, *,
              observe: Callable | None = None, until: Callable | None = None,
              progress: Callable | None = None, callback: Callable | None = None,
              resumed: dict | None = None, stop_on_failure: bool = False) -> RunResult:
-    """Step ``sim`` from its step count to ``n_steps`` in steps of ``dt`` [s].
+    """Step ``sim`` from its step count to ``n_steps`` in steps of ``dt`` [s]; ``dt = None``: to
+    ``sim.control.t_end`` in the adaptive steps of ``sim.control`` (:class:`~fbmflow.adaptive.StepControl`).
 
     ``sim``: a :class:`~fbmflow.simulation.Simulation` (``step``, ``state``, ``t``, ``step_count``,
     ``particles``, ``x``, ``flow``, ``owner``, ``force``). ``observe(sim) -> dict``: a row of named
@@ -186,7 +187,12 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
 
     reports, failure = [], None
     with interrupt.handling(), interrupt.safe_point("step"):
-        for k in range(sim.step_count + 1, n_steps + 1):
+        control = sim.control if dt is None else None
+        k = sim.step_count
+        while not control.finished(sim.t) if control else k < n_steps:
+            k += 1
+            if control:
+                n_steps = k + control.remaining_steps(sim.t) - 1  # (for progress)
             try:
                 report = sim.step(dt)
             except ConvergenceError as err:
@@ -223,7 +229,8 @@ def run_loop(sim, n_steps: int, dt: float, files: RunFiles | None = None, *,
                 if out is not None:
                     checkpoint(k)
                 raise RunInterrupted(k, out, signum)
-            if files.checkpoint_every and k % files.checkpoint_every == 0 and k < n_steps:
+            if files.checkpoint_every and k % files.checkpoint_every == 0 and \
+                    not (control.finished(sim.t) if control else k >= n_steps):
                 sim.flow.forget_linearisation()
                 if out is not None:
                     checkpoint(k)

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .adaptive import StepControl
+from .config import check_types
 from .contact.settings import ContactParams, RepulsionParams
 from .coupling import make_coupling
 from .coupling.schemes import auto_coupling
@@ -56,7 +58,8 @@ class Simulation:
         default: no-slip walls all round.
     time : TimeParams
         The time scheme; ``dt`` and ``t_end`` are what :meth:`run` and :meth:`step` without a
-        time step use.
+        time step use; with ``adaptive`` each step's size comes from a local error estimate of
+        the particles' velocities (:class:`~fbmflow.adaptive.StepControl`, :attr:`control`).
     solver : SolverParams
         Newton and linear solver settings. ``linear = "auto"`` takes the cheaper of the direct
         solver and multigrid by measured cost
@@ -98,9 +101,8 @@ class Simulation:
     ------
     ValueError
         A set-up that cannot run (placement, symmetry, a boundary or force the shapes do not
-        support, contact with the trapezoidal integrator), or
-        :class:`~fbmflow.solvers.choice.InsufficientMemory`; the
-        message says what to change.
+        support, contact with the trapezoidal or adaptive stepping), or
+        :class:`~fbmflow.solvers.choice.InsufficientMemory`; the message says what to change.
     """
 
     def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict | None = None,
@@ -109,16 +111,10 @@ class Simulation:
                  fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
                  contact: ContactParams | None = None, repulsion: RepulsionParams | None = None,
                  symmetry: tuple = (), frozen: bool = False):
-        for name, value, cls in (("particles", particles, Particles), ("fluid", fluid, FluidParams),
-                                 ("time", time, TimeParams), ("solver", solver, SolverParams),
-                                 ("coupling", coupling, CouplingParams),
-                                 ("fbm", fbm, FictitiousBoundaryParams),
-                                 ("contact", contact, (ContactParams, type(None))),
-                                 ("repulsion", repulsion, (RepulsionParams, type(None)))):
-            if not isinstance(value, cls):
-                expected = cls.__name__ if isinstance(cls, type) else f"{cls[0].__name__} or None"
-                raise TypeError(f"Simulation: {name} must be a {expected}, got {type(value).__name__}; "
-                                f"make it with {expected.split()[0]}(...) or fbmflow.config.from_dict")
+        check_types("Simulation", particles=(particles, Particles), fluid=(fluid, FluidParams),
+                    time=(time, TimeParams), solver=(solver, SolverParams),
+                    coupling=(coupling, CouplingParams), fbm=(fbm, FictitiousBoundaryParams),
+                    contact=(contact, ContactParams, None), repulsion=(repulsion, RepulsionParams, None))
         #: the arguments this simulation was made with (:func:`fbmflow.scenes.registry.resume` makes it
         #: again from them)
         self._setup = dict(mesh=mesh, particles=particles.copy(), fluid=fluid, boundary=boundary, time=time,
@@ -130,6 +126,8 @@ class Simulation:
                              f"{coupling.integrator!r} cannot be combined with it: set coupling.integrator = "
                              "'semi-implicit-euler' or turn contact off")
         self.time = time
+        #: the adaptive step's controller (None: steps of :attr:`dt`)
+        self.control = StepControl(time, particles, contact is not None) if time.adaptive else None
         n_unknowns = FlowSpace.estimate_dofs(mesh)
         if coupling.scheme == "auto":
             coupling = dataclasses.replace(coupling, scheme=auto_coupling(n_unknowns, particles, symmetry))
@@ -178,8 +176,7 @@ class Simulation:
 
     @property
     def n_steps(self) -> int:
-        """Steps of a whole run, from ``t = 0`` to ``time.t_end``
-            (:attr:`~fbmflow.params.TimeParams.n_steps`)."""
+        """Steps of a whole run to ``time.t_end`` (:attr:`~fbmflow.params.TimeParams.n_steps`)."""
         return self.time.n_steps
 
     @property
@@ -231,20 +228,23 @@ class Simulation:
 
     def state(self) -> dict:
         """Everything a restart needs, as arrays and numbers (the system's
-        :meth:`~fbmflow.coupling.system.CoupledSystem.state` and the coupling scheme's)."""
-        return {**self.system.state(), **self.coupling.state()}
+        :meth:`~fbmflow.coupling.system.CoupledSystem.state`, the coupling scheme's, the step control's)."""
+        control = self.control.state() if self.control else {}
+        return {**self.system.state(), **self.coupling.state(), **control}
 
     def set_state(self, state: dict) -> None:
         """Restore :meth:`state`; ValueError when it does not fit this simulation."""
         self.system.set_state(state)
         self.coupling.set_state(state)
+        if self.control is not None:
+            self.control.set_state(state)
 
     # -- stepping -------------------------------------------------------------------------------
     def run(self, out=None, *, checkpoint_every: int = 0, fields_every: int = 0, fields_format: str = "xdmf",
             resume: bool = False, overwrite: bool = False, progress: bool = False,
             callback=None) -> list[StepReport]:
-        """Step from the current step to ``time.t_end`` in steps of :attr:`dt`; returns the steps'
-        reports (ConvergenceError names a failing step).
+        """Step from the current step to ``time.t_end`` in steps of :attr:`dt` (adaptive ones with
+        ``time.adaptive``); returns the steps' reports (ConvergenceError names a failing step).
 
         With an output folder ``out`` the run writes ``run.h5`` (a row per step), a checkpoint
         every ``checkpoint_every`` steps (and on a failed step or a signal), ParaView output
@@ -256,9 +256,9 @@ class Simulation:
         simulation made as the run's was). ``progress``: show progress on stderr;
         ``callback(report)`` after every step.
         """
+        dt, progress = (None if self.control else self.dt), (Progress() if progress else None)
         if out is None:
-            return run_loop(self, self.n_steps, self.dt, None, callback=callback,
-                            progress=Progress() if progress else None).reports
+            return run_loop(self, self.n_steps, dt, None, callback=callback, progress=progress).reports
         files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,
                          {"kind": "simulation", "fbmflow_version": __version__}, self._setup)
         with claim(files.out, resume, overwrite):
@@ -266,14 +266,16 @@ class Simulation:
             if resume:
                 state, _, resumed = load_checkpoint(files.out / "checkpoint.h5", expect=files.meta)
                 self.set_state(state)
-            return run_loop(self, self.n_steps, self.dt, files, callback=callback, resumed=resumed,
-                            progress=Progress() if progress else None).reports
+            return run_loop(self, self.n_steps, dt, files, callback=callback, resumed=resumed,
+                            progress=progress).reports
 
     def step(self, dt: float | None = None) -> StepReport:
-        """Advance flow and particles over ``dt`` [s] (default :attr:`dt`) by the coupling
-        scheme, then contact; ConvergenceError names the step and time."""
-        dt = self.dt if dt is None else float(dt)
-        if not dt > 0.0:
+        """Advance flow and particles over ``dt`` [s] (default :attr:`dt`, or an adaptive step that
+        :attr:`control` accepts) by the coupling scheme, then contact; ConvergenceError names the
+        step and time."""
+        if dt is None and self.control is not None:
+            return self.control.step(self)
+        if not (dt := self.dt if dt is None else float(dt)) > 0.0:
             raise ValueError(f"the time step must be positive, got {dt}")
         system = self.system
         where = f"step {system.step_count + 1} (t = {system.t:.6g} -> {system.t + dt:.6g})"

@@ -78,10 +78,11 @@ class Scene:
 
 @dataclass
 class Setup:
-    """A built time-dependent scene: the simulation, its time step and number of steps."""
+    """A built time-dependent scene: the simulation, its time step (None: adaptive) and number of
+    steps (adaptive: at the first step's size)."""
 
     sim: Any
-    dt: float
+    dt: float | None
     n_steps: int
 
 
@@ -104,10 +105,13 @@ class SimulationScene(Scene):
         return False
 
     def _observe(self, params, sim) -> dict[str, float]:
-        """:meth:`observe` and the fastest particle's speed, ``_speed`` (the Courant number the
-        run met: ``courant_number = max speed * dt / h`` with h the finest cell)."""
+        """:meth:`observe` and the Courant number of the last step, ``_courant``: the fastest
+        particle's speed times the step over the finest cell (``courant_number``, the largest the
+        run met)."""
         v = sim.particles.velocity
-        return {**self.observe(params, sim), "_speed": float(np.sqrt((v**2).sum(axis=1)).max(initial=0.0))}
+        dt = sim.control.last_dt if sim.control else sim.dt
+        speed = float(np.sqrt((v**2).sum(axis=1)).max(initial=0.0))
+        return {**self.observe(params, sim), "_courant": speed * dt / min(sim.flow.mesh.finest_spacing)}
 
     def quantities(self, params, series: dict[str, list], sim) -> dict:
         raise NotImplementedError
@@ -137,14 +141,23 @@ class SimulationScene(Scene):
         done = run_loop(sim, setup.n_steps, setup.dt, files, observe=lambda s: self._observe(params, s),
                         until=lambda row: self.stop(params, row), progress=progress, resumed=resumed,
                         stop_on_failure=stop_on_failure)
-        speed = max(done.series.pop("_speed", []), default=0.0)
-        cell = float(min(sim.flow.mesh.finest_spacing))
-        quantities = {**self.quantities(params, done.series, sim), "time_step": setup.dt,
-                      "courant_number": speed * setup.dt / cell, "force_estimator": sim.system.estimator.name}
+        quantities = {**self.quantities(params, done.series, sim), **self._steps(setup, sim),
+                      "courant_number": max(done.series.pop("_courant", []), default=0.0),
+                      "force_estimator": sim.system.estimator.name}
         return SceneResult(quantities, sim.flow.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=done.newton_iterations,
                            extra={} if done.failure is None else {"failure": done.failure},
                            linear_solver=sim.flow.linear_solver_description)
+
+    @staticmethod
+    def _steps(setup: Setup, sim) -> dict:
+        """``time_step`` [s] (adaptive: the mean, with the smallest and the largest and the
+        rejected steps)."""
+        control = sim.control
+        if control is None:
+            return {"time_step": setup.dt}
+        return {"time_step": sim.t / max(sim.step_count, 1), "time_step_smallest": control.smallest,
+                "time_step_largest": control.largest, "rejected_steps": control.rejected}
 
     @staticmethod
     def _resume_checkpoint(path, params, meta: dict) -> tuple[dict, dict]:

@@ -144,7 +144,7 @@ class ParticleScene(SimulationScene):
                          fbm=params.fbm, contact=getattr(params, "contact", None), repulsion=params.repulsion,
                          symmetry=place.symmetry, frozen=frozen)
         self._check_contact_skin(sim, level)
-        return Setup(sim, sim.dt, sim.n_steps)
+        return Setup(sim, None if sim.control else sim.dt, sim.n_steps)
 
     def _check_contact_skin(self, sim: Simulation, level: int) -> None:
         """Warn when hard contact keeps surfaces more than :data:`SKIN_FRACTION` of the smallest

@@ -26,7 +26,8 @@ import numpy as np
 #: or the quantity does not converge like a power of h)
 ORDER_RANGE = (0.5, 4.0)
 #: the quantities of a summary that are no results of the physics: never estimated
-BOOKKEEPING = ("cells_per_diameter", "time_step", "courant_number")
+BOOKKEEPING = ("cells_per_diameter", "time_step", "courant_number", "time_step_smallest", "time_step_largest",
+               "rejected_steps")
 
 
 def richardson(values: list[float], order: float = 1.0) -> dict:

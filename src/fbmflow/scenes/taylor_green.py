@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Section, derive, param, tree
+from ..config import ParamError, Section, derive, param, tree
 from ..fem.functions import error_norms
 from ..flow.time_schemes import advance
 from ..mesh import StructuredMesh
@@ -49,8 +49,14 @@ class TaylorGreenFluid(Section):
 
 
 TaylorGreenTime = derive(TimeParams, "TaylorGreenTime", "Time stepping of the vortex.", dt=0.025, t_end=0.5)
-TaylorGreenParams = tree("TaylorGreenParams", "Parameters of ``taylor-green-2d``.", fluid=TaylorGreenFluid,
-                         time=TaylorGreenTime, solver=SolverParams)
+def _no_adaptive(params) -> None:
+    if params.time.adaptive:
+        raise ParamError("taylor-green-2d: time.adaptive chooses steps by the particles' motion and this "
+                         "scene has no particles; set time.adaptive = false and choose time.dt")
+
+
+TaylorGreenParams = tree("TaylorGreenParams", "Parameters of ``taylor-green-2d``.", validate=_no_adaptive,
+                         fluid=TaylorGreenFluid, time=TaylorGreenTime, solver=SolverParams)
 
 
 class TaylorGreen2D(Scene):
