@@ -115,7 +115,7 @@ def write(rows: list[dict]) -> None:
         lines.append(f"| {r['scheme']} | {r['integrator']} | {r['pattern']} | {r['u_max']:.4f} | {change} | "
                      f"{r['date']} {r['commit']} |")
     lines += ["", "## Adaptive against fixed steps, to the scene's end", "",
-              "| steps | tolerance | dt s (mean; range) | accepted | rejected | Courant | u_max cm/s | wall s "
+              "| stepping | tolerance | dt s (mean; range) | accepted | rejected | Courant | u_max cm/s | wall s "
               "| measured |", "|---|---|---|---|---|---|---|---|---|"]
     tolerance_rows = [r for r in rows if r["part"] == "tolerance"]
     for r in sorted(tolerance_rows, key=lambda r: (r["tolerance"] is None, -(r["tolerance"] or 0))):

@@ -127,7 +127,7 @@ class Simulation:
                              "'semi-implicit-euler' or turn contact off")
         self.time = time
         #: the adaptive step's controller (None: steps of :attr:`dt`)
-        self.control = StepControl(time, particles, contact is not None) if time.adaptive else None
+        self.control = StepControl(time, particles, bool(contact), coupling) if time.adaptive else None
         n_unknowns = FlowSpace.estimate_dofs(mesh)
         if coupling.scheme == "auto":
             coupling = dataclasses.replace(coupling, scheme=auto_coupling(n_unknowns, particles, symmetry))
