@@ -6,13 +6,11 @@ where constant steps of the same mean put it, per time scheme and particle integ
 level 1, how do the peak, the steps and the rejected steps of adaptive runs compare with fixed
 steps?
 Answer: steps that alternate 0.5 / 1.5 ms raise the peak to 0.4 s by 4.2 % over constant 1 ms
-steps with the scene's Crank–Nicolson and trapezoidal integrator, 1.0 % with Crank–Nicolson and
-semi-implicit Euler, and change it by -0.6 % with backward Euler: the Crank–Nicolson pressure's
-force is a mid-step value that the trapezoidal rule pairs with the next step's, so the
-controller lets the step grow by at most 1.25 per step (blocks of 10 equal steps: -0.3 %). At
-tolerance 1e-3 the level-1 peak is 5.8294 cm/s (+0.05 % from fixed 1 ms) in 305 steps, 66 of
-them taken again: no cheaper than the fixed step the scene chooses
-(benchmarks/results/adaptive_steps.md).
+steps with the scenes' Crank–Nicolson and trapezoidal integrator, 0.2 % with Crank–Nicolson and
+semi-implicit Euler, -0.6 % with backward Euler (the trapezoidal rule pairs two mid-step pressure
+forces); so with the default pair the adaptive peak does not converge as the tolerance tightens
+(5.8752 / 5.8294 / 5.9093 cm/s at 3e-3 / 1e-3 / 3e-4, fixed 1 ms: 5.8267), and is no cheaper
+than the fixed step the scene chooses (benchmarks/results/adaptive_steps.md).
 Measured: 2026-11-28, commit 8ed94f1; quoted in docs/validation/converged-answers.md.
 Run: python -m fbmbench adaptive_steps --part tolerance
 
