@@ -49,6 +49,8 @@ class TaylorGreenFluid(Section):
 
 
 TaylorGreenTime = derive(TimeParams, "TaylorGreenTime", "Time stepping of the vortex.", dt=0.025, t_end=0.5)
+
+
 def _no_adaptive(params) -> None:
     if params.time.adaptive:
         raise ParamError("taylor-green-2d: time.adaptive chooses steps by the particles' motion and this "
