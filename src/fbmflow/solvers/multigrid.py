@@ -32,6 +32,7 @@ from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
 from .reports import LinearReport
+from .sparse import matvec
 from .system import SaddlePointSystem, expansion
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
@@ -128,14 +129,14 @@ class _Level:
         self.coarse_orphans = coarse.orphans
 
     def restrict(self, r: np.ndarray, coarse: "_Level") -> np.ndarray:
-        rc = self.R @ r
+        rc = matvec(self.R, r)
         rc[self.coarse_fixed] = 0.0
         if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
             rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]
         return rc
 
     def prolongate(self, e: np.ndarray, coarse: "_Level") -> np.ndarray:
-        return self.P @ e
+        return matvec(self.P, e)
 
 
 class MultigridHierarchy(Factorization):

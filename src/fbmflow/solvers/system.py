@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
 from ..fem.constraints import zero_columns
+from .sparse import matvec
 
 log = logging.getLogger(__name__)
 
@@ -122,10 +123,10 @@ class SaddlePointSystem:
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
         u, p = x[:self.n_u], x[self.n_u:]
-        q = self.BT @ u
+        q = matvec(self.BT, u)
         if self.pressure_block is not None:
             q += self.pressure_block @ p
-        return np.concatenate([self.A @ u + self.gradient @ p, q])
+        return np.concatenate([matvec(self.A, u) + matvec(self.gradient, p), q])
 
     def balance(self, g: np.ndarray) -> np.ndarray:
         """Continuity right-hand side(s) made solvable (:func:`balance_volume`); ``g`` itself when

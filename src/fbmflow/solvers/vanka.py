@@ -60,9 +60,7 @@ class VankaSmoother:
         else:
             self._extra = (space.slots,)
         mesh = space.mesh
-        axis = ordering.slab_axis(mesh.shape)
-        period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
-        reach = ordering.system_reach(system, ordering.dof_planes(space, axis), period)
+        reach = ordering.sweep_reach(system)
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells),
                                       reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
@@ -227,9 +225,7 @@ class FactoredVankaSmoother:
         _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
                               4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
         mesh = space.mesh
-        axis = ordering.slab_axis(mesh.shape)
-        period = 2 * mesh.shape[axis] if mesh.periodic[axis] else 0
-        reach = ordering.system_reach(system, ordering.dof_planes(space, axis), period)
+        reach = ordering.sweep_reach(system)
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), cells, reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)

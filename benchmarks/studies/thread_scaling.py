@@ -1,0 +1,163 @@
+"""Seconds per time step against Numba's thread count, for this tree and, beside it, another.
+
+Question: how much faster is a time step of a 3D particle scene on more cores, and what did the
+blocked sweep order and the parallel mat-vec change?
+Answer: not measured yet: see benchmarks/results/thread_scaling.md when it has rows.
+Measured: 2026-11-28, commit 0000000; quoted in docs/validation/multigrid-with-fictitious-boundaries.md
+Run: python -m fbmbench thread_scaling --threads 1 2
+
+Every row is one process, run one after the other: the scene is built at ``level``, ``warm`` steps
+are taken (the first step also builds the multigrid hierarchy's kernels from the Numba cache), and
+the next ``steps`` steps are timed. The process reports seconds per step, the linear solves' share,
+multigrid cycles per step and its peak resident memory. ``--baseline DIR`` runs the same rows
+with the package at ``DIR`` (a ``src`` folder, for example ``git archive COMMIT src | tar -x -C
+DIR``), so that the two trees' ratio is measured in one run on one machine. Run the Numba cache
+warm first (one row at level 0 does).
+
+writes benchmarks/results/thread_scaling.{json,md}: the rows of this run, with the machine (CPU
+model and count); ``--tag`` names the run (rows with other tags are kept).
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+BENCHMARKS = Path(__file__).resolve().parents[1]
+RESULTS = BENCHMARKS / "results"
+SRC = BENCHMARKS.parent / "src"
+
+CHILD = r"""
+import json, resource, sys, time
+args = json.loads(sys.argv[1])
+import numba
+from fbmflow.scenes.registry import load_scene
+scene, params, level = load_scene(args["scene"], args["level"], args["overrides"])
+t0 = time.perf_counter()
+setup = scene.build(params, level)
+build = time.perf_counter() - t0
+steps = []
+total = args["warm"] + args["steps"]
+for k in range(total):
+    if args["profile"] and k == total - 1:
+        import cProfile
+        profile = cProfile.Profile()
+        profile.enable()
+    t1 = time.perf_counter()
+    report = setup.sim.step(setup.dt)
+    if k >= args["warm"]:
+        steps.append(dict(wall=time.perf_counter() - t1, linear=report.linear.time_s,
+                          cycles=report.linear.iterations, solves=report.linear.solves))
+n = len(steps)
+if args["profile"]:
+    import io, pstats
+    profile.disable()
+    text = io.StringIO()
+    pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(25)
+    print(text.getvalue(), file=sys.stderr)
+print(json.dumps(dict(threads=numba.get_num_threads(), build_s=build,
+                      unknowns=int(setup.sim.flow.n_dofs),
+                      s_per_step=sum(s["wall"] for s in steps) / n,
+                      linear_s_per_step=sum(s["linear"] for s in steps) / n,
+                      cycles_per_step=sum(s["cycles"] for s in steps) / n,
+                      peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)))
+"""
+
+
+def machine() -> str:
+    """CPU model and logical CPU count of this machine."""
+    model = platform.processor() or "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} logical CPUs"
+
+
+def one(tree: Path, threads: int, scene: str, level: int, overrides: list[str], warm: int, steps: int,
+        profile: bool = False) -> dict:
+    """One process: the package from ``tree`` at ``threads`` Numba threads (``profile``: its last
+    step's functions by own time printed)."""
+    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
+    args = dict(scene=scene, level=level, overrides=overrides, warm=warm, steps=steps, profile=profile)
+    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(args)], env=env, capture_output=True,
+                         text=True, check=False)
+    if out.returncode != 0:
+        raise RuntimeError(f"{tree} at {threads} threads failed:\n{out.stderr[-3000:]}")
+    if profile:
+        print(out.stderr[-6000:], flush=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def table(rows: list[dict]) -> str:
+    """The rows as Markdown, with each row's speed-up over its tree's fewest threads in the same
+    run and, for this commit's rows, the baseline's time at the same threads over its own."""
+    fewest = {}
+    for r in rows:
+        key = (r["tag"], r["tree"])
+        if key not in fewest or r["threads"] < fewest[key]["threads"]:
+            fewest[key] = r
+    base = {(r["tag"], r["threads"]): r for r in rows if r["tree"] != "this commit"}
+    lines = ["# Seconds per time step against threads (python -m fbmbench thread_scaling)", "",
+             "One process per row, one after the other, nothing else running. `tree`: this commit's "
+             "package or the baseline named. Speed-up: over the same tree's fewest threads in the same "
+             "run; vs baseline: the baseline's seconds per step at the same threads over this row's.", "",
+             "| tag | machine | scene | level | unknowns | tree | threads | s / step | linear s / step | "
+             "cycles / step | speed-up | vs baseline | peak GB |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        speedup = fewest[(r["tag"], r["tree"])]["s_per_step"] / r["s_per_step"]
+        b = base.get((r["tag"], r["threads"])) if r["tree"] == "this commit" else None
+        versus = f"{b['s_per_step'] / r['s_per_step']:.2f}" if b else ""
+        lines.append(f"| {r['tag']} | {r['machine']} | {r['scene']} | {r['level']} | {r['unknowns']} | "
+                     f"{r['tree']} | {r['threads']} | {r['s_per_step']:.2f} | {r['linear_s_per_step']:.2f} | "
+                     f"{r['cycles_per_step']:.1f} | {speedup:.2f} | {versus} | {r['peak_gb']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1, overrides: list[str] = (),
+        warm: int = 1, steps: int = 2, baseline: Path | None = None, baseline_name: str = "baseline",
+        baseline_threads: list[int] = (), profile: bool = False, tag: str = "dev") -> None:
+    """Time ``steps`` steps after ``warm`` ones at every thread count, for this tree and the
+    baseline.
+
+    Parameters
+    ----------
+    threads : Numba thread counts, one process each
+    scene : the scene
+    level : its level
+    overrides : ``KEY=VALUE`` parameter overrides
+    warm : steps taken before the timed ones
+    steps : steps timed
+    baseline : a ``src`` folder holding another version of the package, run at the same thread
+        counts after this tree's rows (none: this tree only)
+    baseline_name : the baseline's name in the table (a commit)
+    baseline_threads : the baseline's thread counts (none: those of ``threads``)
+    profile : print the last timed step's profile (functions by own time) of every row (the
+        profiler's overhead is in that step's time)
+    tag : this run's name in the results (rows with other tags are kept)
+    """
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / "thread_scaling.json"
+    kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
+    rows = []
+    trees = [(SRC, "this commit", threads)]
+    if baseline:
+        trees.append((Path(baseline).resolve(), baseline_name, baseline_threads or threads))
+    where = machine()
+    for tree, name, counts in trees:
+        for k in counts:
+            r = one(tree, k, scene, level, list(overrides), warm, steps, profile)
+            r.update(tag=tag, machine=where, scene=scene, level=level, tree=name)
+            rows.append(r)
+            print(f"{name}, {k} threads: {r['s_per_step']:.2f} s per step ({r['linear_s_per_step']:.2f} s "
+                  f"linear, {r['cycles_per_step']:.1f} cycles), peak {r['peak_gb']:.2f} GB", flush=True)
+            path.write_text(json.dumps(kept + rows, indent=1))
+            (RESULTS / "thread_scaling.md").write_text(table(kept + rows))
