@@ -14,21 +14,24 @@ def _groups(phases):
     return [[order[gptr[g]:gptr[g + 1]] for g in range(gptr.size - 1)] for gptr, order in phases]
 
 
-@pytest.mark.parametrize("shape, periodic, reach, blocks", [
-    ((40, 40, 64), (False, False, False), 2, True),      # ten Cate level 1: blocks
-    ((20, 20, 32), (False, False, False), 2, False),     # too small for blocks
-    ((48, 48, 32), (True, False, True), 2, True),        # periodic axes
-    ((160, 128), (False, False), 6, True),               # 2D, a wider reach
-    ((32, 96), (False, True), 2, False),
+@pytest.mark.parametrize("shape, periodic, reach, n_phases", [
+    ((40, 40, 64), (False, False, False), 2, 4),     # 16 slabs, then 8 along y: 32 blocks per phase
+    ((12, 12, 64), (False, False, False), 2, 4),     # ten Cate level 1: 16 blocks per phase
+    ((12, 12, 64), (False, False, False), 6, 4),     # ... with the sphere's reach: 4 per phase
+    ((20, 20, 32), (False, False, False), 2, 4),
+    ((48, 48, 32), (True, False, True), 2, 4),       # periodic axes
+    ((160, 128), (False, False), 6, 4),              # 2D, a wider reach
+    ((64, 128), (False, False), 2, 2),               # slabs along y; never cut along x
+    ((32, 96), (False, True), 2, 2),                 # too small for blocks
 ])
-def test_groups_of_a_phase_are_independent(shape, periodic, reach, blocks):
+def test_groups_of_a_phase_are_independent(shape, periodic, reach, n_phases):
     """Every cell is swept once, each group in lexicographic order; two cells of different
     groups of one phase lie at least ``gap`` layers apart along some axis (modulo the period),
     so that no group touches a DOF another reads."""
     mesh = StructuredMesh.box(shape, periodic=periodic)
     index = mesh.cell_indices()
     phases = ordering.slab_phases(mesh.shape, mesh.periodic, index, np.arange(mesh.n_cells), reach)
-    assert (len(phases) == 4) == blocks
+    assert len(phases) == n_phases
     swept = np.concatenate([order for _, order in phases])
     assert np.array_equal(np.sort(swept), np.arange(mesh.n_cells))
     gap = int(np.floor(1 + reach / 2)) + 1
@@ -60,7 +63,8 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     from fbmflow.solvers.vanka import FactoredVankaSmoother
     monkeypatch.setattr(ordering, "BLOCK_CELLS", 16)
     monkeypatch.setattr(ordering, "MIN_SLAB_LAYERS", 2)
-    mesh = StructuredMesh.box((24, 24))
+    monkeypatch.setattr(ordering, "MIN_BLOCK_LAYERS", 2)
+    mesh = StructuredMesh.box((24, 16))  # slabs along x, blocks along y
     bcs = {t: NoSlip() for t in mesh.tags}
     bcs["ymax"] = Dirichlet((1.0, 0.0))
     prob = NavierStokesProblem(mesh, 0.01, bcs)
@@ -68,7 +72,7 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     b = -prob.residual(x0, 10.0, 1.0, prob.load(), con)
     system = prob.linear_system(x0, 10.0, 1.0, con)
     smoother = FactoredVankaSmoother(system)
-    assert len(smoother.sweeps[0]) == 4
+    assert len(smoother.sweeps[0][0]) == 4
     out = []
     before = numba.get_num_threads()
     try:
@@ -80,8 +84,9 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     finally:
         numba.set_num_threads(before)
     assert np.array_equal(out[0], out[1])
-    # the sequential block Gauss-Seidel sweep in the phases' order, twice
-    sequential = np.concatenate([order for _, order in smoother.sweeps[0]])
+    # the sequential block Gauss-Seidel sweep in the phases' order, then the far patches, twice
+    phases, far = smoother.sweeps[0]
+    sequential = np.concatenate([order for _, order in phases] + [far])
     x = np.zeros_like(b)
     for _ in range(2):
         smoother.update(sequential, b, x)
@@ -98,3 +103,42 @@ def test_matvec_matches_scipy(n):
     assert (M.nnz >= PARALLEL_NNZ) == (n > 1000)
     assert np.array_equal(matvec(M.tocsr(), x), M @ x)
     assert np.array_equal(matvec(M.tocsc(), x), M.tocsc() @ x)
+
+
+def test_unknown_reach_matches_numpy():
+    """The reach of every row against the same from the COO entries of the blocks: a periodic
+    mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
+    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them."""
+    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
+    from fbmflow.flow import NavierStokesProblem, NoSlip
+    from fbmflow.particles import Ball
+    mesh = StructuredMesh.box((12, 10), periodic=(True, False))
+    centre, shapes = np.array([[0.51, 0.47]]), [Ball(0.2, 2)]
+    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
+
+    def ball(V, t):
+        owner = node_owner(V, centre, shapes)
+        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
+        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
+
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
+    x, con = prob.zero_state(), prob.constraints()
+    system = prob.linear_system(x, 100.0, 1.0, con)
+    system = system.preconditioner or system
+    reach = ordering.unknown_reach(system)
+    points = ordering.lattice_points(system.space)
+    periods = np.array([2 * mesh.shape[0], 0])
+    expected = np.zeros(len(points), dtype=np.int64)
+    n_u = system.n_u
+    for M, r, c in ((system.A, 0, 0), (system.gradient, 0, n_u), (system.BT, n_u, 0),
+                    (system.pressure_block, n_u, n_u)):
+        if M is None:
+            continue
+        M = sp.coo_matrix(M)
+        diff = points[c + M.col] - points[r + M.row]
+        diff[:, 0] = (diff[:, 0] + periods[0] // 2) % periods[0] - periods[0] // 2
+        np.maximum.at(expected, r + M.row, np.abs(diff).max(axis=1))
+    assert np.array_equal(reach, expected)
+    assert reach.max() > 2 and np.median(reach) == 2
+    near = ordering.near_patches(reach)
+    assert (~near).sum() <= ordering.FAR_SHARE * reach.size and near[reach == 2].all()

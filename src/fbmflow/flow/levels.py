@@ -25,6 +25,7 @@ from ..fem import (
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
+from ..solvers.sparse import matvec
 from ..solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 from .boundary import build_constraints
 
@@ -112,7 +113,7 @@ class NewtonBlock:
         v = np.asarray(v)
         if v.ndim == 2:
             return np.column_stack([self @ v[:, k] for k in range(v.shape[1])])
-        return self.base @ v + self._newton_terms(v)
+        return matvec(self.base, v) + self._newton_terms(v)
 
     def _sparse(self, W: sp.csc_matrix) -> np.ndarray:
         out = (self.base @ W).toarray()

@@ -595,17 +595,21 @@ def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
                      width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
 
 
-@njit
-def plane_reach(k_ptr, k_idx, planes, period, row_offset, col_offset):
-    """Largest ``|planes[col_offset + k_idx[j]] - planes[row_offset + row]|`` over the entries of
-    the CSR pattern ``(k_ptr, k_idx)`` (the difference taken modulo ``period``, into
-    ``[-period/2, period/2)``, when ``period > 0``)."""
-    reach = 0
-    for row in range(k_ptr.shape[0] - 1):
-        p = planes[row_offset + row]
+@njit(parallel=True)
+def row_reach(k_ptr, k_idx, points, periods, row_offset, col_offset, out):
+    """``out[row_offset + row]`` raised to the largest ``|points[col_offset + k_idx[j], a] -
+    points[row_offset + row, a]|`` over the entries ``j`` of every row of the CSR pattern ``(k_ptr,
+    k_idx)`` and the axes ``a`` (the difference taken modulo ``periods[a]``, into
+    ``[-periods[a]/2, periods[a]/2)``, where ``periods[a] > 0``); rows in parallel."""
+    dim = points.shape[1]
+    for row in prange(k_ptr.shape[0] - 1):
+        q = row_offset + row
+        reach = out[q]
         for j in range(k_ptr[row], k_ptr[row + 1]):
-            diff = planes[col_offset + k_idx[j]] - p
-            if period > 0:
-                diff = (diff + period // 2) % period - period // 2
-            reach = max(reach, abs(diff))
-    return reach
+            c = col_offset + k_idx[j]
+            for a in range(dim):
+                diff = points[c, a] - points[q, a]
+                if periods[a] > 0:
+                    diff = (diff + periods[a] // 2) % periods[a] - periods[a] // 2
+                reach = max(reach, abs(diff))
+        out[q] = reach

@@ -60,7 +60,7 @@ class VankaSmoother:
         else:
             self._extra = (space.slots,)
         mesh = space.mesh
-        reach = ordering.sweep_reach(system)
+        reach = int(ordering.unknown_reach(system).max())
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells),
                                       reach)
         self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
@@ -149,13 +149,15 @@ class FactoredVankaSmoother:
     whatever their pattern: ghost-node rows, transferred continuity rows, Galerkin coarse rows)
     and factorised once; a sweep then costs a residual and two triangular solves per patch.
     Cell patches go in slab order (:mod:`fbmflow.solvers.ordering`: a sequential block
-    Gauss–Seidel sweep in lexicographic order within slabs that threads sweep at once);
-    then the patches at and inside the fictitious boundaries (those that hold a constrained
-    velocity, fixed or row-constrained, not a wall's) get ``interface_sweeps`` more updates, the
-    cell patches among them in slab phases as well and the agglomerated ones after them one after
-    the other; then all agglomerated patches one after the other. A cluster of cells whose
-    pressures share an orphaned mode (the pressure block couples them; ``_clusters``) is
-    agglomerated too, into one patch instead of its cells' patches.
+    Gauss–Seidel sweep in lexicographic order within slabs or blocks that threads sweep at once),
+    those whose rows reach further than most (:func:`~fbmflow.solvers.ordering.near_patches`)
+    after them one after the other (before them in a backward sweep); then the patches at and
+    inside the fictitious boundaries (those that hold a constrained velocity, fixed or
+    row-constrained, not a wall's) get ``interface_sweeps`` more updates, the cell patches among
+    them in slab phases as well and the agglomerated ones after them one after the other; then
+    all agglomerated patches one after the other. A cluster of cells whose pressures share an
+    orphaned mode (the pressure block couples them; ``_clusters``) is agglomerated too, into one
+    patch instead of its cells' patches.
 
     Parameters
     ----------
@@ -225,17 +227,25 @@ class FactoredVankaSmoother:
         _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
                               4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
         mesh = space.mesh
-        reach = ordering.sweep_reach(system)
-        phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), cells, reach)
-        self.sweeps = [phases, ordering.reversed_phases(phases)] if symmetric else [phases]
+        index = mesh.cell_indices()
+        reach = np.maximum.reduceat(ordering.unknown_reach(system)[self.dofs], self.ptr[:-1])  # per patch
+        near = ordering.near_patches(reach[:cells.size])
+        phases = ordering.slab_phases(mesh.shape, mesh.periodic, index, cells[near],
+                                      int(reach[:cells.size][near].max(initial=0)))
+        phases = [(gptr, np.flatnonzero(near)[order]) for gptr, order in phases]  # as patch indices
+        #: cell patches whose rows reach too far for the phases, updated after them one by one
+        self.far = np.flatnonzero(~near).astype(np.int64)
+        self.sweeps = [(phases, self.far), (ordering.reversed_phases(phases), self.far[::-1].copy())]
+        self.sweeps = self.sweeps if symmetric else self.sweeps[:1]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
         self.interface_sweeps = interface_sweeps
         self.interface = self._interface_patches(system)
         # the cell patches among them in slab phases too (patch k < cells.size is cell cells[k]);
         # the agglomerated ones, which may reach across slabs, one after the other
         plain_interface = self.interface[self.interface < cells.size]
+        interface_reach = int(reach[plain_interface].max(initial=0))
         self.interface_phases = [(gptr, plain_interface[order]) for gptr, order in ordering.slab_phases(
-            mesh.shape, mesh.periodic, mesh.cell_indices(), cells[plain_interface], reach)]
+            mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
         self.interface_merged = self.interface[self.interface >= cells.size]
 
     @property
@@ -268,7 +278,12 @@ class FactoredVankaSmoother:
     def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
         """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
         for k in range(sweeps):
-            self._sweep(self.sweeps[k % len(self.sweeps)], b, x)
+            phases, far = self.sweeps[k % len(self.sweeps)]
+            if k % len(self.sweeps) == 1:  # backwards: the far patches first
+                self.update(far, b, x)
+            self._sweep(phases, b, x)
+            if k % len(self.sweeps) == 0:
+                self.update(far, b, x)
             for _ in range(self.interface_sweeps):
                 self._sweep(self.interface_phases, b, x)
                 self.update(self.interface_merged, b, x)
