@@ -80,6 +80,18 @@ def machine() -> str:
     return f"{model}, {os.cpu_count()} logical CPUs"
 
 
+def commit() -> str:
+    """The short git commit of this tree ("+" when it has changes), "this tree" without git."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=BENCHMARKS, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=BENCHMARKS,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "this tree"
+    return head + ("+" if dirty else "")
+
+
 def one(tree: Path, threads: int, scene: str, level: int, overrides: list[str], warm: int, steps: int,
         profile: bool = False) -> dict:
     """One process: the package from ``tree`` at ``threads`` Numba threads (``profile``: its last
@@ -104,17 +116,17 @@ def table(rows: list[dict]) -> str:
         key = (r["tag"], r["tree"])
         if key not in fewest or r["threads"] < fewest[key]["threads"]:
             fewest[key] = r
-    base = {(r["tag"], r["threads"]): r for r in rows if r["tree"] != "this commit"}
+    base = {(r["tag"], r["threads"]): r for r in rows if r["baseline"]}
     lines = ["# Seconds per time step against threads (python -m fbmbench thread_scaling)", "",
-             "One process per row, one after the other, nothing else running. `tree`: this commit's "
-             "package or the baseline named. Speed-up: over the same tree's fewest threads in the same "
-             "run; vs baseline: the baseline's seconds per step at the same threads over this row's.", "",
+             "One process per row, one after the other, nothing else running. `tree`: the commit of the "
+             "package measured. Speed-up: over the same tree's fewest threads in the same run; vs "
+             "baseline: the baseline's seconds per step at the same threads (same tag) over this row's.", "",
              "| tag | machine | scene | level | unknowns | tree | threads | s / step | linear s / step | "
              "cycles / step | speed-up | vs baseline | peak GB |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         speedup = fewest[(r["tag"], r["tree"])]["s_per_step"] / r["s_per_step"]
-        b = base.get((r["tag"], r["threads"])) if r["tree"] == "this commit" else None
+        b = None if r["baseline"] else base.get((r["tag"], r["threads"]))
         versus = f"{b['s_per_step'] / r['s_per_step']:.2f}" if b else ""
         lines.append(f"| {r['tag']} | {r['machine']} | {r['scene']} | {r['level']} | {r['unknowns']} | "
                      f"{r['tree']} | {r['threads']} | {r['s_per_step']:.2f} | {r['linear_s_per_step']:.2f} | "
@@ -124,7 +136,7 @@ def table(rows: list[dict]) -> str:
 
 def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1, overrides: list[str] = (),
         warm: int = 1, steps: int = 2, baseline: Path | None = None, baseline_name: str = "baseline",
-        baseline_threads: list[int] = (), profile: bool = False, tag: str = "dev") -> None:
+        baseline_threads: list[int] = (), profile: bool = False, name: str = "", tag: str = "dev") -> None:
     """Time ``steps`` steps after ``warm`` ones at every thread count, for this tree and the
     baseline.
 
@@ -140,6 +152,7 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
         counts after this tree's rows (none: this tree only)
     baseline_name : the baseline's name in the table (a commit)
     baseline_threads : the baseline's thread counts (none: those of ``threads``)
+    name : this tree's name in the table (none: its git commit, "this tree" without git)
     profile : print the last timed step's profile (functions by own time) of every row (the
         profiler's overhead is in that step's time)
     tag : this run's name in the results (rows with other tags are kept)
@@ -148,14 +161,14 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     path = RESULTS / "thread_scaling.json"
     kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
     rows = []
-    trees = [(SRC, "this commit", threads)]
+    trees = [(SRC, name or commit(), threads, False)]
     if baseline:
-        trees.append((Path(baseline).resolve(), baseline_name, baseline_threads or threads))
+        trees.append((Path(baseline).resolve(), baseline_name, baseline_threads or threads, True))
     where = machine()
-    for tree, name, counts in trees:
+    for tree, name, counts, is_baseline in trees:
         for k in counts:
             r = one(tree, k, scene, level, list(overrides), warm, steps, profile)
-            r.update(tag=tag, machine=where, scene=scene, level=level, tree=name)
+            r.update(tag=tag, machine=where, scene=scene, level=level, tree=name, baseline=is_baseline)
             rows.append(r)
             print(f"{name}, {k} threads: {r['s_per_step']:.2f} s per step ({r['linear_s_per_step']:.2f} s "
                   f"linear, {r['cycles_per_step']:.1f} cycles), peak {r['peak_gb']:.2f} GB", flush=True)
