@@ -118,12 +118,12 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
         for order, sm in smoothers.items():
             phases, far = sm.sweeps[0]
             x = np.zeros_like(b)
-            sm._sweep(phases, b, x)  # compiled, caches warm
+            sm.sweep_phases(phases, b, x)  # compiled, caches warm
             row = dict(tag=tag, machine=where, scene=scene, level=level, unknowns=system.n_u + system.n_p,
                        order=order, groups=[len(g) - 1 for g, _ in phases], far=int(far.size), threads=k,
-                       phases_ms=1e3 * _best(lambda: sm._sweep(phases, b, x), repeats),
+                       phases_ms=1e3 * _best(lambda: sm.sweep_phases(phases, b, x), repeats),
                        far_ms=1e3 * _best(lambda: sm.update(far, b, x), repeats),
-                       interface_ms=1e3 * _best(lambda: sm._sweep(sm.interface_phases, b, x), repeats),
+                       interface_ms=1e3 * _best(lambda: sm.sweep_phases(sm.interface_phases, b, x), repeats),
                        merged_ms=1e3 * _best(lambda: sm.update(sm.merged, b, x), repeats),
                        apply_ms=1e3 * _best(lambda: system.apply(x), repeats))
             rows.append(row)

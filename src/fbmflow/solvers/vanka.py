@@ -281,15 +281,15 @@ class FactoredVankaSmoother:
             phases, far = self.sweeps[k % len(self.sweeps)]
             if k % len(self.sweeps) == 1:  # backwards: the far patches first
                 self.update(far, b, x)
-            self._sweep(phases, b, x)
+            self.sweep_phases(phases, b, x)
             if k % len(self.sweeps) == 0:
                 self.update(far, b, x)
             for _ in range(self.interface_sweeps):
-                self._sweep(self.interface_phases, b, x)
+                self.sweep_phases(self.interface_phases, b, x)
                 self.update(self.interface_merged, b, x)
             self.update(self.merged, b, x)
 
-    def _sweep(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
+    def sweep_phases(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
         """The patches of ``phases`` (:func:`~fbmflow.solvers.ordering.slab_phases`), each phase's
         slabs in parallel."""
         for gptr, order in phases:
