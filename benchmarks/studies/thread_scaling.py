@@ -110,7 +110,8 @@ def one(tree: Path, threads: int, scene: str, level: int, overrides: list[str], 
 
 def table(rows: list[dict]) -> str:
     """The rows as Markdown, with each row's speed-up over its tree's fewest threads in the same
-    run and, for this commit's rows, the baseline's time at the same threads over its own."""
+    run and, for this commit's rows, the baseline's time at the same threads over its own (both
+    medians where a row has several runs)."""
     fewest = {}
     for r in rows:
         key = (r["tag"], r["tree"])
@@ -121,22 +122,38 @@ def table(rows: list[dict]) -> str:
              "One process per row, one after the other, nothing else running. `tree`: the commit of the "
              "package measured. Speed-up: over the same tree's fewest threads in the same run; vs "
              "baseline: the baseline's seconds per step at the same threads (same tag) over this row's.", "",
-             "| tag | machine | scene | level | unknowns | tree | threads | s / step | linear s / step | "
-             "cycles / step | speed-up | vs baseline | peak GB |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| tag | machine | scene | level | unknowns | tree | threads | runs | s / step (range) | "
+             "linear s / step | cycles / step | speed-up | vs baseline | peak GB |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         speedup = fewest[(r["tag"], r["tree"])]["s_per_step"] / r["s_per_step"]
         b = None if r["baseline"] else base.get((r["tag"], r["threads"]))
         versus = f"{b['s_per_step'] / r['s_per_step']:.2f}" if b else ""
+        low, high = r.get("s_per_step_range", [r["s_per_step"]] * 2)
+        spread = f" ({low:.2f}-{high:.2f})" if r.get("runs", 1) > 1 else ""
         lines.append(f"| {r['tag']} | {r['machine']} | {r['scene']} | {r['level']} | {r['unknowns']} | "
-                     f"{r['tree']} | {r['threads']} | {r['s_per_step']:.2f} | {r['linear_s_per_step']:.2f} | "
-                     f"{r['cycles_per_step']:.1f} | {speedup:.2f} | {versus} | {r['peak_gb']:.2f} |")
+                     f"{r['tree']} | {r['threads']} | {r.get('runs', 1)} | {r['s_per_step']:.2f}{spread} | "
+                     f"{r['linear_s_per_step']:.2f} | {r['cycles_per_step']:.1f} | {speedup:.2f} | "
+                     f"{versus} | {r['peak_gb']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
+def _median_rows(runs: dict, **fields) -> list[dict]:
+    """One row per ``(tree, threads, is_baseline)`` of ``runs``: its median process by seconds per
+    step, with the number of processes, their range and ``fields``."""
+    rows = []
+    for (tree, _, is_baseline), rs in runs.items():
+        times = sorted(q["s_per_step"] for q in rs)
+        middle = sorted(rs, key=lambda q: q["s_per_step"])[(len(rs) - 1) // 2]
+        rows.append(dict(middle, tree=tree, baseline=is_baseline, runs=len(rs),
+                         s_per_step_range=[times[0], times[-1]], **fields))
+    return rows
+
+
 def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1, overrides: list[str] = (),
-        warm: int = 1, steps: int = 2, baseline: Path | None = None, baseline_name: str = "baseline",
-        baseline_threads: list[int] = (), profile: bool = False, name: str = "", tag: str = "dev") -> None:
+        warm: int = 1, steps: int = 2, repeats: int = 1, baseline: Path | None = None,
+        baseline_name: str = "baseline", baseline_threads: list[int] = (), profile: bool = False,
+        name: str = "", tag: str = "dev") -> None:
     """Time ``steps`` steps after ``warm`` ones at every thread count, for this tree and the
     baseline.
 
@@ -148,8 +165,11 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     overrides : ``KEY=VALUE`` parameter overrides
     warm : steps taken before the timed ones
     steps : steps timed
+    repeats : processes per tree and thread count, in turn (this tree, the baseline, this tree,
+        ...), so that a drift of the machine's speed reaches both alike; a row gives the median
+        process's figures (by seconds per step) and the range
     baseline : a ``src`` folder holding another version of the package, run at the same thread
-        counts after this tree's rows (none: this tree only)
+        counts (none: this tree only)
     baseline_name : the baseline's name in the table (a commit)
     baseline_threads : the baseline's thread counts (none: those of ``threads``)
     name : this tree's name in the table (none: its git commit, "this tree" without git)
@@ -160,17 +180,21 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "thread_scaling.json"
     kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
-    rows = []
     trees = [(SRC, name or commit(), threads, False)]
     if baseline:
         trees.append((Path(baseline).resolve(), baseline_name, baseline_threads or threads, True))
     where = machine()
-    for tree, name, counts, is_baseline in trees:
-        for k in counts:
-            r = one(tree, k, scene, level, list(overrides), warm, steps, profile)
-            r.update(tag=tag, machine=where, scene=scene, level=level, tree=name, baseline=is_baseline)
-            rows.append(r)
-            print(f"{name}, {k} threads: {r['s_per_step']:.2f} s per step ({r['linear_s_per_step']:.2f} s "
-                  f"linear, {r['cycles_per_step']:.1f} cycles), peak {r['peak_gb']:.2f} GB", flush=True)
-            path.write_text(json.dumps(kept + rows, indent=1))
-            (RESULTS / "thread_scaling.md").write_text(table(kept + rows))
+    runs: dict = {}
+    for _ in range(repeats):
+        for k in sorted({k for _, _, counts, _ in trees for k in counts}, reverse=True):
+            for tree, label, counts, is_baseline in trees:
+                if k not in counts:
+                    continue
+                r = one(tree, k, scene, level, list(overrides), warm, steps, profile)
+                print(f"{label}, {k} threads: {r['s_per_step']:.2f} s per step "
+                      f"({r['linear_s_per_step']:.2f} s linear, {r['cycles_per_step']:.1f} cycles), "
+                      f"peak {r['peak_gb']:.2f} GB", flush=True)
+                runs.setdefault((label, k, is_baseline), []).append(r)
+                rows = _median_rows(runs, tag=tag, machine=where, scene=scene, level=level)
+                path.write_text(json.dumps(kept + rows, indent=1))
+                (RESULTS / "thread_scaling.md").write_text(table(kept + rows))
