@@ -81,12 +81,13 @@ def machine() -> str:
 
 
 def commit() -> str:
-    """The short git commit of this tree ("+" when it has changes), "this tree" without git."""
+    """The short git commit of this tree ("+" when its package has changes), "this tree" without
+    git."""
     try:
         head = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=BENCHMARKS, capture_output=True,
                               text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=BENCHMARKS,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", str(SRC)],
+                               cwd=BENCHMARKS, capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "this tree"
     return head + ("+" if dirty else "")
