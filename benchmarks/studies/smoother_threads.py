@@ -6,14 +6,14 @@ far-reaching patches set aside, against the slab order it replaced, and what do 
 run on one thread cost?
 Answer: ten Cate level 1 (278 739 unknowns, 12 x 12 x 64 cells), on this 2-core machine: the
 blocked order gives 16 groups per phase (slabs only: 4, the sphere's rows reaching 6
-half-cells); its sweep takes 149 / 70 ms on 1 / 2 threads against 134 / 98 ms in slabs
-(slabs with the far patches set aside: 8 per phase), a 2-thread speed-up of 2.1 against 1.4. On
-the 16-core machine the slab order's sweep stopped at 63 ms from 4 threads on (1 thread:
-135 ms); the blocked order there is not measured yet. The sequential updates of the
-agglomerated patches take 5-7 ms per sweep at any thread count.
+half-cells); its phases take 148.4 / 68.4 ms on 1 / 2 threads against 154.0 / 90.6 ms in
+slabs, a 2-thread speed-up of 2.17 against 1.70. On the 16-core machine the slab order's sweep
+stopped at 63 ms from 4 threads on (1 thread: 135 ms; memory bandwidth 13 / 91 GB/s on 1 / 16
+threads); the blocked order there is not measured yet. The agglomerated patches' sequential
+updates take 5-8 ms per sweep at any thread count.
 Measured: 2026-11-28, commit d59c63a; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
-Run: python -m fbmbench smoother_threads --threads 1 2
+Run: python -m fbmbench smoother_threads --threads 1 2 --repeats 5
 
 The scene is built at ``level``, one time step taken, and the last linear system it solved (its
 Picard preconditioner where it has one) given two factored Vanka smoothers: one in today's order

@@ -2,9 +2,15 @@
 
 Question: how much faster is a time step of a 3D particle scene on more cores, and what did the
 blocked sweep order and the parallel mat-vec change?
-Answer: not measured yet: see benchmarks/results/thread_scaling.md when it has rows.
-Measured: 2026-11-28, commit 0000000; quoted in docs/validation/multigrid-with-fictitious-boundaries.md
-Run: python -m fbmbench thread_scaling --threads 1 2
+Answer: ten Cate level 1 on the 16-core machine (commit 152794f, the parallel mat-vec; the blocks
+did not yet reach level 1): 8.67 s per step at 16 threads against a1c18aa's 9.86 s, 12.93
+against 14.48 s at 2, 1.49x from 2 to 16 threads (before: 1.47x); on this 2-core machine the
+blocked order's step at 2 threads is 9.31 s against 9.56 s, three runs each in turn: no
+measurable change. The blocked order on 16 cores is not measured yet
+(benchmarks/device/threads.sh).
+Measured: 2026-11-28, commit dbea9d2; quoted in
+docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
+Run: python -m fbmbench thread_scaling --threads 2 --repeats 3 --baseline ../out/baseline/src
 
 Every row is one process, run one after the other: the scene is built at ``level``, ``warm`` steps
 are taken (the first step also builds the multigrid hierarchy's kernels from the Numba cache), and
