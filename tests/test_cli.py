@@ -34,6 +34,10 @@ def test_run_as_a_separate_process(tmp_path):
     assert summary["params"]["fluid"]["viscosity"] == 0.02
     assert summary["level"] == 1 and summary["n_cells"] == 8 * 2
     assert summary["linear_solver"] == "direct (SuperLU)"  # 2D and small: SuperLU, PARDISO or not
+    if sys.platform != "win32":  # the process's measured peak: above the interpreter's, below 8 GB
+        peak = summary["peak_memory_gb"] * 1e9
+        assert 5e7 < peak < 8e9
+        assert summary["bytes_per_unknown"] == pytest.approx(peak / summary["n_dofs"])
     q = summary["quantities"]
     assert q["max_velocity_error"] < 1e-10
     assert q["pressure_drop"] == pytest.approx(32 * 0.02, rel=1e-10)

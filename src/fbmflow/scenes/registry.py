@@ -16,6 +16,7 @@ from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
 from ..run import OutputError, RunFiles, claim, output_folder, read_run_info
 from ..simulation import Simulation
+from ..solvers.choice import peak_resident_memory
 from . import richardson
 from .base import Scene, SimulationScene
 from .cavity import Cavity2D
@@ -44,6 +45,16 @@ def get_scene(name: str) -> Scene:
     except KeyError:
         raise ParamError(f"unknown scene {name!r}; built-in scenes: {', '.join(SCENES)} "
                          "(or give a path to a .toml scene file)") from None
+
+
+def memory_figures(n_dofs: int) -> dict:
+    """``peak_memory_gb`` (the process's peak resident memory, interpreter and compiled kernels
+    included) and ``bytes_per_unknown`` (that over the finest level's unknowns) for a summary;
+    empty where the platform does not report the peak."""
+    peak = peak_resident_memory()
+    if peak is None:
+        return {}
+    return {"peak_memory_gb": peak / 1e9, "bytes_per_unknown": peak / max(n_dofs, 1)}
 
 
 def load_scene(spec: str, level: int | None = None, overrides: list[str] = ()):
@@ -134,7 +145,8 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
         summary = {"scene": scene.name, "fbmflow_version": __version__, "params": to_dict(params),
                    "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
                    "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
-                   "newton_iterations": result.newton_iterations, "quantities": finite(result.quantities)}
+                   "newton_iterations": result.newton_iterations, **memory_figures(result.n_dofs),
+                   "quantities": finite(result.quantities)}
         _save_summary(out, summary)
     if estimate_error:
         summary = _estimate_error(scene, params, level, out, progress, plot, summary)

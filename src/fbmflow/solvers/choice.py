@@ -21,6 +21,7 @@ fit (:class:`InsufficientMemory`, with the figure and a remedy) and warns above 
 from __future__ import annotations
 
 import logging
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -208,6 +209,18 @@ def available_memory(meminfo="/proc/meminfo") -> float | None:
         if left is not None:
             found.append(left)
     return min(found) if found else None
+
+
+def peak_resident_memory() -> float | None:
+    """The process's peak resident memory so far [bytes] (``ru_maxrss``: kilobytes on Linux,
+    bytes on macOS); None where the platform does not report it (Windows)."""
+    try:
+        import resource
+
+        peak = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    except (ImportError, OSError, ValueError):
+        return None
+    return peak if sys.platform == "darwin" else peak * 1024.0
 
 
 def address_space_left(status="/proc/self/status") -> float | None:
