@@ -135,7 +135,7 @@ class Simulation:
         self.coupling = make_coupling(coupling, solver.newton_rtol)
         responses = self.coupling.stored_responses(particles, tuple(symmetry))
         linear = solver.linear_solver(mesh.dim, n_unknowns, responses)
-        check_memory(n_unknowns, mesh.dim, linear, responses)
+        check_memory(n_unknowns, mesh.dim, linear, responses, transient=True)
         boundary = {t: NoSlip() for t in mesh.tags} if boundary is None else boundary
         #: the coupled flow and particles and their state
         self.system = CoupledSystem(mesh, particles, fluid, boundary=boundary, time_scheme=time.scheme,

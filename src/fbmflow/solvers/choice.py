@@ -161,9 +161,16 @@ class InsufficientMemory(ParamError):
 #: sedimentation-3d 32 707 unknowns PARDISO 1.22 GB, SuperLU 0.91 GB; glowinski-free-fall
 #: 17 106 / 52 818 / 164 946 unknowns PARDISO or SuperLU 0.33 / 0.55 / 1.30 GB, multigrid 0.81 GB
 #: at 164 946.
-MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (6_500, 165_000, 0.25),
+MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 165_000, 0.25),
                 (2, "multigrid"): (3_500, 165_000, 0.0), (3, "pardiso"): (40_000, 280_000, 0.15),
                 (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (6_500, 280_000, 0.0)}
+#: the same for the time steps of particle scenes where they need less (multigrid's Picard
+#: hierarchy: one velocity block per component instead of the coupled Newton one); fitted, with a
+#: margin of 12-27 %, to ten-cate levels 0 / 1 / 2 (64 547 / 278 739 / 2 012 403 unknowns, one
+#: step): 0.48 / 1.27 / 7.63 GB (``python -m fbmbench memory_model``,
+#: benchmarks/results/memory_model.md); level 3 (15.8 M unknowns) then estimates 80 GB where the
+#: steady model says 103 GB
+TRANSIENT_MODEL = {(3, "multigrid"): (4_300, 2_000_000, 0.08)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
 #: peak memory per unknown of each response the implicit coupling keeps [bytes]: about ten float64
@@ -175,20 +182,23 @@ ENGINE_NAMES = {"superlu": "the direct solver (SuperLU)", "pardiso": "the direct
                 "multigrid": "multigrid"}
 
 
-def estimate_memory(n_unknowns: int, dim: int, solver: LinearSolver | str) -> tuple[float, str]:
+def estimate_memory(n_unknowns: int, dim: int, solver: LinearSolver | str,
+                    transient: bool = False) -> tuple[float, str]:
     """Rough, conservative peak memory of a run: ``(bytes, the solver in words)``.
 
     ``solver``: a :class:`~fbmflow.solvers.base.LinearSolver`, an engine (``"superlu"``,
     ``"pardiso"``, ``"multigrid"``) or ``"direct"`` (the backend the direct solver would take
     here). The estimate is ``MEMORY_BASE + n c (n / n_ref)^e`` with ``(c, n_ref, e)`` from
-    :data:`MEMORY_MODEL`; it is meant to tell a run that fits from one that cannot, not to
-    predict the figure to better than a few tens of per cent.
+    :data:`TRANSIENT_MODEL` for the time steps of a particle scene (``transient``) where it has
+    the engine, else from :data:`MEMORY_MODEL`; it is meant to tell a run that fits from one that
+    cannot, not to predict the figure to better than a few tens of per cent.
     """
     if isinstance(solver, LinearSolver):
         engine = solver.engine(dim, n_unknowns)
     else:
         engine = direct.auto_backend(dim, n_unknowns) if solver == "direct" else solver
-    c, n_ref, growth = MEMORY_MODEL[(dim, engine)]
+    model = TRANSIENT_MODEL if transient and (dim, engine) in TRANSIENT_MODEL else MEMORY_MODEL
+    c, n_ref, growth = model[(dim, engine)]
     return MEMORY_BASE + n_unknowns * c * (n_unknowns / n_ref) ** growth, ENGINE_NAMES[engine]
 
 
@@ -261,14 +271,16 @@ def cgroup_left(root="/sys/fs/cgroup") -> float | None:
     return None
 
 
-def check_memory(n_unknowns: int, dim: int, solver: LinearSolver | str, responses: int = 0) -> float:
-    """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` plus the
+def check_memory(n_unknowns: int, dim: int, solver: LinearSolver | str, responses: int = 0,
+                 transient: bool = False) -> float:
+    """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` (``transient``:
+    a particle scene's time steps) plus the
     ``responses`` flow fields an implicit coupling keeps (:data:`RESPONSE_BYTES` per unknown
     each) exceeds the available memory, warn when it exceeds half of it; returns the estimate
     [bytes]. Called before the first solve, so that a run too large for the machine stops with
     the figure and a remedy instead of a MemoryError, or the kernel's out-of-memory killer, in the
     factorisation or the responses."""
-    need, words = estimate_memory(n_unknowns, dim, solver)
+    need, words = estimate_memory(n_unknowns, dim, solver, transient)
     have = available_memory()
     if have is None:
         return need
@@ -285,7 +297,7 @@ def check_memory(n_unknowns: int, dim: int, solver: LinearSolver | str, response
     if need > have:
         remedy = "a coarser mesh (a lower --level)"
         if words != "multigrid":
-            mg, _ = estimate_memory(n_unknowns, dim, "multigrid")
+            mg, _ = estimate_memory(n_unknowns, dim, "multigrid", transient)
             remedy += f" or solver.linear = multigrid (about {mg / 1e9:.1f} GB)"
         raise InsufficientMemory(f"{figure}, more than the {have / 1e9:.1f} GB available; use {remedy}")
     if need > 0.5 * have:
