@@ -6,12 +6,13 @@ far-reaching patches set aside, against the slab order it replaced, and what do 
 run on one thread cost?
 Answer: ten Cate level 1 (278 739 unknowns, 12 x 12 x 64 cells), on this 2-core machine: the
 blocked order gives 16 groups per phase (slabs only: 4, the sphere's rows reaching 6
-half-cells); its phases take 148.4 / 68.4 ms on 1 / 2 threads against 154.0 / 90.6 ms in
-slabs, a 2-thread speed-up of 2.17 against 1.70. On the 16-core machine the slab order's sweep
-stopped at 63 ms from 4 threads on (1 thread: 135 ms; memory bandwidth 13 / 91 GB/s on 1 / 16
-threads); the blocked order there is not measured yet. The agglomerated patches' sequential
-updates take 5-8 ms per sweep at any thread count.
-Measured: 2026-11-28, commit d59c63a; quoted in
+half-cells). Its phases took 148.4 / 68.4 ms on 1 / 2 threads against 154.0 / 90.6 ms in slabs
+in one run, and 138.4 / 99.4 against 173.4 / 96.9 ms in another: on 2 cores the difference is
+within the machine's noise. On the 16-core machine the slab order's sweep stopped at 63 ms from
+4 threads on (1 thread: 135 ms; memory bandwidth 13 / 91 GB/s on 1 / 16 threads); the blocked
+order there is not measured yet. The 86 agglomerated patches take 35 colours: 8.1 / 4.5 ms on
+1 / 2 threads, against 7.1 / 6.7 ms one by one.
+Measured: 2026-11-28, commits d59c63a and 3fd90f7; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
 Run: python -m fbmbench smoother_threads --threads 1 2 --repeats 5
 
@@ -21,7 +22,8 @@ Picard preconditioner where it has one) given two factored Vanka smoothers: one 
 furthest-reaching row (the order before blocks). For each thread count (one process,
 ``numba.set_num_threads``) each part of a sweep is timed, best of ``repeats``: the parallel phases,
 the far patches' sequential updates, the interface patches' extra sweep, the agglomerated
-patches' updates, and one product with the system (:meth:`SaddlePointSystem.apply`).
+patches' updates one by one (as before) and in colours (as now), and one product with the system
+(:meth:`SaddlePointSystem.apply`).
 
 writes benchmarks/results/smoother_threads.{json,md}: the rows of this run with the machine;
 ``--tag`` names the run (rows with other tags are kept).
@@ -53,8 +55,9 @@ def table(rows: list[dict]) -> str:
              "parallel sweep; `far`: patches updated one by one after the phases. Speed-up: over the "
              "same order's fewest threads in the same run.", "",
              "| tag | machine | scene | level | unknowns | order | groups | far | threads | phases | "
-             "far updates | interface | agglomerated | apply | speed-up of the phases |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "far updates | interface | agglomerated one by one | in colours (colours) | apply | "
+             "speed-up of the phases |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     fewest = {}
     for r in rows:
         key = (r["tag"], r["order"])
@@ -62,9 +65,10 @@ def table(rows: list[dict]) -> str:
             fewest[key] = r
     for r in rows:
         speedup = fewest[(r["tag"], r["order"])]["phases_ms"] / r["phases_ms"]
+        coloured = f"{r['merged_colours_ms']:.1f} ({r['colours']})" if "colours" in r else ""
         lines.append(f"| {r['tag']} | {r['machine']} | {r['scene']} | {r['level']} | {r['unknowns']} | "
                      f"{r['order']} | {r['groups']} | {r['far']} | {r['threads']} | {r['phases_ms']:.1f} | "
-                     f"{r['far_ms']:.1f} | {r['interface_ms']:.1f} | {r['merged_ms']:.1f} | "
+                     f"{r['far_ms']:.1f} | {r['interface_ms']:.1f} | {r['merged_ms']:.1f} | {coloured} | "
                      f"{r['apply_ms']:.1f} | {speedup:.2f} |")
     return "\n".join(lines) + "\n"
 
@@ -125,6 +129,9 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
                        far_ms=1e3 * _best(lambda: sm.update(far, b, x), repeats),
                        interface_ms=1e3 * _best(lambda: sm.sweep_phases(sm.interface_phases, b, x), repeats),
                        merged_ms=1e3 * _best(lambda: sm.update(sm.merged, b, x), repeats),
+                       merged_colours_ms=1e3 * _best(lambda: sm.sweep_phases(sm.merged_phases, b, x),
+                                                     repeats),
+                       colours=len(sm.merged_phases),
                        apply_ms=1e3 * _best(lambda: system.apply(x), repeats))
             rows.append(row)
             print(f"{order}, {k} threads: phases {row['phases_ms']:.1f} ms (groups {row['groups']}), far "

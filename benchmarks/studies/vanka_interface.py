@@ -56,12 +56,13 @@ def run(*, count: int = 500, level: int = 2, sweeps: int = 2) -> None:
     print(f"{system.n_u + system.n_p} unknowns, {smoother.ptr.size - 1} patches, "
           f"{smoother.interface.size} at the interface", flush=True)
     b = np.random.default_rng(0).standard_normal(system.n_u + system.n_p)
-    phases, merged = smoother.interface_phases, smoother.interface_merged
+    phases, merged = smoother.interface_phases, smoother.interface_merged_phases
+    one_group = [(np.array([0, smoother.interface.size]), smoother.interface)]  # one after the other
 
     def timed(order: str) -> tuple[float, float]:
         smoother.interface_sweeps = 0 if order == "none" else 2
         smoother.interface_phases = phases if order == "slab phases" else []
-        smoother.interface_merged = merged if order == "slab phases" else smoother.interface
+        smoother.interface_merged_phases = merged if order == "slab phases" else one_group
         best = np.inf
         for _ in range(3):
             x = np.zeros_like(b)

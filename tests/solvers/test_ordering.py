@@ -142,3 +142,64 @@ def test_unknown_reach_matches_numpy():
     assert reach.max() > 2 and np.median(reach) == 2
     near = ordering.near_patches(reach)
     assert (~near).sum() <= ordering.FAR_SHARE * reach.size and near[reach == 2].all()
+
+
+def test_greedy_colours_match_python():
+    """The kernel against the same greedy rule in Python, on a random symmetric graph: a proper
+    colouring (no edge within a colour), each vertex the smallest colour its earlier neighbours
+    leave."""
+    from fbmflow.solvers._kernels import greedy_colours
+    rng = np.random.default_rng(5)
+    G = sp.random(300, 300, density=0.03, format="csr", random_state=rng)
+    G = ((G + G.T) != 0).astype(float).tocsr()
+    G.setdiag(0.0)
+    G.eliminate_zeros()
+    colour = greedy_colours(G.indptr, G.indices)
+    expected = []
+    for i in range(300):
+        taken = {expected[j] for j in G.indices[G.indptr[i]:G.indptr[i + 1]] if j < i}
+        expected.append(min(set(range(len(taken) + 1)) - taken))
+    assert np.array_equal(colour, expected)
+    rows, cols = G.nonzero()
+    assert np.all(colour[rows] != colour[cols])
+
+
+def test_agglomerated_patches_of_a_colour_touch_nothing_of_each_other():
+    """The sharp boundary's agglomerated patches in colours: within a colour no patch writes an
+    unknown another reads, so a colour's updates give the same bits in either order; every patch
+    is in one colour, and the colours are fewer than the patches."""
+    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
+    from fbmflow.flow import NavierStokesProblem, NoSlip
+    from fbmflow.particles import Ball
+    from fbmflow.solvers.vanka import FactoredVankaSmoother, saddle_point_csr
+    mesh = StructuredMesh.box((24, 24))
+    centre, shapes = np.array([[0.513, 0.521]]), [Ball(0.3, 2)]
+    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
+
+    def ball(V, t):
+        owner = node_owner(V, centre, shapes)
+        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
+        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
+
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
+    x0, con = prob.zero_state(), prob.constraints()
+    system = prob.linear_system(x0, 100.0, 1.0, con)
+    system = system.preconditioner or system
+    smoother = FactoredVankaSmoother(system)
+    phases = smoother.merged_phases
+    coloured = np.concatenate([order for _, order in phases])
+    assert np.array_equal(np.sort(coloured), smoother.merged) and 1 < len(phases) < smoother.merged.size
+    ptr, idx, _ = saddle_point_csr(system, np.float64)
+    for _, order in phases:
+        writes = [smoother.dofs[smoother.ptr[k]:smoother.ptr[k + 1]] for k in order]
+        reads = [np.unique(np.concatenate([idx[ptr[q]:ptr[q + 1]] for q in w])) for w in writes]
+        for i in range(len(order)):
+            for j in range(len(order)):
+                assert i == j or not np.intersect1d(writes[j], reads[i]).size, (i, j)
+    b = np.random.default_rng(2).standard_normal(system.n_u + system.n_p)
+    out = []
+    for ordered in (phases, [(g, o[::-1].copy()) for g, o in phases]):
+        x = np.zeros_like(b)
+        smoother.sweep_phases(ordered, b, x)
+        out.append(x)
+    assert np.array_equal(out[0], out[1]) and np.any(out[0])

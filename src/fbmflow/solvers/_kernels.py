@@ -613,3 +613,23 @@ def row_reach(k_ptr, k_idx, points, periods, row_offset, col_offset, out):
                     diff = (diff + periods[a] // 2) % periods[a] - periods[a] // 2
                 reach = max(reach, abs(diff))
         out[q] = reach
+
+
+@njit
+def greedy_colours(indptr, indices):
+    """Colours of the vertices of the graph ``(indptr, indices)`` (CSR adjacency, symmetric, no
+    self-loops), greedily in vertex order: each vertex takes the smallest colour none of its
+    earlier neighbours has; (m,) int64."""
+    m = indptr.shape[0] - 1
+    colour = np.full(m, -1, dtype=np.int64)
+    mark = np.full(m + 1, -1, dtype=np.int64)
+    for i in range(m):
+        for j in range(indptr[i], indptr[i + 1]):
+            c = colour[indices[j]]
+            if c >= 0:
+                mark[c] = i
+        c = 0
+        while mark[c] == i:
+            c += 1
+        colour[i] = c
+    return colour

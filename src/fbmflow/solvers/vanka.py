@@ -243,10 +243,44 @@ class FactoredVankaSmoother:
         # the cell patches among them in slab phases too (patch k < cells.size is cell cells[k]);
         # the agglomerated ones, which may reach across slabs, one after the other
         plain_interface = self.interface[self.interface < cells.size]
+        #: the agglomerated patches in colours that touch nothing of each other (one parallel
+        #: phase each), all of them and those at the fictitious boundaries
+        self.merged_phases = self._colour_phases(system, self.merged)
+        self.interface_merged_phases = self._colour_phases(system,
+                                                           self.interface[self.interface >= cells.size])
         interface_reach = int(reach[plain_interface].max(initial=0))
         self.interface_phases = [(gptr, plain_interface[order]) for gptr, order in ordering.slab_phases(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
-        self.interface_merged = self.interface[self.interface >= cells.size]
+
+    def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray) -> list:
+        """``patches`` (m,) int64 in colours: two patches of one colour never touch an unknown the
+        other reads (its rows' columns) or writes (:func:`~fbmflow.solvers._kernels.greedy_colours`
+        on that conflict graph, in patch order), so that one colour's patches may be updated at the
+        same time, each its own group. Phases as :func:`~fbmflow.solvers.ordering.slab_phases`'s,
+        colour by colour."""
+        if patches.size == 0:
+            return []
+        n_u = system.n_u
+        sizes = self.ptr[patches + 1] - self.ptr[patches]
+        start = np.repeat(self.ptr[patches] - np.concatenate([[0], np.cumsum(sizes)[:-1]]), sizes)
+        dofs = self.dofs[start + np.arange(sizes.sum())]
+        P = sp.csr_matrix((np.ones(dofs.size), (np.repeat(np.arange(patches.size), sizes), dofs)),
+                          shape=(patches.size, n_u + system.n_p))
+        Pu, Pp = P[:, :n_u], P[:, n_u:]
+        reads_u = Pu @ abs(sp.csr_matrix(system.A)) + Pp @ abs(system.BT)
+        reads_p = Pu @ abs(system.gradient)
+        if system.pressure_block is not None:
+            reads_p = reads_p + Pp @ abs(system.pressure_block)
+        touch = sp.hstack([reads_u, reads_p]).tocsr() @ P.T  # patch i reads what patch j writes
+        touch = (touch + touch.T).tocsr()
+        touch.setdiag(0.0)
+        touch.eliminate_zeros()
+        colour = _kernels.greedy_colours(touch.indptr, touch.indices)
+        phases = []
+        for c in range(int(colour.max()) + 1):
+            chosen = patches[colour == c]
+            phases.append((np.arange(chosen.size + 1, dtype=np.int64), chosen.astype(np.int64)))
+        return phases
 
     @property
     def _patches(self) -> tuple:
@@ -286,8 +320,8 @@ class FactoredVankaSmoother:
                 self.update(far, b, x)
             for _ in range(self.interface_sweeps):
                 self.sweep_phases(self.interface_phases, b, x)
-                self.update(self.interface_merged, b, x)
-            self.update(self.merged, b, x)
+                self.sweep_phases(self.interface_merged_phases, b, x)
+            self.sweep_phases(self.merged_phases, b, x)
 
     def sweep_phases(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
         """The patches of ``phases`` (:func:`~fbmflow.solvers.ordering.slab_phases`), each phase's
