@@ -12,7 +12,7 @@ within the machine's noise. On the 16-core machine the slab order's sweep stoppe
 4 threads on (1 thread: 135 ms; memory bandwidth 13 / 91 GB/s on 1 / 16 threads); the blocked
 order there is not measured yet. The 86 agglomerated patches take 35 colours: 8.1 / 4.5 ms on
 1 / 2 threads, against 7.1 / 6.7 ms one by one.
-Measured: 2026-11-28, commits d59c63a and 3fd90f7; quoted in
+Measured: 2026-11-28, commit 3fd90f7 (and d59c63a); quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
 Run: python -m fbmbench smoother_threads --threads 1 2 --repeats 5
 
