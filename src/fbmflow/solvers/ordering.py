@@ -46,8 +46,9 @@ BLOCK_CELLS = 4096
 MIN_GROUPS = 32
 #: a block holds at least this many cell layers along the axes after the first
 MIN_BLOCK_LAYERS = 3
-#: at most this share of the patches are left out of the phases for the reach of their rows
-FAR_SHARE = 0.1
+#: at most this share of the patches are left out of the phases for the reach of their rows (they
+#: are updated one after the other: a larger share would cap what threads can gain)
+FAR_SHARE = 0.02
 
 
 def slab_axis(shape: tuple[int, ...]) -> int:
