@@ -130,8 +130,8 @@ def unknown_reach(system) -> np.ndarray:
 
 
 def near_patches(reach: np.ndarray) -> np.ndarray:
-    """Which patches the parallel phases sweep, from every patch's reach (the largest
-    :func:`unknown_reach` of its unknowns), (m,) int64: those whose reach is at most the smallest
+    """Which patches the parallel phases sweep, from every patch's reach ``(m,)`` int64 (the largest
+    :func:`unknown_reach` of its unknowns): those whose reach is at most the smallest
     one that leaves out no more than :data:`FAR_SHARE` of them. The others, whose rows reach far
     (a few cells at a particle's sharp boundary), would widen the gap between every pair of slabs
     (ten Cate level 1: reach 6 half-cells instead of 2, so 4 slabs per phase instead of 8); they
