@@ -105,15 +105,13 @@ def test_matvec_matches_scipy(n):
     assert np.array_equal(matvec(M.tocsc(), x), M.tocsc() @ x)
 
 
-def test_unknown_reach_matches_numpy():
-    """The reach of every row against the same from the COO entries of the blocks: a periodic
-    mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
-    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them."""
+def _sharp_ball_system(mesh, centre, radius):
+    """The Picard system of a backward-Euler step (dt 0.01) in ``mesh`` (no-slip walls) with a
+    sharp-boundary disk of ``radius`` at ``centre`` moving down at 1."""
     from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
     from fbmflow.flow import NavierStokesProblem, NoSlip
     from fbmflow.particles import Ball
-    mesh = StructuredMesh.box((12, 10), periodic=(True, False))
-    centre, shapes = np.array([[0.51, 0.47]]), [Ball(0.2, 2)]
+    centre, shapes = np.array([centre]), [Ball(radius, 2)]
     vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
 
     def ball(V, t):
@@ -124,7 +122,15 @@ def test_unknown_reach_matches_numpy():
     prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
     x, con = prob.zero_state(), prob.constraints()
     system = prob.linear_system(x, 100.0, 1.0, con)
-    system = system.preconditioner or system
+    return system.preconditioner or system
+
+
+def test_unknown_reach_matches_numpy():
+    """The reach of every row against the same from the COO entries of the blocks: a periodic
+    mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
+    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them."""
+    mesh = StructuredMesh.box((12, 10), periodic=(True, False))
+    system = _sharp_ball_system(mesh, [0.51, 0.47], 0.2)
     reach = ordering.unknown_reach(system)
     points = ordering.lattice_points(system.space)
     periods = np.array([2 * mesh.shape[0], 0])
@@ -168,23 +174,8 @@ def test_agglomerated_patches_of_a_colour_touch_nothing_of_each_other():
     """The sharp boundary's agglomerated patches in colours: within a colour no patch writes an
     unknown another reads, so a colour's updates give the same bits in either order; every patch
     is in one colour, and the colours are fewer than the patches."""
-    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
-    from fbmflow.flow import NavierStokesProblem, NoSlip
-    from fbmflow.particles import Ball
     from fbmflow.solvers.vanka import FactoredVankaSmoother, saddle_point_csr
-    mesh = StructuredMesh.box((24, 24))
-    centre, shapes = np.array([[0.513, 0.521]]), [Ball(0.3, 2)]
-    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
-
-    def ball(V, t):
-        owner = node_owner(V, centre, shapes)
-        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
-        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
-
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
-    x0, con = prob.zero_state(), prob.constraints()
-    system = prob.linear_system(x0, 100.0, 1.0, con)
-    system = system.preconditioner or system
+    system = _sharp_ball_system(StructuredMesh.box((24, 24)), [0.513, 0.521], 0.3)
     smoother = FactoredVankaSmoother(system)
     phases = smoother.merged_phases
     coloured = np.concatenate([order for _, order in phases])
