@@ -9,7 +9,6 @@ import pytest
 
 from fbmflow.adaptive import StepControl
 from fbmflow.cli import main
-from fbmflow.coupling.settings import CouplingParams
 from fbmflow.params import TimeParams
 from fbmflow.particles import Ball, Particles
 from fbmflow.solvers import ConvergenceError
@@ -133,11 +132,8 @@ def test_a_restored_controller_takes_the_same_steps():
         StepControl(_time(1e-3), again.particles).set_state({"step_count": 3})
 
 
-def test_adaptive_steps_are_refused_with_contact_without_free_particles_and_without_particles(capsys, caplog):
+def test_adaptive_steps_are_refused_with_contact_without_free_particles_and_without_particles(capsys):
     p = Particles.at_rest([Ball(0.05, dim=2)], 2.0, [[0.5, 5.0]])
-    StepControl(TimeParams(dt=0.01, adaptive=True, scheme="crank-nicolson"), p,
-                coupling=CouplingParams(integrator="trapezoidal"))
-    assert "does not converge as time.tolerance tightens" in caplog.text  # (warned, not refused)
     with pytest.raises(ValueError, match="contact impulses"):
         StepControl(_time(1e-3), p, contact=True)
     p.fixed[:] = True
@@ -148,7 +144,7 @@ def test_adaptive_steps_are_refused_with_contact_without_free_particles_and_with
     assert "time.adaptive = false" in capsys.readouterr().err
 
 
-def _disk(adaptive=True):
+def _disk(adaptive=True, force="auto"):
     import fbmflow as fb
 
     mesh = fb.StructuredMesh.box((8, 24), upper=(2.0, 6.0))
@@ -156,7 +152,32 @@ def _disk(adaptive=True):
     return fb.Simulation(mesh, disk, fb.FluidParams(density=1.0, viscosity=0.1, gravity=980.0),
                          time=fb.TimeParams(dt=0.005, t_end=0.1, scheme="crank-nicolson", adaptive=adaptive,
                                             tolerance=2e-3),
-                         coupling=fb.CouplingParams(integrator="trapezoidal"))
+                         coupling=fb.CouplingParams(integrator="trapezoidal"),
+                         fbm=fb.FictitiousBoundaryParams(force=force))
+
+
+def test_with_varying_steps_the_trapezoidal_rule_takes_each_steps_own_pressure_force(caplog):
+    """Adaptive steps with Crank–Nicolson: the new velocity is ``v + dt/2 (a_visc^n + a_visc^{n+1})
+    + dt a_p^{n+1}`` (the midpoint rule for the step's pressure), not the mean of two steps'
+    pressure forces; fixed steps keep that mean. A force that cannot separate the pressure warns."""
+    fixed, sim = _disk(adaptive=False), _disk()
+    assert sim.system.midpoint_pressure and not fixed.system.midpoint_pressure
+    sim.step(0.004)
+    system, dt = sim.system, 0.006
+    p = system.particles
+    solved = sim.coupling.advance(system, dt)
+    new = system.integrate(solved.force, solved.torque, dt, x=solved.x)
+    pressure = system.pressure_forces(solved.x, dt)[0]
+    viscous = 0.5 * (system.last_force - system.last_pressure[0] + solved.force - pressure)
+    weight = (1.0 - 1.0 / 1.25) * system.gravity
+    expected = p.velocity + dt * ((viscous + pressure) / p.mass[:, None] + weight)
+    assert np.allclose(new.velocity, expected, rtol=1e-12, atol=1e-12)
+    mean = p.velocity + dt * (0.5 * (system.last_force + solved.force) / p.mass[:, None] + weight)
+    assert not np.allclose(new.velocity, mean, rtol=1e-6)  # the pairing made a difference
+    with pytest.raises(ValueError, match="needs the step's flow"):
+        system.integrate(solved.force, solved.torque, dt)
+    assert not _disk(force="test-function").system.midpoint_pressure
+    assert "does not separate the pressure" in caplog.text
 
 
 def test_an_adaptive_simulation_resumes_bit_exactly(tmp_path):

@@ -25,13 +25,16 @@ from __future__ import annotations
 import time
 from typing import Literal
 
+import numpy as np
 from fbmbench.common import RESULTS, load_rows, merge_row, provenance, write_text
 
 from fbmflow.config import from_dict
 from fbmflow.scenes.registry import load_scene
 
-SCHEMES = (("crank-nicolson", "trapezoidal"), ("crank-nicolson", "semi-implicit-euler"),
-           ("backward-euler", "trapezoidal"))
+SCHEMES = (("crank-nicolson", "trapezoidal"), ("crank-nicolson", "semi-implicit-euler"))
+#: how the trapezoidal integrator pairs the pressure forces: the mean of two steps' (constant
+#: steps) or the step's own (the midpoint rule, which adaptive runs take)
+PAIRINGS = ("two-step mean", "midpoint")
 PATTERNS = {"constant": lambda k: 0.001, "alternating": lambda k: 0.0005 if k % 2 == 0 else 0.0015,
             "blocks": lambda k: 0.0005 if (k // 10) % 2 == 0 else 0.0015}
 
@@ -41,17 +44,31 @@ def _scene(settings: dict):
     return scene, from_dict(type(defaults), settings)
 
 
-def variable(scheme: str, integrator: str, pattern: str, t_end: float = 0.4) -> dict:
-    """The peak settling velocity to ``t_end`` with steps of ``pattern``."""
-    scene, params = _scene({"time": {"dt": 0.001, "scheme": scheme}, "coupling": {"integrator": integrator}})
-    sim = scene.build(params, 1).sim
-    t0, k, peak = time.perf_counter(), 0, 0.0
+def variable(scheme: str, integrator: str, pattern: str, pairing: str = "two-step mean", level: int = 2,
+             t_end: float = 0.25) -> dict:
+    """The settling velocity to ``t_end`` with steps of ``pattern`` (its curve, the peak and the
+    end value); ``pairing`` "midpoint": a simulation made for adaptive steps (the trapezoidal
+    integrator then takes each step's own pressure force), stepped by the pattern."""
+    time_settings = {"dt": 0.001, "scheme": scheme, "adaptive": pairing == "midpoint"}
+    scene, params = _scene({"time": time_settings, "coupling": {"integrator": integrator}})
+    sim = scene.build(params, level).sim
+    t0, k, curve = time.perf_counter(), 0, []
     while sim.t < t_end - 1e-12:
         sim.step(PATTERNS[pattern](k))
         k += 1
-        peak = max(peak, -float(sim.particles.velocity[0, -1]))
-    return dict(part="variable", scheme=scheme, integrator=integrator, pattern=pattern, t_end=t_end, steps=k,
-                u_max=peak, wall_s=time.perf_counter() - t0, **provenance())
+        curve.append((sim.t, -float(sim.particles.velocity[0, -1])))
+    t, v = np.array(curve).T
+    return dict(part="variable", scheme=scheme, integrator=integrator, pairing=pairing, pattern=pattern,
+                level=level, t_end=t_end, steps=k, u_max=float(v.max()), u_end=float(v[-1]), t=t.tolist(),
+                settling_velocity=v.tolist(), wall_s=time.perf_counter() - t0, **provenance())
+
+
+def curve_change(row: dict, base: dict, after: float = 0.05) -> float:
+    """Largest relative change of ``row``'s settling velocity from ``base``'s over ``base``'s
+    times after ``after`` seconds (``row`` interpolated linearly)."""
+    t, v = np.array(base["t"]), np.array(base["settling_velocity"])
+    keep = t > after
+    return float(np.max(np.abs(np.interp(t[keep], row["t"], row["settling_velocity"]) / v[keep] - 1.0)))
 
 
 def tolerance(value: float) -> dict:
@@ -70,7 +87,7 @@ def tolerance(value: float) -> dict:
 
 
 def run(*, part: Literal["variable", "tolerance"] = "variable", tolerances: list[float] = (1e-2, 1e-3, 3e-4),
-        fixed: list[float] = (0.002, 0.001)) -> None:
+        fixed: list[float] = (0.002, 0.001), level: int = 2) -> None:
     """One part of the study; one row per run.
 
     Parameters
@@ -78,14 +95,18 @@ def run(*, part: Literal["variable", "tolerance"] = "variable", tolerances: list
     part : variable (steps that change) or tolerance (adaptive runs against fixed steps)
     tolerances : time.tolerance values of the adaptive runs
     fixed : the fixed steps [s] to compare with
+    level : the mesh level of the variable part (the tolerance part runs at level 1)
     """
     if part == "variable":
-        for scheme, integrator in SCHEMES:
+        runs = [(scheme, integrator, pairing) for scheme, integrator in SCHEMES
+                for pairing in (PAIRINGS if integrator == "trapezoidal" else PAIRINGS[:1])]
+        for scheme, integrator, pairing in runs:
             for pattern in PATTERNS:
-                row = variable(scheme, integrator, pattern)
-                print(f"{scheme} + {integrator}, {pattern}: u_max {row['u_max']:.5f}", flush=True)
-                merge_row("adaptive_steps", row, lambda r, s: all(
-                    r.get(k) == s.get(k) for k in ("part", "scheme", "integrator", "pattern")))
+                row = variable(scheme, integrator, pattern, pairing, level)
+                print(f"{scheme} + {integrator} ({pairing}), {pattern}: u_max {row['u_max']:.5f}, "
+                      f"{row['wall_s']:.0f} s", flush=True)
+                merge_row("adaptive_steps", row, lambda r, s: r["part"] == s["part"] and r.get("pattern") ==
+                          s.get("pattern") and _variable_key(r) == _variable_key(s))
     else:
         for value in list(tolerances) + [-dt for dt in fixed]:
             row = tolerance(value)
@@ -96,25 +117,43 @@ def run(*, part: Literal["variable", "tolerance"] = "variable", tolerances: list
     write(load_rows("adaptive_steps"))
 
 
+def _variable_key(r: dict) -> tuple:
+    return r.get("level", 1), r["scheme"], r["integrator"], r.get("pairing", "two-step mean")
+
+
 def write(rows: list[dict]) -> None:
     lines = ["# Adaptive time steps on Glowinski's settling disk (adaptive_steps)", "",
-             "Level 1 (2 cells per diameter across the disk's path), the scene's defaults otherwise. Wall "
-             "time on the 2-core machine, other jobs beside some runs (upper bounds). Reproduce: `python -m "
-             "fbmbench adaptive_steps --part variable` / `--part tolerance`.", "",
-             "## Steps that vary: peak settling velocity to t = 0.4 s", "",
-             "| time scheme | particle integrator | step pattern | u_max cm/s | vs constant 1 ms "
-             "| measured |",
-             "|---|---|---|---|---|---|"]
-    variable_rows = [r for r in rows if r["part"] == "variable"]
+             "The scene's defaults but the steps (level 1: 2 cells per diameter across the disk's path, "
+             "level 2, the default: 4). Wall time on the 2-core machine, other jobs beside some runs (upper "
+             "bounds). Reproduce: `python -m fbmbench adaptive_steps --part variable [--level L]` / `--part "
+             "tolerance`.", "",
+             "## Steps that vary: the settling velocity", "",
+             "Steps of 1 ms ('constant'), of 0.5 and 1.5 ms in turn ('alternating') and ten 0.5 ms then ten "
+             "1.5 ms steps in turn ('blocks'), the same mean. Pressure pairing of the trapezoidal "
+             "integrator: the mean of two steps' pressure forces (fixed steps) or the step's own (the "
+             "midpoint rule, which adaptive runs take). 'curve': the largest change of the settling "
+             "velocity from the constant steps' after t = 0.05 s.", "",
+             "| level | time scheme | particle integrator | pressure pairing | step pattern | to t s "
+             "| u_max cm/s | vs constant | u at the end | vs constant | curve | measured |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    variable_rows = sorted((r for r in rows if r["part"] == "variable"), key=_variable_key)
     for r in variable_rows:
-        base = [b for b in variable_rows if (b["scheme"], b["integrator"], b["pattern"])
-                == (r["scheme"], r["integrator"], "constant")]
-        change = f"{100 * (r['u_max'] / base[0]['u_max'] - 1):+.2f} %" if base else ""
-        lines.append(f"| {r['scheme']} | {r['integrator']} | {r['pattern']} | {r['u_max']:.4f} | {change} | "
-                     f"{r['date']} {r['commit']} |")
+        base = [b for b in variable_rows
+                if _variable_key(b) == _variable_key(r) and b["pattern"] == "constant"]
+        b = base[0] if base else None
+        change = f"{100 * (r['u_max'] / b['u_max'] - 1):+.2f} %" if b else ""
+        end, end_change, curve = "", "", ""
+        if "u_end" in r:
+            end = f"{r['u_end']:.4f}"
+            end_change = f"{100 * (r['u_end'] / b['u_end'] - 1):+.2f} %" if b else ""
+            curve = f"{100 * curve_change(r, b):.2f} %" if b else ""
+        lines.append(f"| {r.get('level', 1)} | {r['scheme']} | {r['integrator']} | "
+                     f"{r.get('pairing', 'two-step mean') if r['integrator'] == 'trapezoidal' else ''} | "
+                     f"{r['pattern']} | {r['t_end']:g} | {r['u_max']:.4f} | {change} | {end} | "
+                     f"{end_change} | {curve} | {r['date']} {r['commit']} |")
     lines += ["", "## Adaptive against fixed steps, to the scene's end", "",
-              "| stepping | tolerance | dt s (mean; range) | accepted | rejected | Courant | u_max cm/s | wall s "
-              "| measured |", "|---|---|---|---|---|---|---|---|---|"]
+              "| stepping | tolerance | dt s (mean; range) | accepted | rejected | Courant | u_max cm/s "
+              "| wall s | measured |", "|---|---|---|---|---|---|---|---|---|"]
     tolerance_rows = [r for r in rows if r["part"] == "tolerance"]
     for r in sorted(tolerance_rows, key=lambda r: (r["tolerance"] is None, -(r["tolerance"] or 0))):
         if r["tolerance"] is None:

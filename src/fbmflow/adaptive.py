@@ -25,13 +25,9 @@ the counts) travels in the simulation's checkpoints, so that a resumed run takes
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from .solvers import ConvergenceError
-
-log = logging.getLogger(__name__)
 
 #: the step may grow at most this factor per step (the coupled scheme with Crank–Nicolson is
 #: not consistent under steps that jump: docs/validation/converged-answers.md), and shrink at most
@@ -58,10 +54,6 @@ class StepControl:
         The run's particles (at least one free).
     contact : bool
         Whether the run has hard contact (refused: its impulses are no smooth motion).
-    coupling : CouplingParams, optional
-        Its particle ``integrator``: ``trapezoidal`` with Crank–Nicolson gets a warning: that pair is
-        not consistent under steps that vary (the peak of Glowinski's disk does not converge as the
-        tolerance tightens; docs/validation/converged-answers.md, "Adaptive time steps").
 
     Raises
     ------
@@ -80,16 +72,11 @@ class StepControl:
         The smallest and largest accepted step [s] (0 before the first).
     """
 
-    def __init__(self, time, particles, contact: bool = False, coupling=None):
+    def __init__(self, time, particles, contact: bool = False):
         if contact or particles.fixed.all():
             raise ValueError("time.adaptive estimates the error from the free particles' smooth motion: "
                              + ("contact impulses break it; turn hard contact off" if contact
                                 else "there is no free particle") + " or set time.adaptive = false")
-        if getattr(coupling, "integrator", None) == "trapezoidal" and time.scheme == "crank-nicolson":
-            log.warning("time.adaptive with Crank-Nicolson and the trapezoidal integrator: steps that vary "
-                        "bias the particles' velocities (up to 4 %% where steps alternate), so the answer "
-                        "does not converge as time.tolerance tightens; set coupling.integrator = "
-                        "semi-implicit-euler or keep fixed steps (docs/validation/converged-answers.md)")
         self.dt0, self.t_end = float(time.dt), float(time.t_end)
         self.tolerance, self.max_courant = time.tolerance, time.max_courant
         self.dt, self.last_dt, self.rejected = self.dt0, 0.0, 0

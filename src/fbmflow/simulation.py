@@ -127,7 +127,7 @@ class Simulation:
                              "'semi-implicit-euler' or turn contact off")
         self.time = time
         #: the adaptive step's controller (None: steps of :attr:`dt`)
-        self.control = StepControl(time, particles, bool(contact), coupling) if time.adaptive else None
+        self.control = StepControl(time, particles, bool(contact)) if time.adaptive else None
         n_unknowns = FlowSpace.estimate_dofs(mesh)
         if coupling.scheme == "auto":
             coupling = dataclasses.replace(coupling, scheme=auto_coupling(n_unknowns, particles, symmetry))
@@ -141,7 +141,8 @@ class Simulation:
         self.system = CoupledSystem(mesh, particles, fluid, boundary=boundary, time_scheme=time.scheme,
                                     integrator=coupling.integrator, fbm=fbm, contact=contact,
                                     repulsion=repulsion, symmetry=symmetry, frozen=frozen,
-                                    linear_solver=linear, newton=solver.newton_settings())
+                                    linear_solver=linear, newton=solver.newton_settings(),
+                                    varying_steps=time.adaptive)
 
     # -- the state ------------------------------------------------------------------------------
     @property
@@ -283,7 +284,7 @@ class Simulation:
         work = dataclasses.replace(self.flow.linear_work)
         try:
             solved = self.coupling.advance(system, dt)
-            shift = system.commit(solved, system.integrate(solved.force, solved.torque, dt), dt)
+            shift = system.commit(solved, system.integrate(solved.force, solved.torque, dt, x=solved.x), dt)
         except ConvergenceError as err:
             raise err.with_remedy(self._remedy(), f"{where}: ") from None
         self.coupling.accept(solved)

@@ -72,7 +72,8 @@ class CoupledProblem(Protocol):
 
     def flow_and_forces(self, dt: float, velocities=None, guess=None, rtol=None, linear_rtol=None): ...
 
-    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True): ...
+    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True,
+                  x: np.ndarray | None = None): ...
 
     def velocity_gain(self, dt: float) -> np.ndarray: ...
 
@@ -183,7 +184,7 @@ class StabilisedCoupling(CouplingScheme):
         if p.fixed.all():
             return CoupledFlow(x, reports, force, torque)
         v = pack_velocities(p)
-        new = system.integrate(force, torque, dt, contact=False)
+        new = system.integrate(force, torque, dt, contact=False, x=x)
         gain = system.velocity_gain(dt)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)
@@ -273,7 +274,7 @@ class NewtonKrylovCoupling(StabilisedCoupling):
             both = free[row[on], :d, None] & free[row[on], None, :d]
             S[row[on], :d, :d] += np.where(both, blocks.data[on], 0.0)
             push = (K @ v[:, :d].ravel()).reshape(p.n, d)
-        new = system.integrate(force + push, torque, dt, contact=False)
+        new = system.integrate(force + push, torque, dt, contact=False, x=x)
         own_gs = np.einsum("nab,nbc->nac", gain, S)
         own = np.linalg.inv(np.eye(r) - own_gs)   # (n, r, r)
         last = {}
@@ -414,7 +415,7 @@ class ImplicitCoupling(CouplingScheme):
         loose = self.first_rtol is not None and not p.fixed.all()
         x, reports, force, torque = system.flow_and_forces(dt, rtol=self.first_rtol if loose else None)
         exact = not loose
-        new = system.integrate(force, torque, dt, contact=False)
+        new = system.integrate(force, torque, dt, contact=False, x=x)
         gain = system.velocity_gain(dt)
         r = gain.shape[1]
         free = np.zeros((p.n, r), dtype=bool)  # the iterated components: movable, on the planes
@@ -458,7 +459,7 @@ class ImplicitCoupling(CouplingScheme):
             unpack_velocities(guess, v_guess)
             x, reports, force, torque = system.flow_and_forces(dt, velocities=guess, guess=x + step @ dX)
             all_reports += reports
-            new = system.integrate(force, torque, dt, contact=False)
+            new = system.integrate(force, torque, dt, contact=False, x=x)
         raise ConvergenceError(f"fluid-particle coupling did not converge in {self.max_subiterations} "
                                f"sub-iterations (last step {np.linalg.norm(step) / scale:.1e})")
 

@@ -156,6 +156,8 @@ class CoupledSystem:
     symmetry : tuple of int, normal axes of mirror planes through every particle centre
     frozen : bool, hold the particles' positions and orientations
     linear_solver : LinearSolver, newton : NewtonSettings, the flow's solvers
+    varying_steps : bool, the steps change from one to the next (adaptive steps): the
+        trapezoidal integrator then takes each step's own pressure force (:attr:`midpoint_pressure`)
 
     See :class:`~fbmflow.simulation.Simulation` for what each does; ValueError for a set-up that
     cannot run (placement, mirror planes, a boundary or force the shapes do not support).
@@ -164,7 +166,7 @@ class CoupledSystem:
     def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict, time_scheme: str,
                  integrator: str, fbm: FictitiousBoundaryParams, contact: ContactParams | None,
                  repulsion: RepulsionParams | None, symmetry: tuple, frozen: bool,
-                 linear_solver: LinearSolver, newton: NewtonSettings):
+                 linear_solver: LinearSolver, newton: NewtonSettings, varying_steps: bool = False):
         sharp = fbm.boundary == "sharp"
         if sharp and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
@@ -188,6 +190,21 @@ class CoupledSystem:
         self.repulsion = None if repulsion is None else repulsion.make(mesh, faces)
         self.time_scheme = time_scheme
         self._pressure_lag = pressure_lag(time_scheme)
+        #: the trapezoidal integrator pairs the step's own pressure force with the mean of the
+        #: viscous forces at the step's start and end (the midpoint rule for the pressure, a
+        #: multiplier of the whole step under Crank–Nicolson) instead of the mean of two steps'
+        #: pressure forces, which stands for the step only when the two steps are equal (steps
+        #: alternating 0.5 / 1.5 ms raise Glowinski's settling velocity by 2-3 % at level 2;
+        #: docs/validation/converged-answers.md, "Adaptive time steps"). With varying steps
+        #: only: with constant ones the two-step mean is as consistent and smoother.
+        self.midpoint_pressure = varying_steps and integrator == "trapezoidal" and self._pressure_lag > 0
+        if self.midpoint_pressure and not self.estimator.lags_pressure:
+            self.midpoint_pressure = False
+            log.warning("force %r does not separate the pressure's part: with steps that vary, %s and the "
+                        "trapezoidal integrator bias the particles' velocities (up to 3 %% where steps "
+                        "alternate); use fbm.force = 'volume' or 'surface', or coupling.integrator = "
+                        "'semi-implicit-euler' (docs/validation/converged-answers.md)",
+                        self.estimator.name, time_scheme)
         self.particles = particles.copy()
         self.particles.position = wrap(mesh, self.particles.position)
         self._geometry: ParticleGeometry | None = None
@@ -204,6 +221,8 @@ class CoupledSystem:
         # the first: unknown, the fluid's reaction to the first acceleration is not zero)
         self.last_force: np.ndarray | None = None
         self.last_torque: np.ndarray | None = None
+        #: (force (n, dim), torque (n, 3)): the pressure's part of them (:attr:`midpoint_pressure`)
+        self.last_pressure: tuple | None = None
         self.contact_report = None  # what contact did in the last integration with it
         fixed = self.flow.fine.boundary_constraints.dofs  # velocity nodes the walls hold wholly
         space = self.flow.space
@@ -249,14 +268,28 @@ class CoupledSystem:
         force, torque = self.forces(x, dt)
         return x, reports, force, torque
 
-    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True) -> Particles:
+    def integrate(self, force: np.ndarray, torque: np.ndarray, dt: float, contact: bool = True,
+                  x: np.ndarray | None = None) -> Particles:
         """New particle state under the hydrodynamic ``force (n, dim)`` and ``torque (n, 3)``, the
         push of the periodic drive's pressure gradient on their volume (:attr:`drive`), the
         repulsive forces (at the positions of the start of the step) and, with hard contact
-        (unless ``contact`` is False), the contact impulses; the state itself is not changed."""
+        (unless ``contact`` is False), the contact impulses; the state itself is not changed.
+
+        ``x``: the step's flow, whose pressure force replaces the last step's in the trapezoidal
+        rule's start forces with :attr:`midpoint_pressure` (required then)::
+
+            v^{n+1} = v^n + dt / 2 (a(F^n - F_p^n + F_p^{n+1}) + a(F^{n+1}))
+                    = v^n + dt / 2 (a_visc^n + a_visc^{n+1}) + dt a_p^{n+1}
+        """
         previous = None  # the trapezoidal rule's forces at the start of the step (None: no history)
         if self.last_force is not None:
             previous = self.last_force, self.last_torque
+            if self.midpoint_pressure:
+                if x is None:
+                    raise ValueError("the midpoint rule for the pressure needs the step's flow x")
+                force_p, torque_p = self.pressure_forces(x, dt)
+                previous = (previous[0] - self.last_pressure[0] + force_p,
+                            previous[1] - self.last_pressure[1] + torque_p)
         extra = np.zeros_like(force)
         if np.any(self.drive):  # the mean pressure gradient's push on the particles' volume
             extra += np.where(self.particles.fixed[:, None], 0.0, self.particles.volume[:, None] * self.drive)
@@ -284,7 +317,9 @@ class CoupledSystem:
     def velocity_gain(self, dt: float) -> np.ndarray:
         """``d v_new / d f`` of :meth:`integrate` over ``dt``
         (:func:`~fbmflow.particles.dynamics.velocity_gain`),
-        (n, r, r) float64."""
+        (n, r, r) float64. With :attr:`midpoint_pressure` the pressure's part of ``f`` gains twice
+        this; the coupling schemes' Jacobians take this gain for the whole force (the implicit
+        scheme's Broyden update corrects it)."""
         return velocity_gain(self.particles, dt, self.integrator, history=self.last_force is not None)
 
     def rigid_responses(self, x: np.ndarray, free: np.ndarray, dt: float, motions: np.ndarray | None = None,
@@ -363,6 +398,15 @@ class CoupledSystem:
             force, torque = force + force_p, torque + torque_p
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
+    def pressure_forces(self, x: np.ndarray, dt: float):
+        """The pressure's part of :meth:`forces` ``(x, dt)``: force (n, dim) and torque (n, 3);
+        estimators that separate it (``lags_pressure``) only."""
+        behind = self._rule_lagged(dt)
+        rule = self.geometry().rule() if behind is None else behind
+        pressure = x[self.flow.space.n_u:]
+        force, torque = self.estimator.evaluate(rule, None, pressure, self.flow.mu, self.flow.rho, dt=dt)
+        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+
     def _response_forces(self, dX: np.ndarray, dt: float, about: np.ndarray):
         """:meth:`forces` of the ``k`` flow responses ``dX (k, n_dofs)`` about the flow ``about``:
         force (k, n, dim) and torque (k, n, 3), all responses and particles in one evaluation
@@ -409,6 +453,7 @@ class CoupledSystem:
         if self.frozen:
             new.position, new.orientation = self.particles.position.copy(), self.particles.orientation.copy()
         sharp = self.geometry().sharp(self.flow.space.V)  # of the positions the flow was solved with
+        pressure = self.pressure_forces(solved.x, dt) if self.midpoint_pressure else None
         moved = new.position - self.particles.position
         self._warn_if_fast(moved, dt)
         new.position = wrap(self.flow.mesh, new.position)
@@ -420,7 +465,7 @@ class CoupledSystem:
                                                   new.angular_velocity)
             self.x[dofs] = values
         shift = self._remove_mean_flux() if self.zero_flux else None
-        self.last_force, self.last_torque = solved.force, solved.torque
+        self.last_force, self.last_torque, self.last_pressure = solved.force, solved.torque, pressure
         self.t += dt
         self.step_count += 1
         return shift
@@ -504,8 +549,8 @@ class CoupledSystem:
     def state(self) -> dict:
         """Everything a restart of the system needs, as arrays and numbers: flow ``x``, time, step
         count, the particles' positions, velocities, orientations, angular velocities, densities,
-        fixed flags, the last step's forces and the contact warm-start impulses. (The shapes come
-        from the set-up.)"""
+        fixed flags, the last step's forces (and their pressure's part, :attr:`midpoint_pressure`) and
+        the contact warm-start impulses. (The shapes come from the set-up.)"""
         p = self.particles
         out = {"x": self.x.copy(), "t": self.t, "step_count": self.step_count,
                "position": p.position.copy(), "velocity": p.velocity.copy(),
@@ -513,6 +558,9 @@ class CoupledSystem:
                "density": p.density.copy(), "fixed": p.fixed.copy()}
         if self.last_force is not None:  # the trapezoidal rule's force history (none before step 1)
             out.update(last_force=self.last_force.copy(), last_torque=self.last_torque.copy())
+        if self.last_pressure is not None:
+            out.update(last_pressure_force=self.last_pressure[0].copy(),
+                       last_pressure_torque=self.last_pressure[1].copy())
         if self.contact is not None:
             out.update({f"contact_{k}": v for k, v in self.contact.state().items()})
         return out
@@ -538,6 +586,13 @@ class CoupledSystem:
             raise ValueError("the state lacks the last step's forces, which the trapezoidal integrator needs")
         else:
             self.last_force = self.last_torque = None
+        self.last_pressure = None
+        if "last_pressure_force" in state:
+            self.last_pressure = (np.array(state["last_pressure_force"], dtype=float),
+                                  np.array(state["last_pressure_torque"], dtype=float))
+        elif self.midpoint_pressure and self.last_force is not None:
+            raise ValueError("the state lacks the last step's pressure force, which the midpoint rule for "
+                             "the pressure needs (a state of a run with constant steps)")
         if self.contact is not None:
             self.contact.set_state({k[len("contact_"):]: v for k, v in state.items()
                                     if k.startswith("contact_")})
