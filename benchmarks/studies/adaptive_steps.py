@@ -71,15 +71,16 @@ def curve_change(row: dict, base: dict, after: float = 0.05) -> float:
     return float(np.max(np.abs(np.interp(t[keep], row["t"], row["settling_velocity"]) / v[keep] - 1.0)))
 
 
-def tolerance(value: float) -> dict:
-    """The scene at level 1 with adaptive steps at tolerance ``value``, or fixed steps of ``-value``
+def tolerance(value: float, level: int = 1) -> dict:
+    """The scene at ``level`` with adaptive steps at tolerance ``value``, or fixed steps of ``-value``
     seconds when it is negative."""
     settings = {"time": {"adaptive": True, "tolerance": value}} if value > 0 else {"time": {"dt": -value}}
     scene, params = _scene(settings)
     t0 = time.perf_counter()
-    result = scene.run(params, 1)
+    result = scene.run(params, level)
     q = result.quantities
-    return dict(part="tolerance", tolerance=value if value > 0 else None, dt=-value if value < 0 else None,
+    return dict(part="tolerance", level=level, tolerance=value if value > 0 else None,
+                dt=-value if value < 0 else None, pairing="midpoint" if value > 0 else "two-step mean",
                 steps=result.steps, u_max=q["max_settling_velocity"], time_step=q["time_step"],
                 smallest=q.get("time_step_smallest"), largest=q.get("time_step_largest"),
                 rejected=q.get("rejected_steps", 0), courant=q["courant_number"],
@@ -87,7 +88,8 @@ def tolerance(value: float) -> dict:
 
 
 def run(*, part: Literal["variable", "tolerance"] = "variable", tolerances: list[float] = (1e-2, 1e-3, 3e-4),
-        fixed: list[float] = (0.002, 0.001), level: int = 2) -> None:
+        fixed: list[float] = (0.002, 0.001), level: int = 2, t_end: float = 0.25,
+        patterns: list[str] = tuple(PATTERNS)) -> None:
     """One part of the study; one row per run.
 
     Parameters
@@ -95,30 +97,32 @@ def run(*, part: Literal["variable", "tolerance"] = "variable", tolerances: list
     part : variable (steps that change) or tolerance (adaptive runs against fixed steps)
     tolerances : time.tolerance values of the adaptive runs
     fixed : the fixed steps [s] to compare with
-    level : the mesh level of the variable part (the tolerance part runs at level 1)
+    level : the mesh level
+    t_end : the variable part's end [s] (the tolerance part runs to the scene's end)
+    patterns : the variable part's step patterns
     """
     if part == "variable":
         runs = [(scheme, integrator, pairing) for scheme, integrator in SCHEMES
                 for pairing in (PAIRINGS if integrator == "trapezoidal" else PAIRINGS[:1])]
         for scheme, integrator, pairing in runs:
-            for pattern in PATTERNS:
-                row = variable(scheme, integrator, pattern, pairing, level)
+            for pattern in patterns:
+                row = variable(scheme, integrator, pattern, pairing, level, t_end)
                 print(f"{scheme} + {integrator} ({pairing}), {pattern}: u_max {row['u_max']:.5f}, "
                       f"{row['wall_s']:.0f} s", flush=True)
                 merge_row("adaptive_steps", row, lambda r, s: r["part"] == s["part"] and r.get("pattern") ==
                           s.get("pattern") and _variable_key(r) == _variable_key(s))
     else:
         for value in list(tolerances) + [-dt for dt in fixed]:
-            row = tolerance(value)
+            row = tolerance(value, level)
             print(f"tolerance {row['tolerance']} dt {row['dt']}: u_max {row['u_max']:.5f}, "
                   f"{row['steps']} steps, {row['rejected']} rejected, {row['wall_s']:.0f} s", flush=True)
             merge_row("adaptive_steps", row, lambda r, s: all(
-                r.get(k) == s.get(k) for k in ("part", "tolerance", "dt")))
+                r.get(k, 1) == s.get(k, 1) for k in ("part", "tolerance", "dt", "level")))
     write(load_rows("adaptive_steps"))
 
 
 def _variable_key(r: dict) -> tuple:
-    return r.get("level", 1), r["scheme"], r["integrator"], r.get("pairing", "two-step mean")
+    return r.get("level", 1), r["t_end"], r["scheme"], r["integrator"], r.get("pairing", "two-step mean")
 
 
 def write(rows: list[dict]) -> None:
@@ -152,15 +156,19 @@ def write(rows: list[dict]) -> None:
                      f"{r['pattern']} | {r['t_end']:g} | {r['u_max']:.4f} | {change} | {end} | "
                      f"{end_change} | {curve} | {r['date']} {r['commit']} |")
     lines += ["", "## Adaptive against fixed steps, to the scene's end", "",
-              "| stepping | tolerance | dt s (mean; range) | accepted | rejected | Courant | u_max cm/s "
-              "| wall s | measured |", "|---|---|---|---|---|---|---|---|---|"]
+              "Crank–Nicolson and the trapezoidal integrator; its pressure pairing as in the first "
+              "table.", "",
+              "| level | stepping | pressure pairing | tolerance | dt s (mean; range) | accepted | rejected "
+              "| Courant | u_max cm/s | wall s | measured |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     tolerance_rows = [r for r in rows if r["part"] == "tolerance"]
-    for r in sorted(tolerance_rows, key=lambda r: (r["tolerance"] is None, -(r["tolerance"] or 0))):
+    for r in sorted(tolerance_rows, key=lambda r: (r.get("level", 1), r["tolerance"] is None,
+                                                   -(r["tolerance"] or 0), r["dt"] or 0)):
         if r["tolerance"] is None:
             kind, tol, dt = "fixed", "", f"{r['dt']:g}"
         else:
             kind, tol = "adaptive", f"{r['tolerance']:g}"
             dt = f"{r['time_step']:.3g} ({r['smallest']:.2g} to {r['largest']:.2g})"
-        lines.append(f"| {kind} | {tol} | {dt} | {r['steps']} | {r['rejected']} | {r['courant']:.2f} | "
-                     f"{r['u_max']:.4f} | {r['wall_s']:.0f} | {r['date']} {r['commit']} |")
+        lines.append(f"| {r.get('level', 1)} | {kind} | {r.get('pairing', 'two-step mean')} | {tol} | {dt} | "
+                     f"{r['steps']} | {r['rejected']} | {r['courant']:.2f} | {r['u_max']:.4f} | "
+                     f"{r['wall_s']:.0f} | {r['date']} {r['commit']} |")
     write_text(RESULTS / "adaptive_steps.md", "\n".join(lines) + "\n")

@@ -29,9 +29,9 @@ import numpy as np
 
 from .solvers import ConvergenceError
 
-#: the step may grow at most this factor per step (the coupled scheme with Crank–Nicolson is
-#: not consistent under steps that jump: docs/validation/converged-answers.md), and shrink at most
-#: to this fraction
+#: the step may grow at most this factor per step (chosen while the trapezoidal integrator's
+#: pressure pairing was not consistent under steps that jump, docs/validation/converged-answers.md;
+#: not tuned since), and shrink at most to this fraction
 GROWTH, SHRINK = 1.25, 0.2
 #: safety factor of the step size formula
 SAFETY = 0.9
