@@ -1,24 +1,26 @@
 """Adaptive time steps (``time.adaptive``) on Glowinski's settling disk: does the coupled scheme
 stay consistent when the step changes, and what does a tolerance buy against a fixed step?
 
-Question: (1) with steps that vary from one to the next, does the peak settling velocity stay
-where constant steps of the same mean put it, per time scheme and particle integrator? (2) at
-level 1, how do the peak, the steps and the rejected steps of adaptive runs compare with fixed
-steps?
-Answer: steps that alternate 0.5 / 1.5 ms raise the peak to 0.4 s by 4.2 % over constant 1 ms
-steps with the scenes' Crank–Nicolson and trapezoidal integrator, 0.2 % with Crank–Nicolson and
-semi-implicit Euler, -0.6 % with backward Euler (the trapezoidal rule pairs two mid-step pressure
-forces); so with the default pair the adaptive peak does not converge as the tolerance tightens
-(5.8752 / 5.8294 / 5.9093 cm/s at 3e-3 / 1e-3 / 3e-4, fixed 1 ms: 5.8267), and is no cheaper
-than the fixed step the scene chooses (benchmarks/results/adaptive_steps.md).
-Measured: 2026-11-28, commit 8ed94f1; quoted in docs/validation/converged-answers.md.
-Run: python -m fbmbench adaptive_steps --part tolerance
+Question: (1) with steps that vary from one to the next, does the settling velocity stay where
+constant steps of the same mean put it, per time scheme, particle integrator and pressure
+pairing? (2) how do the peak, the steps and the rejected steps of adaptive runs compare with
+fixed steps?
+Answer: at level 2, steps that alternate 0.5 / 1.5 ms move the velocity curve by up to 4.0 %
+from constant 1 ms steps with the trapezoidal integrator's two-step mean of pressure forces, 1.2 %
+with the step's own pressure force (the midpoint rule, which adaptive runs now take), 1.5 % with
+semi-implicit Euler; the adaptive peaks follow the largest Courant number met rather than the
+tolerance (5.6076 / 5.6478 / 5.5978 cm/s at 3e-3 / 1e-3 / 3e-4, Courant 0.50 / 0.45 / 0.20;
+fixed 2 / 1 / 0.5 ms: 5.6120 / 5.5811 / 5.5663), and are no cheaper than the fixed step the scene
+chooses (benchmarks/results/adaptive_steps.md).
+Measured: 2026-11-28, commit b5d4b58; quoted in docs/validation/converged-answers.md, "Adaptive time steps".
+Run: python -m fbmbench adaptive_steps --part variable --level 2
 
-(and ``--part variable``.) ``variable``: ``glowinski-free-fall`` at level 1 to t = 0.4 s in steps
-of 1 ms, of 0.5 and 1.5 ms in turn ("alternating"), and of ten 0.5 ms then ten 1.5 ms steps in
-turn ("blocks"), per scheme pair. ``tolerance``: the scene at level 1 to its end with ``time.adaptive`` at each tolerance,
-and with fixed steps. Rows go to ``benchmarks/results/adaptive_steps.json``; the table to
-``adaptive_steps.md``.
+(and ``--part tolerance --level 2 --tolerances 0.003 0.001 0.0003 --fixed 0.002 0.001 0.0005``.)
+``variable``: ``glowinski-free-fall`` at ``level`` to ``t_end`` in steps of 1 ms, of 0.5 and 1.5
+ms in turn ("alternating"), and of ten 0.5 ms then ten 1.5 ms steps in turn ("blocks"), per
+scheme pair and pressure pairing. ``tolerance``: the scene at ``level`` to its end with
+``time.adaptive`` at each tolerance, and with fixed steps. Rows go to
+``benchmarks/results/adaptive_steps.json``; the table to ``adaptive_steps.md``.
 """
 from __future__ import annotations
 
