@@ -194,14 +194,14 @@ class CoupledSystem:
         #: viscous forces at the step's start and end (the midpoint rule for the pressure, a
         #: multiplier of the whole step under Crank–Nicolson) instead of the mean of two steps'
         #: pressure forces, which stands for the step only when the two steps are equal (steps
-        #: alternating 0.5 / 1.5 ms raise Glowinski's settling velocity by 2-3 % at level 2;
+        #: alternating 0.5 / 1.5 ms moved Glowinski's settling velocity by up to 4 % at level 2;
         #: docs/validation/converged-answers.md, "Adaptive time steps"). With varying steps
         #: only: with constant ones the two-step mean is as consistent and smoother.
         self.midpoint_pressure = varying_steps and integrator == "trapezoidal" and self._pressure_lag > 0
         if self.midpoint_pressure and not self.estimator.lags_pressure:
             self.midpoint_pressure = False
             log.warning("force %r does not separate the pressure's part: with steps that vary, %s and the "
-                        "trapezoidal integrator bias the particles' velocities (up to 3 %% where steps "
+                        "trapezoidal integrator bias the particles' velocities (up to 4 %% where steps "
                         "alternate); use fbm.force = 'volume' or 'surface', or coupling.integrator = "
                         "'semi-implicit-euler' (docs/validation/converged-answers.md)",
                         self.estimator.name, time_scheme)
