@@ -487,3 +487,95 @@ def free_components(indptr, indices, free):
         if free[i]:
             labels[i] = _root(parent, i)
     return labels
+
+
+# -- the velocity block stored once per scalar (fbmflow.fem.velocity_block) -------------------
+def _block_apply(indptr, indices, data, d, x, out):
+    """``out = diag(S, ..., S) x`` for the scalar CSR ``S (n_v, n_v)`` and ``x, out (d n_v,)``;
+    each row's sum in storage order (as the assembled block's row)."""
+    n = indptr.shape[0] - 1
+    for a in prange(n):
+        for i in range(d):
+            off = i * n
+            s = 0.0
+            for k in range(indptr[a], indptr[a + 1]):
+                s += data[k] * x[off + indices[k]]
+            out[off + a] = s
+
+
+block_apply = njit(parallel=True)(_block_apply)
+block_apply_serial = njit(_block_apply)
+
+
+@njit
+def override_rows(dofs, o_ptr, o_idx, o_val, x, out):
+    """``out[dofs[j]] = O[j] . x`` for the CSR rows ``O`` (n_o rows, columns into ``x``)."""
+    for j in range(dofs.shape[0]):
+        s = 0.0
+        for k in range(o_ptr[j], o_ptr[j + 1]):
+            s += o_val[k] * x[o_idx[k]]
+        out[dofs[j]] = s
+
+
+@njit
+def shifted_copies(ptr, idx, val, pos, n_v):
+    """For every row ``j`` of ``pos (m, d)`` (row numbers into the CSR ``(ptr, idx, val)``, -1
+    where absent): whether the rows ``pos[j, i]`` all exist and are row ``pos[j, 0]`` with its
+    columns (all below ``n_v``) shifted by ``i n_v``. (m,) bool."""
+    m, d = pos.shape
+    out = np.zeros(m, dtype=np.bool_)
+    for j in range(m):
+        first = pos[j, 0]
+        if first < 0:
+            continue
+        start, ln = ptr[first], ptr[first + 1] - ptr[first]
+        same = True
+        for k in range(ln):
+            if idx[start + k] >= n_v:
+                same = False
+        for i in range(1, d):
+            r = pos[j, i]
+            if not same or r < 0 or ptr[r + 1] - ptr[r] != ln:
+                same = False
+                break
+            for k in range(ln):
+                if idx[ptr[r] + k] != idx[start + k] + i * n_v or val[ptr[r] + k] != val[start + k]:
+                    same = False
+                    break
+        out[j] = same
+    return out
+
+
+@njit
+def gather_lengths(rows, indptr, n_v, o_pos, o_ptr):
+    """Row pointers (k + 1,) int64 of :func:`gather_rows`'s rows ``rows (k,)``."""
+    k = rows.shape[0]
+    ptr = np.zeros(k + 1, dtype=np.int64)
+    for j in range(k):
+        r = rows[j]
+        q = o_pos[r]
+        ptr[j + 1] = ptr[j] + (o_ptr[q + 1] - o_ptr[q] if q >= 0 else indptr[r % n_v + 1] - indptr[r % n_v])
+    return ptr
+
+
+@njit
+def gather_rows(rows, indptr, indices, data, n_v, o_pos, o_ptr, o_idx, o_val, shift, ptr, idx, val):
+    """Write the rows ``rows (k,)`` of ``diag(S, ..., S)`` (scalar CSR ``S``), the rows with
+    ``o_pos[r] >= 0`` replaced by row ``o_pos[r]`` of ``O``, into the CSR arrays ``(ptr, idx,
+    val)`` (``ptr`` from :func:`gather_lengths`); columns into the whole velocity vector, or,
+    where ``shift`` is False, the scalar rows' node columns (``S``'s own)."""
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        q = o_pos[r]
+        s = ptr[j]
+        if q >= 0:
+            for t in range(o_ptr[q], o_ptr[q + 1]):
+                idx[s] = o_idx[t]
+                val[s] = o_val[t]
+                s += 1
+        else:
+            a, off = r % n_v, (r // n_v) * n_v if shift else 0
+            for t in range(indptr[a], indptr[a + 1]):
+                idx[s] = indices[t] + off
+                val[s] = data[t]
+                s += 1

@@ -23,6 +23,7 @@ from ..fem import (
     velocity_coefficients,
 )
 from ..fem.constraints import DirichletConstraints
+from ..fem.velocity_block import VelocityBlock
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
 from ..solvers.sparse import matvec
@@ -186,47 +187,47 @@ class FlowLevel:
                own_buffer: bool = False, orphans: sp.csr_matrix | None = None) -> SaddlePointSystem:
         """Newton linearisation ``m rho M + a (mu L + rho (N(u) + R(u)))`` at velocity ``u``.
 
-        The velocity block's data lives in a buffer of this level and is overwritten by the next
-        call: use the returned system before linearising again (or pass ``own_buffer`` to get a
-        fresh array that nothing else writes to). ``orphans``: the orphaned pressure modes under
-        ``con`` where the caller has them (an empty matrix: none), else they are computed
-        (:class:`~fbmflow.solvers.system.SaddlePointSystem`).
+        Without the Newton term (``newton`` False, no convection, or ``a`` zero) the velocity
+        block is a :class:`~fbmflow.fem.velocity_block.VelocityBlock`: the scalar operator stored
+        once, the constrained rows beside it. The Newton block is assembled, its data in a buffer
+        of this level that the next call overwrites: use the returned system before linearising
+        again (or pass ``own_buffer`` to get a fresh array that nothing else writes to).
+        ``orphans``: the orphaned pressure modes under ``con`` where the caller has them (an empty
+        matrix: none), else they are computed (:class:`~fbmflow.solvers.system.SaddlePointSystem`).
         """
         s = self.space
         con = con or self.homogeneous_constraints()
         newton = convection and a != 0.0 and newton
-        size = s.dim * s.nnz * (s.dim if newton else 1)
-        if own_buffer:
-            J = np.empty(size)
-        else:
-            if self._jacobian_data is None or self._jacobian_data.size != size:
-                self._jacobian_data = np.empty(size)
-            J = self._jacobian_data
-        if newton:
-            expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
-            assemble_convection(s, u, a * rho, newton_out=J)
-        else:  # block diagonal: the same scalar operator for every component
-            S = J[:s.nnz]
-            np.multiply(self.M, m * rho, out=S)
+        rows = con.rows.dofs if con.rows is not None else None
+        if not newton:  # block diagonal: the same scalar operator for every component, stored once
+            S = np.multiply(self.M, m * rho)
             S += (a * mu) * self.L
             if convection and a != 0.0:
                 assemble_convection(s, u, a * rho, scalar_out=S)
-            for i in range(1, s.dim):
-                J[i * s.nnz:(i + 1) * s.nnz] = S
-        A = s.coupled_matrix(J)
-        con.zero_rows(A)
+            R = None if rows is None else sp.diags(self.row_scale(rows, m, a, rho, mu)) @ con.rows.matrix
+            A = VelocityBlock(s, S, con.fixed, rows, R)
+        else:
+            size = s.dim * s.nnz * s.dim
+            if own_buffer:
+                J = np.empty(size)
+            else:
+                if self._jacobian_data is None or self._jacobian_data.size != size:
+                    self._jacobian_data = np.empty(size)
+                J = self._jacobian_data
+            expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
+            assemble_convection(s, u, a * rho, newton_out=J)
+            A = s.coupled_matrix(J)
+            con.zero_rows(A)
+            if rows is not None:
+                A = con.rows.write_rows(A, self.row_scale(rows, m, a, rho, mu))
+                if not own_buffer and not np.shares_memory(A.data, J):
+                    # a new matrix: the buffer would only hold memory (ten Cate level 1: 116 MB, the
+                    # step's peak 1 326 -> 1 210 MB)
+                    self._jacobian_data = None
         if not con.sharp:
             return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
                                      fixed_always=self.boundary_constraints.dofs, transient=m != 0.0,
                                      orphans=orphans)
-        rows = None
-        if con.rows is not None:
-            rows = con.rows.dofs
-            A = con.rows.write_rows(A, self.row_scale(rows, m, a, rho, mu))
-            if not own_buffer and not np.shares_memory(A.data, J):
-                # a new matrix: the buffer would only hold memory (ten Cate level 1: 116 MB, the
-                # step's peak 1 326 -> 1 210 MB)
-                self._jacobian_data = None
         return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),

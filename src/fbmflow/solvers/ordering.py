@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..fem.velocity_block import VelocityBlock
 from . import _kernels
 
 #: a slab holds at least this many cell layers
@@ -121,8 +122,9 @@ def unknown_reach(system) -> np.ndarray:
     periods = np.array([2 * n if periodic else 0 for n, periodic in zip(mesh.shape, mesh.periodic)],
                        dtype=np.int64)
     out = np.zeros(len(points), dtype=np.int64)
-    for M, r, c in ((system.A, 0, 0), (system.gradient, 0, n_u), (system.BT, n_u, 0),
-                    (system.pressure_block, n_u, n_u)):
+    A = system.A.parts() if isinstance(system.A, VelocityBlock) else [(system.A, 0)]
+    for M, r, c in ([(M, r, r) for M, r in A] + [(system.gradient, 0, n_u), (system.BT, n_u, 0),
+                                                   (system.pressure_block, n_u, n_u)]):
         if M is not None:
             M = sp.csr_matrix(M)
             _kernels.row_reach(M.indptr, M.indices, points, periods, r, c, out)

@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
 from ..fem.constraints import zero_columns
+from ..fem.velocity_block import VelocityBlock
 from .sparse import matvec
 
 log = logging.getLogger(__name__)
@@ -36,7 +37,8 @@ class SaddlePointSystem:
 
     Attributes
     ----------
-    A : (n_u, n_u) CSR, constrained rows already unit rows
+    A : (n_u, n_u) CSR or :class:`~fbmflow.fem.velocity_block.VelocityBlock`, constrained rows already
+        unit rows (or the row constraints' rows)
     BT : (n_p, n_u) CSR, constrained columns zeroed; ``B = BT.T``
     mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
     fixed : (n_c,) int64 or None, the constrained velocity DOFs (unit rows of ``A``); solvers
@@ -151,12 +153,13 @@ class SaddlePointSystem:
         stacked row-wise from CSR blocks without a COO round trip (scipy's ``bmat`` took 3.6 s
         per factorisation at ten-cate level 1)."""
         C = self.pressure_block
+        A = self.A.tocsr() if isinstance(self.A, VelocityBlock) else self.A
         if bordered and self.mean_weights is not None:
             w = sp.csr_matrix(self.mean_weights[None, :])
-            blocks = [[self.A, self.gradient, None], [self.BT, C, w.T], [None, w, None]]
+            blocks = [[A, self.gradient, None], [self.BT, C, w.T], [None, w, None]]
             return sp.bmat(blocks, format="csc")
         C = sp.csr_matrix((self.n_p, self.n_p)) if C is None else sp.csr_matrix(C)
-        top = sp.hstack([sp.csr_matrix(self.A), self.gradient], format="csr")
+        top = sp.hstack([sp.csr_matrix(A), self.gradient], format="csr")
         K = sp.vstack([top, sp.hstack([sp.csr_matrix(self.BT), C], format="csr")], format="csr")
         K.sort_indices()
         return K

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
 from .._jit import numba_threads
+from ..fem.velocity_block import VelocityBlock
 from . import _kernels, ordering
 from .system import SaddlePointSystem, cell_blocks
 
@@ -46,13 +47,14 @@ class VankaSmoother:
         self.space = space
         B = system.BT.T.tocsr()
         self._b = (B.indptr.astype(np.int64), B.indices.astype(np.int64), B.data)
-        nb = system.A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
+        A = system.A.tocsr() if isinstance(system.A, VelocityBlock) else system.A  # on the space's pattern
+        nb = A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
         npl = space.dim + 1
         pblock = cell_blocks(system.orphans, space.mesh.n_cells, npl)  # cluster modes: cell parts only
-        self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, system.A.data,
+        self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, A.data,
                         *self._b, system.BT.data, space.local_rank, space.V.cell_dofs, pblock)
         if variant == "vanka-diagonal":
-            diag = system.A.diagonal()
+            diag = A.diagonal()
             diag_inv = np.where(diag != 0.0, 1.0 / np.where(diag != 0.0, diag, 1.0), 0.0)
             S = _kernels.schur_diagonal(system.BT.data, space.local_rank, space.V.cell_dofs,
                                         diag_inv, space.dim, space.n_v)
@@ -93,7 +95,8 @@ def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None
     n_u, n_p = system.n_u, system.n_p
     keep_u = np.ones(n_u, dtype=bool) if keep_u is None else keep_u
     blocks = []
-    for M, shape in ((system.A, (n_u, n_u)), (system.gradient, (n_u, n_p)), (system.BT, (n_p, n_u)),
+    A = system.A.select(keep_u) if isinstance(system.A, VelocityBlock) else system.A
+    for M, shape in ((A, (n_u, n_u)), (system.gradient, (n_u, n_p)), (system.BT, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else sp.csr_matrix(M)
         blocks += [M.indptr, M.indices, M.data]
@@ -206,10 +209,15 @@ class FactoredVankaSmoother:
         cells = np.flatnonzero(plain)
         # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
         # and every other row (the kernels' "op")
-        A = sp.csr_matrix(system.A)
-        regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
+        if isinstance(system.A, VelocityBlock):
+            regular = system.A.regular
+            scalar = system.A.scalar_rows(regular, dtype)
+        else:
+            A = sp.csr_matrix(system.A)
+            regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
+            scalar = _rows_of(A, regular, dtype)
         regular_u = np.tile(regular, d)
-        self.op = (regular, *_rows_of(A, regular, dtype), *_rows_of(system.gradient, regular_u, dtype),
+        self.op = (regular, *scalar, *_rows_of(system.gradient, regular_u, dtype),
                    *saddle_point_csr(system, dtype, ~regular_u))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
@@ -271,7 +279,8 @@ class FactoredVankaSmoother:
         # the fine velocity block), in absolute value (no entries cancelling in the sums)
         u, p = np.unique(dofs[dofs < n_u]), np.unique(dofs[dofs >= n_u]) - n_u
         Pu, Pp = P[:, u], P[:, n_u + p]
-        reads_u = Pu @ abs(sp.csr_matrix(system.A)[u]) + Pp @ abs(system.BT[p])
+        A = system.A if isinstance(system.A, VelocityBlock) else sp.csr_matrix(system.A)
+        reads_u = Pu @ abs(A[u]) + Pp @ abs(system.BT[p])
         reads_p = Pu @ abs(system.gradient[u])
         if system.pressure_block is not None:
             reads_p = reads_p + Pp @ abs(system.pressure_block[p])
