@@ -539,14 +539,21 @@ def test_reaction_coefficients(space):
     assert_rel(react, np.einsum("cqil,cqlk,cq->cqik", gref, space.Jinv, space.detJw))
 
 
-def test_apply_scalar_pair(case):
-    from fbmflow.fem import apply_scalar_pair
+def test_apply_mass_laplace(case):
+    """The cell-by-cell product equals the dense reference's ``(alpha M + beta L) u_i`` per component."""
+    from fbmflow.fem import apply_mass_laplace
     space, ref = case
     u = np.random.default_rng(43).normal(size=space.n_u)
-    out = apply_scalar_pair(space, 2.0, np.full(space.nnz, 1.5), -0.5,
-                            np.arange(space.nnz, dtype=float), u)
-    S = space.scalar_matrix(3.0 - 0.5 * np.arange(space.nnz, dtype=float))
-    assert_rel(out, (S @ u.reshape(space.dim, -1).T).T.ravel())
+    out = apply_mass_laplace(space, 2.0, -0.5, u)
+    K = 2.0 * ref.mass() - 0.5 * ref.laplace()
+    assert_rel(out, (K @ u.reshape(space.dim, -1).T).T.ravel())
+
+
+def test_assemble_mass_laplace(case):
+    from fbmflow.fem import assemble_mass_laplace
+    space, ref = case
+    K = _dense_scalar(space, assemble_mass_laplace(space, 2.0, -0.5))
+    assert_rel(K, 2.0 * ref.mass() - 0.5 * ref.laplace())
 
 
 def test_apply_reaction_is_the_newton_term(case):

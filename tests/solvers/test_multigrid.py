@@ -172,7 +172,7 @@ def test_periodic_taylor_green_oseen_system():
         prob = NavierStokesProblem(TaylorGreen2D.mesh(level), 0.01, {}, linear_solver=mg)
         x = TaylorGreen2D.initial_state(prob, 0.01)
         con = prob.constraints()
-        rhs = (1.0 / 0.05) * prob._apply_scalar(prob.M, x[:prob.space.n_u])
+        rhs = (1.0 / 0.05) * prob.apply_mass(x[:prob.space.n_u])
         F = prob.residual(x, 1.0 / 0.05, 1.0, rhs, con)
         rep, rel = _solve(prob, mg, x, con, F, m=1.0 / 0.05)
         assert rel < 1e-8

@@ -1,13 +1,14 @@
 """Reference elements, quadrature, DOF maps, Numba kernels and assembly of Q2/P1disc."""
 from .assembly import (
                        apply_convection,
+                       apply_mass_laplace,
                        apply_reaction,
-                       apply_scalar_pair,
                        assemble_convection,
                        assemble_divergence,
                        assemble_laplace,
                        assemble_load,
                        assemble_mass,
+                       assemble_mass_laplace,
                        expand_to_coupled,
                        masked_groups,
                        pressure_mean_weights,
@@ -22,5 +23,5 @@ from .space import FlowSpace
 __all__ = ["FlowSpace", "DofMap", "PressureDofMap", "ElementQ1", "ElementQ2", "ElementP1Disc",
            "gauss_tensor", "assemble_mass", "assemble_laplace", "assemble_convection",
            "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights",
-           "apply_convection", "apply_reaction", "apply_scalar_pair", "reaction_coefficients",
-           "velocity_coefficients", "masked_groups"]
+           "apply_convection", "apply_reaction", "apply_mass_laplace", "assemble_mass_laplace",
+           "reaction_coefficients", "velocity_coefficients", "masked_groups"]

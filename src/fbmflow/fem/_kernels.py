@@ -441,17 +441,39 @@ def apply_convection(cells, conv, cell_dofs, phi, dphi, Jinv, w, scale, out):
 
 
 @njit(parallel=True)
-def apply_scalar_pair(indptr, indices, X, alpha, Y, beta, u, out):
-    """``out[i] = (alpha X + beta Y) u[i]`` for every component ``i``: two matrices on one scalar
-    CSR pattern ``(indptr, indices)`` (data ``X``, ``Y`` (nnz,)) applied to ``u (d, n)`` without
-    forming their combination; out (d, n) float64, overwritten."""
-    d = u.shape[0]
-    for r in prange(indptr.shape[0] - 1):
-        for i in range(d):
-            s = 0.0
-            for j in range(indptr[r], indptr[r + 1]):
-                s += (alpha * X[j] + beta * Y[j]) * u[i, indices[j]]
-            out[i, r] = s
+def apply_mass_laplace(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, w, out):
+    """Add ``(alpha M + beta L) w_i`` to ``out[i]`` for every component: ``alpha int phi_a w_i +
+    beta int grad phi_a . grad w_i`` by quadrature, cell by cell, without a matrix; ``w``, ``out``
+    (d, n_v) float64; cells in parallel groups of DOF-disjoint cells (-1 = padding) as in
+    :func:`apply_convection`."""
+    n_groups, length = cells.shape
+    nq, nl = phi.shape
+    d = w.shape[0]
+    for g in prange(n_groups):
+        wl = np.empty((d, nl))
+        wq = np.empty((nq, d))
+        gq = np.empty((nq, d, d))
+        flux = np.empty((d, d))
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
+            for q in range(nq):
+                weight = detJw[c, q]
+                for i in range(d):  # flux[i, l] = sum_k Jinv[l, k] d w_i / d x_k: to the reference axes
+                    for ax in range(d):
+                        s = 0.0
+                        for k in range(d):
+                            s += Jinv[c, q, ax, k] * gq[q, i, k]
+                        flux[i, ax] = beta * weight * s
+                for a in range(nl):
+                    dof = cell_dofs[c, a]
+                    for i in range(d):
+                        s = alpha * weight * phi[q, a] * wq[q, i]
+                        for ax in range(d):
+                            s += dphi[q, a, ax] * flux[i, ax]
+                        out[i, dof] += s
 
 
 @njit
@@ -491,16 +513,25 @@ def free_components(indptr, indices, free):
 
 # -- the velocity block stored once per scalar (fbmflow.fem.velocity_block) -------------------
 def _block_apply(indptr, indices, data, d, x, out):
-    """``out = diag(S, ..., S) x`` for the scalar CSR ``S (n_v, n_v)`` and ``x, out (d n_v,)``;
-    each row's sum in storage order (as the assembled block's row)."""
+    """``out = diag(S, ..., S) x`` for the scalar CSR ``S (n_v, n_v)`` and ``x, out (d n_v,)``,
+    ``d`` 2 or 3: one pass over each row of ``S`` for all components, each component's sum in
+    storage order (as the assembled block's row)."""
     n = indptr.shape[0] - 1
     for a in prange(n):
-        for i in range(d):
-            off = i * n
-            s = 0.0
-            for k in range(indptr[a], indptr[a + 1]):
-                s += data[k] * x[off + indices[k]]
-            out[off + a] = s
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for k in range(indptr[a], indptr[a + 1]):
+            v = data[k]
+            j = indices[k]
+            s0 += v * x[j]
+            s1 += v * x[n + j]
+            if d == 3:
+                s2 += v * x[2 * n + j]
+        out[a] = s0
+        out[n + a] = s1
+        if d == 3:
+            out[2 * n + a] = s2
 
 
 block_apply = njit(parallel=True)(_block_apply)

@@ -57,6 +57,20 @@ def _assemble_scalar(space: FlowSpace, coeff: np.ndarray, table: np.ndarray) -> 
     return data
 
 
+def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.ndarray:
+    """Data (nnz,) of ``alpha M + beta L`` on ``space``'s scalar pattern, in one pass (the
+    Laplacian's coefficients batch by batch)."""
+    data = np.zeros(space.nnz)
+    mass, laplace = space.table_mass, space.table_laplace
+    with single_threaded_blas():
+        for cells in space.batches:
+            c = cells.ravel()
+            local = (alpha * space.detJw[c]) @ mass
+            local += (beta * _kernels.laplace_coefficients(space.detJw[c], space.Jinv[c])) @ laplace
+            _kernels.scatter_scalar(cells, local, space.slots, data)
+    return data
+
+
 def assemble_mass(space: FlowSpace) -> np.ndarray:
     """Data (nnz,) of the scalar Q2 mass matrix on ``space``'s pattern."""
     return _assemble_scalar(space, space.detJw, space.table_mass)
@@ -193,13 +207,14 @@ def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
                                           space.Jinv)
 
 
-def apply_scalar_pair(space: FlowSpace, alpha: float, X: np.ndarray, beta: float, Y: np.ndarray,
-                      u: np.ndarray) -> np.ndarray:
-    """``(alpha X + beta Y) u`` per velocity component, for scalar-pattern data ``X``, ``Y``
-    (nnz,) and ``u`` (dim * n_v,) -> (dim * n_v,), without forming the combination."""
+def apply_mass_laplace(space: FlowSpace, alpha: float, beta: float, u: np.ndarray) -> np.ndarray:
+    """``(alpha M + beta L) u`` per velocity component, by quadrature cell by cell (no matrix):
+    ``u`` (dim * n_v,) -> (dim * n_v,) float64."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
-    out = np.empty_like(uu)
-    _kernels.apply_scalar_pair(space.indptr, space.indices, X, alpha, Y, beta, uu, out)
+    out = np.zeros_like(uu)
+    for batch in space.colour_groups:
+        _kernels.apply_mass_laplace(batch, space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi,
+                                    alpha, beta, uu, out)
     return out.ravel()
 
 

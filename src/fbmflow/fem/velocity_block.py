@@ -47,6 +47,8 @@ class VelocityBlock:
     def __init__(self, space: FlowSpace, data: np.ndarray, fixed: np.ndarray, rows: np.ndarray | None = None,
                  matrix: sp.spmatrix | None = None):
         d, n_v = space.dim, space.n_v
+        if d not in (2, 3):
+            raise ValueError(f"VelocityBlock: dimension {d}; 2 or 3")
         if data.shape != (space.nnz,):
             raise ValueError(f"VelocityBlock: data has shape {data.shape}, the scalar pattern has "
                              f"{space.nnz} entries")

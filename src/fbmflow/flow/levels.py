@@ -16,6 +16,7 @@ from ..fem import (
     assemble_divergence,
     assemble_laplace,
     assemble_mass,
+    assemble_mass_laplace,
     expand_to_coupled,
     masked_groups,
     pressure_mean_weights,
@@ -129,7 +130,8 @@ class NewtonBlock:
 
 
 class FlowLevel:
-    """Mesh-dependent operators of one level: space, mass ``M``, Laplacian ``L``, ``B^T``.
+    """Mesh-dependent operators of one level: space, ``B^T``, the diagonals of the mass and
+    Laplace matrices.
 
     Parameters
     ----------
@@ -142,14 +144,15 @@ class FlowLevel:
                  extra_constraints=None):
         self.mesh = mesh
         self.space = space = FlowSpace(mesh)
-        self.M = assemble_mass(space)
-        self.L = assemble_laplace(space)
+        # the mass and Laplace matrices are assembled into each linearisation's block and applied
+        # cell by cell elsewhere; of the stored pair only their diagonals stay (row_scale)
+        diag = np.flatnonzero(space.indices == np.repeat(np.arange(space.n_v), np.diff(space.indptr)))
+        self._diagonals = (assemble_mass(space)[diag], assemble_laplace(space)[diag])
         self.BT = assemble_divergence(space)
         self.mean_weights = pressure_mean_weights(space) if pressure_fixed else None
         self.boundary_constraints = build_constraints(space.V, boundary, 0.0)
         self.extra_constraints = extra_constraints
         self._jacobian_data: np.ndarray | None = None
-        self._diagonals: tuple | None = None  # diagonals of M and L (row_scale)
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
 
@@ -200,8 +203,7 @@ class FlowLevel:
         newton = convection and a != 0.0 and newton
         rows = con.rows.dofs if con.rows is not None else None
         if not newton:  # block diagonal: the same scalar operator for every component, stored once
-            S = np.multiply(self.M, m * rho)
-            S += (a * mu) * self.L
+            S = assemble_mass_laplace(s, m * rho, a * mu)
             if convection and a != 0.0:
                 assemble_convection(s, u, a * rho, scalar_out=S)
             R = None if rows is None else sp.diags(self.row_scale(rows, m, a, rho, mu)) @ con.rows.matrix
@@ -214,7 +216,7 @@ class FlowLevel:
                 if self._jacobian_data is None or self._jacobian_data.size != size:
                     self._jacobian_data = np.empty(size)
                 J = self._jacobian_data
-            expand_to_coupled(s, J, m * rho, self.M, a * mu, self.L)
+            expand_to_coupled(s, J, 1.0, assemble_mass_laplace(s, m * rho, a * mu))
             assemble_convection(s, u, a * rho, newton_out=J)
             A = s.coupled_matrix(J)
             con.zero_rows(A)
@@ -253,11 +255,7 @@ class FlowLevel:
         """Scale of the momentum equations of the velocity ``dofs`` (component-blocked): the
         diagonal of ``m rho M + a mu L`` there, (n,) float64. Row constraints replacing those
         equations are multiplied by it, so that their residuals weigh like the others."""
-        s = self.space
-        if self._diagonals is None:
-            diag = np.flatnonzero(s.indices == np.repeat(np.arange(s.n_v), np.diff(s.indptr)))
-            self._diagonals = (self.M[diag], self.L[diag])
-        node = dofs % s.n_v
+        node = dofs % self.space.n_v
         return m * rho * self._diagonals[0][node] + a * mu * self._diagonals[1][node]
 
 

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ..fem import FlowSpace, apply_convection, apply_scalar_pair, assemble_load
+from ..fem import FlowSpace, apply_convection, apply_mass_laplace, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
@@ -101,7 +101,7 @@ class NavierStokesProblem:
         self.extra_constraints = extra_constraints
         self.fine = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
         self.space = self.fine.space
-        self.M, self.L, self.BT = self.fine.M, self.fine.L, self.fine.BT
+        self.BT = self.fine.BT
         self.mean_weights = self.fine.mean_weights
         self._pressure_fixed = pressure_fixed
         self.coarse_cells = coarse_cells
@@ -172,14 +172,14 @@ class NavierStokesProblem:
     def _apply_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
         """``(m rho M + a (mu L + rho N(u))) u`` for a velocity (dim * n_v,) -> (dim * n_v,); the
         convection term without a matrix (:func:`~fbmflow.fem.apply_convection`)."""
-        out = apply_scalar_pair(self.space, m * self.rho, self.M, a * self.mu, self.L, u)
+        out = apply_mass_laplace(self.space, m * self.rho, a * self.mu, u)
         if self.convection and a != 0.0:
             apply_convection(self.space, u, a * self.rho, out)
         return out
 
-    def _apply_scalar(self, S: np.ndarray, u: np.ndarray) -> np.ndarray:
-        s = self.space
-        return (s.scalar_matrix(S) @ u.reshape(s.dim, s.n_v).T).T.ravel()
+    def apply_mass(self, u: np.ndarray) -> np.ndarray:
+        """``M u`` (no density) for a velocity (dim * n_v,) -> (dim * n_v,), without a matrix."""
+        return apply_mass_laplace(self.space, 1.0, 0.0, u)
 
     def apply_spatial(self, u: np.ndarray) -> np.ndarray:
         """``mu L u + rho N(u) u`` for a velocity (dim * n_v,) -> (dim * n_v,)."""

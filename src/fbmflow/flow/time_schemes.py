@@ -93,7 +93,7 @@ def advance(problem, x: np.ndarray, t: float, dt: float, scheme: str, guess: np.
         k = sub.fraction * dt
         t_new = t + k
         u_old = x[:s.n_u]
-        rhs = (problem.rho / k) * problem._apply_scalar(problem.M, u_old)
+        rhs = (problem.rho / k) * problem.apply_mass(u_old)
         if sub.implicit:
             rhs += sub.implicit * problem.load(t_new)
         if sub.explicit:
