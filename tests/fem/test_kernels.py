@@ -264,10 +264,14 @@ def test_convection_coefficients(space, newton):
         assert react.shape == (0, nq)
 
 
-def test_laplace_coefficients(space):
-    out = _kernels.laplace_coefficients(space.detJw, space.Jinv)
-    ref = np.einsum("cq,cqli,cqmi->cqlm", space.detJw, space.Jinv, space.Jinv)
-    assert_rel(out, ref.reshape(space.mesh.n_cells, -1))
+def test_mass_laplace_coefficients(space):
+    out = _kernels.mass_laplace_coefficients(space.detJw, space.Jinv, 2.0, -0.5)
+    d = space.dim
+    ref = -0.5 * np.einsum("cq,cqli,cqmi->cqlm", space.detJw, space.Jinv, space.Jinv)
+    upper = np.triu_indices(d)
+    n, nq = space.detJw.shape
+    assert_rel(out[:, :nq], 2.0 * space.detJw)
+    assert_rel(out[:, nq:], ref[:, :, upper[0], upper[1]].reshape(n, -1))
 
 
 def _dense_scalar(space, data):

@@ -119,18 +119,24 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
 
 
 @njit(parallel=True)
-def laplace_coefficients(detJw, Jinv):
-    """``detJw * (Jinv Jinv^T)[l, m]`` per cell and point: (n_cells, nq * d * d) float64."""
+def mass_laplace_coefficients(detJw, Jinv, alpha, beta):
+    """The coefficients of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace` per cell:
+    ``alpha detJw[q]`` for every point ``q``, then ``beta detJw[q] (Jinv Jinv^T)[l, m]`` for every
+    point and pair ``l <= m``; (n_cells, nq (1 + d (d + 1) / 2)) float64."""
     n_cells, nq, d, _ = Jinv.shape
-    out = np.zeros((n_cells, nq * d * d))
+    pairs = d * (d + 1) // 2
+    out = np.empty((n_cells, nq * (1 + pairs)))
     for c in prange(n_cells):
         for q in range(nq):
+            out[c, q] = alpha * detJw[c, q]
+            k = nq + q * pairs
             for ax in range(d):
-                for m in range(d):
+                for m in range(ax, d):
                     s = 0.0
                     for i in range(d):
                         s += Jinv[c, q, ax, i] * Jinv[c, q, m, i]
-                    out[c, (q * d + ax) * d + m] = detJw[c, q] * s
+                    out[c, k] = beta * detJw[c, q] * s
+                    k += 1
     return out
 
 

@@ -179,10 +179,15 @@ class FlowSpace:
         return t.reshape(t.shape[0] * t.shape[1], -1)
 
     @cached_property
-    def table_laplace(self) -> np.ndarray:
-        """``dphi_a/dxi_l dphi_b/dxi_m``, rows ``(q, l, m)``: (nq * d * d, nl * nl)."""
-        t = np.einsum("qal,qbm->qlmab", self.dphi, self.dphi)
-        return t.reshape(t.shape[0] * t.shape[1] * t.shape[2], -1)
+    def table_mass_laplace(self) -> np.ndarray:
+        """The mass table's rows, then the Laplacian's ``dphi_a/dxi_l dphi_b/dxi_m`` with the
+        symmetric pairs folded (``l < m``: the ``(l, m)`` and ``(m, l)`` terms summed), rows
+        ``q``, then ``(q, l <= m)``: (nq (1 + d (d + 1) / 2), nl * nl)."""
+        d = self.dphi.shape[2]
+        full = np.einsum("qal,qbm->qlmab", self.dphi, self.dphi)
+        rows = [full[:, k, m] + (full[:, m, k] if m != k else 0.0) for k in range(d) for m in range(k, d)]
+        folded = np.stack(rows, axis=1)  # (nq, pairs, nl, nl)
+        return np.vstack([self.table_mass, folded.reshape(folded.shape[0] * folded.shape[1], -1)])
 
     # -- helpers ------------------------------------------------------------------------------
     def free_node_components(self, free: np.ndarray) -> np.ndarray:
