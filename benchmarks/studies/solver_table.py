@@ -69,6 +69,7 @@ def run_case(case: str, solver: str) -> dict:
 
     import fbmflow.flow.navier_stokes as ns
     import fbmflow.solvers.direct as direct
+    from fbmflow._jit import numba_threads
     from fbmflow.scenes.registry import load_scene
 
     scene_name, level, overrides, steps = CASES[case]
@@ -132,7 +133,7 @@ def run_case(case: str, solver: str) -> dict:
                 matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s / len(reports),
                 total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
                 first_step_s=step_times[0] if step_times else None,
-                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, threads=numba_threads())
 
 
 def table(rows: list[dict]) -> str:
@@ -142,22 +143,25 @@ def table(rows: list[dict]) -> str:
              "the first, which includes the set-up). Cycles: FGMRES iterations, one multigrid cycle each. "
              "Matvec-equivalents: linear time per solve over one product with the fine system.", "",
              "Busy: other processes running a pure-Python loop beside the case.", "",
-             "| case | scene | level | unknowns | solver | busy | Newton | solves | cycles / solve "
+             "Threads: Numba's thread count (blank: rows measured before it was recorded, at the "
+             "machine's default, 2 here). Bytes / unknown: the peak over the unknowns.", "",
+             "| case | scene | level | unknowns | solver | busy | threads | Newton | solves | cycles / solve "
              "| matvec-eq / solve "
-             "| s / solve | s / step | total s | peak GB |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| s / solve | s / step | total s | peak GB | bytes / unknown |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "skipped" in r:
             lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | | {r['solver']} | "
-                         f"{r.get('busy', 0)} | "
-                         f"not run: {r['skipped']} | | | | | | | |")
+                         f"{r.get('busy', 0)} | | "
+                         f"not run: {r['skipped']} | | | | | | | | |")
             continue
         cyc = f"{r['cycles_per_solve']:.1f}" if r["cycles_per_solve"] is not None else ""
         step = f"{r['s_per_step']:.1f}" if r["s_per_step"] else ""
         lines.append(f"| {r['case']} | {r['scene']} | {r['level']} | {r['unknowns']} | {r['description']} | "
-                     f"{r.get('busy', 0)} | {r['newton']} | {r['solves']} | {cyc} | "
+                     f"{r.get('busy', 0)} | {r.get('threads', '')} | {r['newton']} | {r['solves']} | {cyc} | "
                      f"{r['matvec_per_solve']:.0f} | {r['s_per_solve']:.2f} | "
-                     f"{step} | {r['total_s']:.1f} | {r['peak_gb']:.1f} |")
+                     f"{step} | {r['total_s']:.1f} | {r['peak_gb']:.1f} | "
+                     f"{r['peak_gb'] * 1e9 / r['unknowns']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
