@@ -400,6 +400,29 @@ def test_the_scalar_velocity_blocks_solve_as_the_assembled_ones(dim, n):
         assert np.allclose(got, want, rtol=0.0, atol=1e-12 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_gradient_applied_cell_by_cell_is_the_assembled_one(dim):
+    """Where the system has the divergence in its cell pattern (the sharp boundary's fine level)
+    it keeps no gradient matrix: ``B p`` comes from ``B^T`` cell by cell, colour by colour, and
+    equals the assembled product; the whole operator equals the assembled matrix's."""
+    from fbmflow.solvers.sparse import cell_transposed_matvec
+    _, system, _ = _ball_system("sharp", n=16 if dim == 2 else 6, dim=dim)
+    fine = system.preconditioner
+    assert fine.gradient_BT is not None and fine._gradient is None
+    rng = np.random.default_rng(5)
+    p = rng.standard_normal(fine.n_p)
+    B = fine.gradient
+    assert fine._gradient is None  # built for the caller, not kept
+    want = B @ p
+    assert np.allclose(fine.apply_gradient(p), want, rtol=0.0, atol=1e-13 * np.abs(want).max())
+    G = fine.gradient_BT
+    assert np.allclose(cell_transposed_matvec(G, p, fine.space.colour_groups, dim + 1), G.T @ p,
+                       rtol=0.0, atol=1e-13 * np.abs(want).max())
+    x = rng.standard_normal(fine.n_u + fine.n_p)
+    K = fine.matrix(bordered=False)
+    assert np.allclose(fine.apply(x), K @ x, rtol=0.0, atol=1e-12 * np.abs(K @ x).max())
+
+
 @pytest.mark.parametrize("dim, n", [(2, 32), (3, 8)])
 def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     """In a closed box the sharp system's left null vector has components on the ghost rows, so

@@ -244,8 +244,8 @@ class FlowLevel:
         ``assembled`` is its preconditioner)."""
         constrained = np.concatenate([d for d in (assembled.fixed, assembled.rows) if d is not None] or
                                      [np.zeros(0, dtype=np.int64)])
-        assembled.gradient  # computed once here, so that the copy shares it (at ten Cate level 1
-        # each system built its own: 37 MB, 132 bytes per unknown)
+        if assembled.gradient_BT is None:  # a kept gradient: built once here, so that the copy
+            assembled.gradient  # shares it (ten Cate level 1: 37 MB, 132 bytes per unknown each)
         system = copy.copy(assembled)  # shares the blocks and the derived ones already computed
         system.A = NewtonBlock(assembled.A, self.space, u, a * rho, constrained, newton_base)
         system.preconditioner, system.coarser, system.prolongation = assembled, None, None

@@ -109,13 +109,13 @@ def nested_dissection(points: np.ndarray, leaf: int = DISSECTION_LEAF) -> np.nda
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
-def unknown_reach(system) -> np.ndarray:
+def unknown_reach(system, gradient=None) -> np.ndarray:
     """How far the row of every unknown of a saddle-point system reaches: the largest distance,
     in half-cells along any axis (modulo the period on a periodic axis), from the unknown's
     lattice point (:func:`lattice_points`) to that of a column of its row in any block (velocity
     block ``A``, gradient, continuity rows ``B^T``, pressure block); (n_u + n_p,) int64. 2 in the
     plain Q2/P1disc discretisation; ghost-node rows of the sharp boundary and Galerkin coarse rows
-    near a particle reach further."""
+    near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it."""
     space, n_u = system.space, system.n_u
     mesh = space.mesh
     points = lattice_points(space)
@@ -123,7 +123,8 @@ def unknown_reach(system) -> np.ndarray:
                        dtype=np.int64)
     out = np.zeros(len(points), dtype=np.int64)
     A = system.A.parts() if isinstance(system.A, VelocityBlock) else [(system.A, 0)]
-    for M, r, c in ([(M, r, r) for M, r in A] + [(system.gradient, 0, n_u), (system.BT, n_u, 0),
+    G = system.gradient if gradient is None else gradient
+    for M, r, c in ([(M, r, r) for M, r in A] + [(G, 0, n_u), (system.BT, n_u, 0),
                                                    (system.pressure_block, n_u, n_u)]):
         if M is not None:
             M = sp.csr_matrix(M)

@@ -40,3 +40,34 @@ def matvec(M: sp.spmatrix, x: np.ndarray) -> np.ndarray:
     out = np.empty(M.shape[0])
     _csr_matvec(M.indptr, M.indices, M.data, np.ascontiguousarray(x, dtype=np.float64), out)
     return out
+
+
+@njit(parallel=True)
+def _cell_rows_transposed(cells, npl, indptr, indices, data, x, out):
+    """``out += M^T x`` for the CSR arrays of ``M (n_cells npl, n)`` whose rows ``c npl .. c npl +
+    npl - 1`` reach only cell ``c``'s unknowns; ``cells (n_groups, length)`` one colour's cells
+    (no two share an unknown, -1 = padding), the groups in parallel."""
+    n_groups, length = cells.shape
+    for g in prange(n_groups):
+        for j in range(length):
+            c = cells[g, j]
+            if c < 0:
+                continue
+            for r in range(c * npl, (c + 1) * npl):
+                xr = x[r]
+                for k in range(indptr[r], indptr[r + 1]):
+                    out[indices[k]] += data[k] * xr
+
+
+def cell_transposed_matvec(M: sp.csr_matrix, x: np.ndarray, colours: list[np.ndarray],
+                           npl: int) -> np.ndarray:
+    """``M^T x`` for a CSR ``M (n_cells npl, n)`` whose ``npl`` rows per cell reach only that
+    cell's unknowns (the discrete divergence ``B^T``: the gradient ``B p`` without a matrix of its
+    own), ``x (n_cells npl,)``; ``colours``: the cells colour by colour, as
+    :attr:`~fbmflow.fem.space.FlowSpace.colour_groups`. Every entry of the result sums its terms
+    colour by colour, so it does not depend on the number of threads. Returns (n,) float64."""
+    out = np.zeros(M.shape[1])
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    for cells in colours:
+        _cell_rows_transposed(cells, npl, M.indptr, M.indices, M.data, x, out)
+    return out

@@ -15,7 +15,7 @@ velocity sees (orphans) and makes continuity data solvable in closed domains.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -24,7 +24,7 @@ import scipy.sparse.csgraph as csgraph
 
 from ..fem.constraints import zero_columns
 from ..fem.velocity_block import VelocityBlock
-from .sparse import matvec
+from .sparse import cell_transposed_matvec, matvec
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +85,7 @@ class SaddlePointSystem:
     extension: object = None
     preconditioner: "SaddlePointSystem | None" = None
     transient: bool = False
+    _gradient: sp.csr_matrix | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
@@ -100,11 +101,30 @@ class SaddlePointSystem:
             # row-constrained columns only, and would otherwise tie those to the modes' g
             self.BT = (self.BT - self.orphans @ self.BT).tocsr()
 
-    @cached_property
+    @property
     def gradient(self) -> sp.csr_matrix:
         """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` transposed, the rows of
-        ``rows`` zeroed."""
-        return zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self.rows).T.tocsr()
+        ``rows`` zeroed. Kept once built, except where ``gradient_BT`` (in the divergence's
+        cell-local pattern) is given: products then use it transposed (:meth:`apply_gradient`)
+        and ``B`` is built anew on each access, for the set-up of smoothers and coarse rows (at
+        ten Cate level 1 it would hold 37 MB, 132 bytes per unknown)."""
+        if self._gradient is not None:
+            return self._gradient
+        B = zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self.rows).T.tocsr()
+        if self.gradient_BT is None:
+            self._gradient = B
+        return B
+
+    def apply_gradient(self, p: np.ndarray) -> np.ndarray:
+        """``B p`` for a pressure (n_p,) -> (n_u,): from ``gradient_BT`` cell by cell where it is
+        given (:func:`~fbmflow.solvers.sparse.cell_transposed_matvec`), else the product with
+        :attr:`gradient`."""
+        if self.gradient_BT is None or self.space is None:
+            return matvec(self.gradient, p)
+        out = cell_transposed_matvec(self.gradient_BT, p, self.space.colour_groups, self.space.dim + 1)
+        if self.rows is not None:
+            out[self.rows] = 0.0
+        return out
 
     @property
     def n_u(self) -> int:
@@ -128,7 +148,7 @@ class SaddlePointSystem:
         q = matvec(self.BT, u)
         if self.pressure_block is not None:
             q += self.pressure_block @ p
-        return np.concatenate([matvec(self.A, u) + matvec(self.gradient, p), q])
+        return np.concatenate([matvec(self.A, u) + self.apply_gradient(p), q])
 
     def balance(self, g: np.ndarray) -> np.ndarray:
         """Continuity right-hand side(s) made solvable (:func:`balance_volume`); ``g`` itself when

@@ -86,17 +86,18 @@ PRECISIONS = {"single": np.float32, "double": np.float64}
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.7}  # name -> default damping
 
 
-def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None,
+                     gradient: sp.csr_matrix | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(indptr, indices, data)`` of ``K = [[A, G], [D, C]]`` (the system's blocks, whatever
     their row patterns; ``C`` may be None): int64 row pointers, int32 column indices, ``dtype``
     values, (n_u + n_p + 1,), (nnz,), (nnz,). Velocity rows where ``keep_u`` (n_u,) bool is
-    False are left empty."""
+    False are left empty. ``gradient``: the system's ``G`` where the caller has built it."""
     n_u, n_p = system.n_u, system.n_p
     keep_u = np.ones(n_u, dtype=bool) if keep_u is None else keep_u
     blocks = []
     A = system.A.select(keep_u) if isinstance(system.A, VelocityBlock) else system.A
-    for M, shape in ((A, (n_u, n_u)), (system.gradient, (n_u, n_p)), (system.BT, (n_p, n_u)),
+    G = system.gradient if gradient is None else gradient
+    for M, shape in ((A, (n_u, n_u)), (G, (n_u, n_p)), (system.BT, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else sp.csr_matrix(M)
         blocks += [M.indptr, M.indices, M.data]
@@ -217,8 +218,9 @@ class FactoredVankaSmoother:
             regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
             scalar = _rows_of(A, regular, dtype)
         regular_u = np.tile(regular, d)
-        self.op = (regular, *scalar, *_rows_of(system.gradient, regular_u, dtype),
-                   *saddle_point_csr(system, dtype, ~regular_u))
+        G = system.gradient  # once: a system may build it anew on each access
+        self.op = (regular, *scalar, *_rows_of(G, regular_u, dtype),
+                   *saddle_point_csr(system, dtype, ~regular_u, G))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
         self.schur = np.concatenate([regular[cd[cells]].all(axis=1), np.zeros(len(merged), dtype=bool)])
@@ -230,14 +232,9 @@ class FactoredVankaSmoother:
         self.width = int(sizes.max())
         self.shape = (nl, d, self.width, n_v, n_u)
         self.omega = omega
-        self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
-        self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
-        schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
-        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
-                              4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
         mesh = space.mesh
         index = mesh.cell_indices()
-        reach = np.maximum.reduceat(ordering.unknown_reach(system)[self.dofs], self.ptr[:-1])  # per patch
+        reach = np.maximum.reduceat(ordering.unknown_reach(system, G)[self.dofs], self.ptr[:-1])  # per patch
         near = ordering.near_patches(reach[:cells.size])
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, index, cells[near],
                                       int(reach[:cells.size][near].max(initial=0)))
@@ -254,14 +251,20 @@ class FactoredVankaSmoother:
         plain_interface = self.interface[self.interface < cells.size]
         #: the agglomerated patches in colours that touch nothing of each other (one parallel
         #: phase each), all of them and those at the fictitious boundaries
-        self.merged_phases = self._colour_phases(system, self.merged)
-        self.interface_merged_phases = self._colour_phases(system,
-                                                           self.interface[self.interface >= cells.size])
+        self.merged_phases = self._colour_phases(system, self.merged, G)
+        merged_interface = self.interface[self.interface >= cells.size]
+        self.interface_merged_phases = self._colour_phases(system, merged_interface, G)
         interface_reach = int(reach[plain_interface].max(initial=0))
         self.interface_phases = [(gptr, plain_interface[order]) for gptr, order in ordering.slab_phases(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
+        del G  # before the factors: the set-up's peak holds one of the two
+        self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
+        self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
+        schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
+        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
+                              4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
 
-    def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray) -> list:
+    def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
         """``patches`` (m,) int64 in colours: two patches of one colour never touch an unknown the
         other reads (its rows' columns) or writes (:func:`~fbmflow.solvers._kernels.greedy_colours`
         on that conflict graph, in patch order), so that one colour's patches may be updated at the
@@ -281,7 +284,7 @@ class FactoredVankaSmoother:
         Pu, Pp = P[:, u], P[:, n_u + p]
         A = system.A if isinstance(system.A, VelocityBlock) else sp.csr_matrix(system.A)
         reads_u = Pu @ abs(A[u]) + Pp @ abs(system.BT[p])
-        reads_p = Pu @ abs(system.gradient[u])
+        reads_p = Pu @ abs(gradient[u])
         if system.pressure_block is not None:
             reads_p = reads_p + Pp @ abs(system.pressure_block[p])
         touch = sp.hstack([reads_u, reads_p]).tocsr() @ P.T  # patch i reads what patch j writes
