@@ -65,11 +65,11 @@ SKIP = {
 
 def run_case(case: str, solver: str) -> dict:
     """Run ``case`` with ``solver`` in this process; the row's figures."""
+    import numba
     import numpy as np
 
     import fbmflow.flow.navier_stokes as ns
     import fbmflow.solvers.direct as direct
-    from fbmflow._jit import numba_threads
     from fbmflow.scenes.registry import load_scene
 
     scene_name, level, overrides, steps = CASES[case]
@@ -133,7 +133,8 @@ def run_case(case: str, solver: str) -> dict:
                 matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s / len(reports),
                 total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
                 first_step_s=step_times[0] if step_times else None,
-                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, threads=numba_threads())
+                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+                threads=numba.get_num_threads())
 
 
 def table(rows: list[dict]) -> str:

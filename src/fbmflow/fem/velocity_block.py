@@ -13,7 +13,8 @@ pattern and the constrained rows as a small CSR matrix: 159 bytes per unknown th
 
 It offers what the solvers use of an assembled block: products with vectors and (sparse)
 matrices, rows, the diagonal, the nodes whose ``d`` rows are one scalar row (the Vanka
-smoother's "regular" nodes) and their scalar rows, and :meth:`tocsr` for the direct solvers.
+smoother's "regular" nodes) and their scalar rows, and :meth:`VelocityBlock.tocsr` for the direct
+solvers.
 """
 from __future__ import annotations
 
