@@ -297,31 +297,34 @@ def replace_rows(indptr, indices, data, rows, r_indptr, r_indices, r_data):
 @njit
 def _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq):
     """Velocity ``uq (nq, d)`` and gradient ``gq (nq, d, d)`` (``d u_i / d x_k``) of ``u (d, n_v)``
-    at the quadrature points of cell ``c``; ``ul (d, nl)`` work."""
+    at the quadrature points of cell ``c``, ``d`` 2 or 3; ``ul (d, nl)`` work. One pass over the
+    cell's nodes per point and component, nothing allocated (the kernels call it per cell in
+    parallel loops)."""
     nq, nl = phi.shape
     d = u.shape[0]
     for a in range(nl):
         dof = cell_dofs[c, a]
         for i in range(d):
             ul[i, a] = u[i, dof]
-    gref = np.empty((d, d))
     for q in range(nq):
         for i in range(d):
             s = 0.0
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
             for a in range(nl):
-                s += ul[i, a] * phi[q, a]
+                v = ul[i, a]
+                s += v * phi[q, a]
+                g0 += v * dphi[q, a, 0]
+                g1 += v * dphi[q, a, 1]
+                if d == 3:
+                    g2 += v * dphi[q, a, 2]
             uq[q, i] = s
-            for ax in range(d):
-                s = 0.0
-                for a in range(nl):
-                    s += ul[i, a] * dphi[q, a, ax]
-                gref[i, ax] = s
-        for i in range(d):
-            for k in range(d):
-                s = 0.0
-                for ax in range(d):
-                    s += gref[i, ax] * Jinv[c, q, ax, k]
-                gq[q, i, k] = s
+            for k in range(d):  # reference gradient to physical: sum over the reference axes
+                t = g0 * Jinv[c, q, 0, k] + g1 * Jinv[c, q, 1, k]
+                if d == 3:
+                    t += g2 * Jinv[c, q, 2, k]
+                gq[q, i, k] = t
 
 
 @njit(parallel=True)
