@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 
 from fbmflow.mesh import StructuredMesh
-from fbmflow.solvers import ordering
+from fbmflow.solvers import ordering, vanka
 from fbmflow.solvers.sparse import PARALLEL_NNZ, matvec
 
 
@@ -62,6 +62,7 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     from fbmflow.scenes.cavity import recirculating_state
     from fbmflow.solvers.vanka import FactoredVankaSmoother
     monkeypatch.setattr(ordering, "BLOCK_CELLS", 16)
+    monkeypatch.setattr(vanka, "SERIAL_CELLS", 0)  # the phases in parallel on this small mesh
     monkeypatch.setattr(ordering, "MIN_SLAB_LAYERS", 2)
     monkeypatch.setattr(ordering, "MIN_BLOCK_LAYERS", 2)
     mesh = StructuredMesh.box((24, 16))  # slabs along x, blocks along y
@@ -90,6 +91,11 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     x = np.zeros_like(b)
     for _ in range(2):
         smoother.update(sequential, b, x)
+    assert np.array_equal(out[0], x)
+    # a level below SERIAL_CELLS sweeps its phases on one thread: the same bits
+    smoother.serial = True
+    x = np.zeros_like(b)
+    smoother.smooth(b, x, 2)
     assert np.array_equal(out[0], x)
 
 

@@ -83,6 +83,10 @@ class VankaSmoother:
 
 
 PRECISIONS = {"single": np.float32, "double": np.float64}
+#: levels with fewer cells are swept on one thread, phase after phase without a parallel region:
+#: their phases have one or two groups of short work, and each region's barrier waits for the
+#: slowest thread (beside another busy process, for a whole scheduler tick)
+SERIAL_CELLS = 4096
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.7}  # name -> default damping
 
 
@@ -233,6 +237,8 @@ class FactoredVankaSmoother:
         self.shape = (nl, d, self.width, n_v, n_u)
         self.omega = omega
         mesh = space.mesh
+        #: whether the phases are swept on one thread (:data:`SERIAL_CELLS`)
+        self.serial = mesh.n_cells < SERIAL_CELLS
         index = mesh.cell_indices()
         reach = np.maximum.reduceat(ordering.unknown_reach(system, G)[self.dofs], self.ptr[:-1])  # per patch
         near = ordering.near_patches(reach[:cells.size])
@@ -341,6 +347,12 @@ class FactoredVankaSmoother:
 
     def sweep_phases(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
         """The patches of ``phases`` (:func:`~fbmflow.solvers.ordering.slab_phases`), each phase's
-        slabs in parallel."""
+        slabs in parallel, or, on a level of fewer than :data:`SERIAL_CELLS` cells
+        (:attr:`serial`), one after the other in the same order (the same result: a phase's
+        slabs touch nothing of each other)."""
         for gptr, order in phases:
-            _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
+            if self.serial:
+                _kernels.vanka_sweep_sequential(order[gptr[0]:gptr[-1]], b, x, self.omega, *self._patches,
+                                                *self.op)
+            else:
+                _kernels.vanka_sweep_groups(gptr, order, b, x, self.omega, *self._patches, *self.op)
