@@ -553,6 +553,16 @@ def test_apply_mass_laplace(case):
     assert_rel(out, (K @ u.reshape(space.dim, -1).T).T.ravel())
 
 
+def test_apply_mass_laplace_with_convection_is_the_sum_of_its_terms(case):
+    """The residual's one pass: ``(alpha M + beta L + gamma N(u)) u`` is the products' sum."""
+    from fbmflow.fem import apply_convection, apply_mass_laplace
+    space, _ = case
+    u = np.random.default_rng(44).normal(size=space.n_u)
+    want = apply_mass_laplace(space, 2.0, -0.5, u)
+    apply_convection(space, u, 0.7, want)
+    assert_rel(apply_mass_laplace(space, 2.0, -0.5, u, convection=0.7), want)
+
+
 def test_assemble_mass_laplace(case):
     from fbmflow.fem import assemble_mass_laplace
     space, ref = case

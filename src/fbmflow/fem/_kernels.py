@@ -422,11 +422,13 @@ def velocity_coefficients(u, cell_dofs, phi, detJw):
 
 
 @njit(parallel=True)
-def apply_convection(cells, conv, cell_dofs, phi, dphi, Jinv, w, scale, out):
-    """Add ``scale N(c) w`` to ``out``: ``out[i, a] += scale int phi_a (c · grad) w_i``, for
-    ``w (d, n_v)`` and the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
-    ``|det J| w_q c_k`` (:func:`velocity_coefficients`); cells as in :func:`apply_reaction`;
-    out (d, n_v) float64, updated in place."""
+def apply_cell_operator(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, w, out):
+    """Add ``(alpha M + beta L + gamma N(c)) w_i`` to ``out[i]`` for every component, by quadrature
+    cell by cell, without a matrix: ``alpha int phi_a w_i + beta int grad phi_a . grad w_i + gamma
+    int phi_a (c . grad) w_i``, the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
+    ``|det J| w_q c_k`` (:func:`velocity_coefficients`; not read where ``gamma`` is 0). ``w``,
+    ``out`` (d, n_v) float64; cells (n_groups, length) int64 in parallel groups of DOF-disjoint
+    cells (-1 = padding), each group in order."""
     n_groups, length = cells.shape
     nq, nl = phi.shape
     d = w.shape[0]
@@ -434,54 +436,38 @@ def apply_convection(cells, conv, cell_dofs, phi, dphi, Jinv, w, scale, out):
         wl = np.empty((d, nl))
         wq = np.empty((nq, d))
         gq = np.empty((nq, d, d))
-        fq = np.empty((nq, d))
+        value = np.empty((nq, d))
+        flux = np.empty((nq, d, d))
         for j in range(length):
             c = cells[g, j]
             if c < 0:
                 continue
             _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
-            for q in range(nq):
-                for i in range(d):
-                    s = 0.0
-                    for k in range(d):
-                        s += conv[c, q, k] * gq[q, i, k]
-                    fq[q, i] = s
-            _test(c, fq, phi, cell_dofs, scale, out)
-
-
-@njit(parallel=True)
-def apply_mass_laplace(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, w, out):
-    """Add ``(alpha M + beta L) w_i`` to ``out[i]`` for every component: ``alpha int phi_a w_i +
-    beta int grad phi_a . grad w_i`` by quadrature, cell by cell, without a matrix; ``w``, ``out``
-    (d, n_v) float64; cells in parallel groups of DOF-disjoint cells (-1 = padding) as in
-    :func:`apply_convection`."""
-    n_groups, length = cells.shape
-    nq, nl = phi.shape
-    d = w.shape[0]
-    for g in prange(n_groups):
-        wl = np.empty((d, nl))
-        wq = np.empty((nq, d))
-        gq = np.empty((nq, d, d))
-        flux = np.empty((d, d))
-        for j in range(length):
-            c = cells[g, j]
-            if c < 0:
-                continue
-            _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
-            for q in range(nq):
+            for q in range(nq):  # what each point gives the test functions' values and gradients
                 weight = detJw[c, q]
-                for i in range(d):  # flux[i, l] = sum_k Jinv[l, k] d w_i / d x_k: to the reference axes
-                    for ax in range(d):
-                        s = 0.0
+                for i in range(d):
+                    s = alpha * weight * wq[q, i]
+                    if gamma != 0.0:
+                        t = 0.0
                         for k in range(d):
-                            s += Jinv[c, q, ax, k] * gq[q, i, k]
-                        flux[i, ax] = beta * weight * s
+                            t += conv[c, q, k] * gq[q, i, k]
+                        s += gamma * t
+                    value[q, i] = s
+                    if beta != 0.0:  # beta |det J| w_q grad w_i, to the reference axes
+                        for ax in range(d):
+                            t = 0.0
+                            for k in range(d):
+                                t += Jinv[c, q, ax, k] * gq[q, i, k]
+                            flux[q, i, ax] = beta * weight * t
+            _test(c, value, phi, cell_dofs, 1.0, out)
+            if beta != 0.0:  # tested with the reference gradients
                 for a in range(nl):
                     dof = cell_dofs[c, a]
                     for i in range(d):
-                        s = alpha * weight * phi[q, a] * wq[q, i]
-                        for ax in range(d):
-                            s += dphi[q, a, ax] * flux[i, ax]
+                        s = 0.0
+                        for q in range(nq):
+                            for ax in range(d):
+                                s += dphi[q, a, ax] * flux[q, i, ax]
                         out[i, dof] += s
 
 

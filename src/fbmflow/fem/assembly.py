@@ -179,17 +179,24 @@ def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndar
         DOF-disjoint cells (-1 = padding), e.g. ``space.colour_groups`` with cells masked out
         (:func:`masked_groups`); default all cells in ``space.colour_groups``
     """
-    if conv is None:
+    if cells is not None:
+        groups = [np.asarray(cells, dtype=np.int64)[None, :]]
+    _apply_cells(space, 0.0, 0.0, scale, u, out, conv, groups)
+
+
+def _apply_cells(space: FlowSpace, alpha: float, beta: float, gamma: float, u: np.ndarray, out: np.ndarray,
+                 conv: np.ndarray | None = None, groups: list[np.ndarray] | None = None) -> None:
+    """Add ``(alpha M + beta L + gamma N(c)) u`` to ``out`` (dim * n_v,) in place
+    (:func:`~fbmflow.fem._kernels.apply_cell_operator`; ``c`` from ``conv``, default ``u``)."""
+    if gamma != 0.0 and conv is None:
         conv = velocity_coefficients(space, u)
+    if conv is None:
+        conv = np.zeros((0, 0, 0))
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     target = out.reshape(space.dim, space.n_v)
-    if cells is not None:
-        batches = [np.asarray(cells, dtype=np.int64)[None, :]]
-    else:
-        batches = space.colour_groups if groups is None else groups
-    for batch in batches:
-        _kernels.apply_convection(batch, conv, space.V.cell_dofs, space.phi, space.dphi, space.Jinv, uu,
-                                  scale, target)
+    for batch in space.colour_groups if groups is None else groups:
+        _kernels.apply_cell_operator(batch, space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi,
+                                     alpha, beta, gamma, conv, uu, target)
 
 
 def masked_groups(space: FlowSpace, keep: np.ndarray) -> list[np.ndarray]:
@@ -206,15 +213,13 @@ def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
                                           space.Jinv)
 
 
-def apply_mass_laplace(space: FlowSpace, alpha: float, beta: float, u: np.ndarray) -> np.ndarray:
-    """``(alpha M + beta L) u`` per velocity component, by quadrature cell by cell (no matrix):
-    ``u`` (dim * n_v,) -> (dim * n_v,) float64."""
-    uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
-    out = np.zeros_like(uu)
-    for batch in space.colour_groups:
-        _kernels.apply_mass_laplace(batch, space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi,
-                                    alpha, beta, uu, out)
-    return out.ravel()
+def apply_mass_laplace(space: FlowSpace, alpha: float, beta: float, u: np.ndarray,
+                       convection: float = 0.0) -> np.ndarray:
+    """``(alpha M + beta L + convection N(u)) u`` per velocity component, by quadrature cell by
+    cell in one pass (no matrix): ``u`` (dim * n_v,) -> (dim * n_v,) float64."""
+    out = np.zeros(space.dim * space.n_v)
+    _apply_cells(space, alpha, beta, convection, u, out)
+    return out
 
 
 def apply_reaction(space: FlowSpace, react: np.ndarray, w: np.ndarray, scale: float, out: np.ndarray,

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ..fem import FlowSpace, apply_convection, apply_mass_laplace, assemble_load
+from ..fem import FlowSpace, apply_mass_laplace, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
@@ -170,12 +170,10 @@ class NavierStokesProblem:
 
     # -- operators ----------------------------------------------------------------------------
     def _apply_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
-        """``(m rho M + a (mu L + rho N(u))) u`` for a velocity (dim * n_v,) -> (dim * n_v,); the
-        convection term without a matrix (:func:`~fbmflow.fem.apply_convection`)."""
-        out = apply_mass_laplace(self.space, m * self.rho, a * self.mu, u)
-        if self.convection and a != 0.0:
-            apply_convection(self.space, u, a * self.rho, out)
-        return out
+        """``(m rho M + a (mu L + rho N(u))) u`` for a velocity (dim * n_v,) -> (dim * n_v,), cell by
+        cell in one pass without a matrix (:func:`~fbmflow.fem.apply_mass_laplace`)."""
+        return apply_mass_laplace(self.space, m * self.rho, a * self.mu, u,
+                                  convection=a * self.rho if self.convection else 0.0)
 
     def apply_mass(self, u: np.ndarray) -> np.ndarray:
         """``M u`` (no density) for a velocity (dim * n_v,) -> (dim * n_v,), without a matrix."""
