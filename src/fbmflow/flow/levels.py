@@ -232,7 +232,7 @@ class FlowLevel:
                                      orphans=orphans)
         return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
-                                 rows=rows, gradient_BT=con.constrain_divergence(self.BT, fixed_only=True),
+                                 rows=rows, gradient_BT=self.BT,
                                  extension=con.extension, transient=m != 0.0, orphans=orphans)
 
     def newton_system(self, assembled: SaddlePointSystem, u: np.ndarray, a: float, rho: float,

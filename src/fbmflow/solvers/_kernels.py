@@ -323,6 +323,21 @@ def regular_nodes(a_ptr, a_idx, a_val, n_v, d):
     return out
 
 
+
+@njit
+def crossing_rows(ptr, idx, val, rows, n_v):
+    """Whether each of the CSR rows (k,) of a velocity block (columns component-blocked,
+    ``(i, a)`` at ``i n_v + a``) that stand for the velocity rows ``rows`` (k,) holds a non-zero
+    in another component's columns. (k,) bool."""
+    out = np.zeros(rows.shape[0], dtype=np.bool_)
+    for r in range(rows.shape[0]):
+        own = rows[r] // n_v
+        for j in range(ptr[r], ptr[r + 1]):
+            if val[j] != 0.0 and idx[j] // n_v != own:
+                out[r] = True
+                break
+    return out
+
 # A factored Vanka operator ("op" below) is the saddle-point matrix in three CSR parts:
 #   regular (n_v,) bool; (s_ptr, s_idx, s_val): scalar rows (node columns) of the regular nodes;
 #   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
@@ -386,18 +401,21 @@ def _inverse(K, piv, inv, rel):
 
 
 @njit(parallel=True)
-def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
+def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
                  s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
 
-    * ``schur[k]`` False: the LU factors of ``K[S, S]`` (:func:`_lu_factor`), ``n_k^2`` values;
-    * ``schur[k]`` True, a cell whose nodes are all regular (``S`` = its ``nl`` nodes per
-      component, then its ``d + 1`` pressures): ``K[S, S] = [[I (x) A, B], [D, C]]`` with the
-      scalar block ``A`` (nl, nl) is solved through its Schur complement; stored are ``A^-1``
-      (nl, nl), ``Y = (I (x) A^-1) B`` (d nl, d + 1), ``D`` (d + 1, d nl) and
-      ``(C - D Y)^-1`` (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
+    * ``blocks[k]`` 0: the LU factors of ``K[S, S]`` (:func:`_lu_factor`), ``n_k^2`` values;
+    * ``blocks[k]`` 1 or ``d``, a cell (``S`` = its ``nl`` nodes per component, then its
+      ``d + 1`` pressures) whose velocity rows couple no two components within the cell:
+      ``K[S, S] = [[diag(A_0, .., A_{d-1}), B], [D, C]]`` with the component blocks ``A_i``
+      (nl, nl) is solved through its Schur complement. Stored are the ``blocks[k]`` inverses
+      ``A_i^-1`` (one, ``A_0^-1``, where all components share one scalar block: the cell's nodes
+      are regular; ``d`` where some rows differ, e.g. a symmetry plane's unit rows), then
+      ``Y = diag(A_i^-1) B`` (d nl, d + 1), ``D`` (d + 1, d nl) and ``(C - D Y)^-1``
+      (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
       ``schur_tol``: a pressure mode that the cell's free velocities barely see (a cell with one
       free node among constrained ones) is left uncorrected, as an orphaned one, rather than
       amplifying the rounding of stored single-precision factors.
@@ -409,7 +427,7 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, s
         loc = np.full(k_ptr.shape[0] - 1, -1, dtype=np.int32)  # global -> local position in the patch
         work = np.empty((width, width))
         A = np.empty((nl, nl))
-        Ainv = np.empty((nl, nl))
+        Ainv = np.empty((d, nl, nl))
         Y = np.empty((nu, npl))
         Sc = np.empty((npl, npl))
         Sinv = np.empty((npl, npl))
@@ -425,15 +443,18 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, s
             for a in range(nk):
                 loc[S[a]] = -1
             base = lu_ptr[k]
-            if schur[k]:
-                A[:, :] = K[:nl, :nl]
-                _inverse(A, p_work[:nl], Ainv, 1e-13)
+            nb = blocks[k]
+            if nb > 0:
+                for i in range(nb):
+                    A[:, :] = K[i * nl:(i + 1) * nl, i * nl:(i + 1) * nl]
+                    _inverse(A, p_work[:nl], Ainv[i], 1e-13)
                 for i in range(d):
+                    Ai = Ainv[i if nb > 1 else 0]
                     for a in range(nl):
                         for mm in range(npl):
                             s = 0.0
                             for b in range(nl):
-                                s += Ainv[a, b] * K[i * nl + b, nu + mm]
+                                s += Ai[a, b] * K[i * nl + b, nu + mm]
                             Y[i * nl + a, mm] = s
                 for mm in range(npl):
                     for q in range(npl):
@@ -443,10 +464,11 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, schur, nl, d, n_chunks, width, s
                         Sc[mm, q] = s
                 _inverse(Sc, p_work[:npl], Sinv, schur_tol)
                 pos = base
-                for a in range(nl):
-                    for b in range(nl):
-                        store[pos] = Ainv[a, b]
-                        pos += 1
+                for i in range(nb):
+                    for a in range(nl):
+                        for b in range(nl):
+                            store[pos] = Ainv[i, a, b]
+                            pos += 1
                 for j in range(nu):
                     for mm in range(npl):
                         store[pos] = Y[j, mm]
@@ -496,19 +518,21 @@ def _lu_solve_stored(LU, piv, r, w, out):
 
 
 @njit(fastmath=True)
-def _schur_solve(store, base, nl, d, r, w, out):
-    """The correction of a Schur patch (see :func:`vanka_factor`) from its residual ``r``
-    (d nl + d + 1,) float64 into ``out``; ``w`` float64 work, (d nl + d + 1,). Accumulated in
-    float64 whatever the storage: the continuity rows ``r_p - D z`` cancel."""
+def _schur_solve(store, base, nb, nl, d, r, w, out):
+    """The correction of a Schur patch with ``nb`` stored component inverses (see
+    :func:`vanka_factor`) from its residual ``r`` (d nl + d + 1,) float64 into ``out``; ``w``
+    float64 work, (d nl + d + 1,). Accumulated in float64 whatever the storage: the continuity
+    rows ``r_p - D z`` cancel."""
     npl = d + 1
     nu = d * nl
-    y0 = base + nl * nl
+    y0 = base + nb * nl * nl
     d0 = y0 + nu * npl
     s0 = d0 + npl * nu
-    for i in range(d):  # z = (I (x) A^-1) r_u into w[:nu]
+    for i in range(d):  # z = diag(A_i^-1) r_u into w[:nu]
+        inv = base + (i if nb > 1 else 0) * nl * nl
         for a in range(nl):
             s = 0.0
-            row = base + a * nl
+            row = inv + a * nl
             for b in range(nl):
                 s += store[row + b] * r[i * nl + b]
             w[i * nl + a] = s
@@ -530,7 +554,7 @@ def _schur_solve(store, base, nl, d, r, w, out):
 
 
 @njit
-def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v,
+def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
                      n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
@@ -544,9 +568,16 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
         k = order[e]
         S = dofs[ptr[k]:ptr[k + 1]]
         nk = S.shape[0]
-        if schur[k]:  # the scalar rows of a node serve its d components at once
+        nb = blocks[k]
+        if nb > 0:  # a Schur patch: the scalar row of a regular node serves its d components
             for a in range(nl):
                 node = S[a]
+                if not regular[node]:
+                    for i in range(d):
+                        r[i * nl + a] = b[S[i * nl + a]] - _row_product(S[i * nl + a], x, n_v, n_u, regular,
+                                                                       s_ptr, s_idx, s_val, g_ptr, g_idx,
+                                                                       g_val, k_ptr, k_idx, k_val)
+                    continue
                 for i in range(d):
                     r[i * nl + a] = 0.0
                 for j in range(s_ptr[node], s_ptr[node + 1]):
@@ -563,7 +594,7 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
             for a in range(nu, nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
                                              g_val, k_ptr, k_idx, k_val)
-            _schur_solve(store, lu_ptr[k], nl, d, r, w64, out)
+            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out)
         else:
             for a in range(nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
@@ -575,23 +606,23 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 
 @njit(parallel=True)
-def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
+def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v, n_u,
                        regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
-        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl,
+        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl,
                          d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx,
                          k_val)
 
 
 @njit
-def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d, width, n_v, n_u,
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v, n_u,
                            regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
-    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, schur, nl, d,
+    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d,
                      width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
 
 

@@ -117,7 +117,7 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     A = _unit_rows(A, fixed)
     gradient = _zero_rows(K[:n_u, n_u:].tocsr(), is_fixed)
     BT = zero_columns(K[n_u:, :n_u].tocsr(), fixed)
-    gradient_BT = zero_columns(_standard_pattern(gradient.T.tocsr(), coarse), fixed)
+    gradient_BT = _standard_pattern(gradient.T.tocsr(), coarse)  # B's fixed rows: zero already
     system = SaddlePointSystem(A, BT, coarse.mean_weights, fixed, space, fixed_always=coarse.fixed_always,
                                gradient_BT=gradient_BT, transient=coarse.transient)
     if system.orphans is not None:  # the orphaned modes' continuity equations drop out

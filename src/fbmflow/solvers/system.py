@@ -64,6 +64,11 @@ class SaddlePointSystem:
         (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
         are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
         carry no pressure gradient, and no pressure mode counts as seen through them.
+    gradient_BT : (n_p, n_u) CSR or None, the divergence whose transpose is ``B`` where it differs
+        from ``BT`` (the sharp boundary: ``BT`` holds the continuity rows), in the divergence's
+        cell-local pattern, its constrained columns *not* zeroed (the level's own matrix, shared):
+        ``B``'s rows of ``fixed`` and ``rows`` are zero. None: ``B`` is ``BT`` transposed.
+    extension : the sharp boundary's :class:`~fbmflow.fem.constraints.PressureExtension` or None
     preconditioner : SaddlePointSystem or None, an approximation of this system with its own
         ``coarser`` chain (the Picard linearisation of a Newton system) that an iterative solver
         builds its preconditioner from, applying this system's matrix in the Krylov iteration;
@@ -90,7 +95,7 @@ class SaddlePointSystem:
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
             seen = self.BT if self.gradient_BT is None else self.gradient_BT
-            self.orphans = orphan_pressure_modes(zero_columns(seen, self.rows), self.space.dim + 1,
+            self.orphans = orphan_pressure_modes(zero_columns(seen, self._gradient_zero), self.space.dim + 1,
                                                  closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
@@ -103,17 +108,26 @@ class SaddlePointSystem:
 
     @property
     def gradient(self) -> sp.csr_matrix:
-        """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` transposed, the rows of
-        ``rows`` zeroed. Kept once built, except where ``gradient_BT`` (in the divergence's
+        """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` (or ``gradient_BT``)
+        transposed, the rows of ``rows`` (and of ``fixed``, from ``gradient_BT``) zeroed. Kept once built, except where ``gradient_BT`` (in the divergence's
         cell-local pattern) is given: products then use it transposed (:meth:`apply_gradient`)
         and ``B`` is built anew on each access, for the set-up of smoothers and coarse rows (at
         ten Cate level 1 it would hold 37 MB, 132 bytes per unknown)."""
         if self._gradient is not None:
             return self._gradient
-        B = zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self.rows).T.tocsr()
+        B = zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self._gradient_zero).T.tocsr()
         if self.gradient_BT is None:
             self._gradient = B
         return B
+
+    @cached_property
+    def _gradient_zero(self) -> np.ndarray | None:
+        """The velocity DOFs whose rows of ``B`` are zero, (k,) int64, or None: those of
+        ``rows``, and those of ``fixed`` where ``gradient_BT`` (whose columns are not zeroed)
+        stands for ``B``."""
+        if self.gradient_BT is None or self.fixed is None:
+            return self.rows
+        return self.fixed if self.rows is None else np.union1d(self.fixed, self.rows)
 
     def apply_gradient(self, p: np.ndarray) -> np.ndarray:
         """``B p`` for a pressure (n_p,) -> (n_u,): from ``gradient_BT`` cell by cell where it is
@@ -122,8 +136,8 @@ class SaddlePointSystem:
         if self.gradient_BT is None or self.space is None:
             return matvec(self.gradient, p)
         out = cell_transposed_matvec(self.gradient_BT, p, self.space.colour_groups, self.space.dim + 1)
-        if self.rows is not None:
-            out[self.rows] = 0.0
+        if self._gradient_zero is not None:
+            out[self._gradient_zero] = 0.0
         return out
 
     @property

@@ -217,21 +217,33 @@ class FactoredVankaSmoother:
         if isinstance(system.A, VelocityBlock):
             regular = system.A.regular
             scalar = system.A.scalar_rows(regular, dtype)
+            R = system.A.rows
+            crossing = np.zeros(n_v, dtype=bool)
+            crossing[system.A.dofs[_kernels.crossing_rows(R.indptr, R.indices, R.data, system.A.dofs, n_v)]
+                     % n_v] = True
         else:
             A = sp.csr_matrix(system.A)
             regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
             scalar = _rows_of(A, regular, dtype)
+            rows = np.arange(n_u, dtype=np.int64)
+            crossing = np.zeros(n_v, dtype=bool)
+            crossing[rows[_kernels.crossing_rows(A.indptr, A.indices, A.data, rows, n_v)] % n_v] = True
         regular_u = np.tile(regular, d)
         G = system.gradient  # once: a system may build it anew on each access
         self.op = (regular, *scalar, *_rows_of(G, regular_u, dtype),
                    *saddle_point_csr(system, dtype, ~regular_u, G))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
-        self.schur = np.concatenate([regular[cd[cells]].all(axis=1), np.zeros(len(merged), dtype=bool)])
+        #: per patch the component inverses its Schur factors store (:func:`vanka_factor
+        #: <fbmflow.solvers._kernels.vanka_factor>`): 1 for a cell of regular nodes, ``d`` for a
+        #: cell whose velocity rows couple no two components, 0 (an LU of the whole block) else
+        self.blocks = np.concatenate([np.where(regular[cd[cells]].all(axis=1), 1,
+                                               np.where(crossing[cd[cells]].any(axis=1), 0, d)),
+                                      np.zeros(len(merged), dtype=np.int64)]).astype(np.int64)
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int64)
-        schur_size = nl * nl + 2 * d * nl * npl + npl * npl
-        self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.schur, schur_size,
+        schur_size = self.blocks * nl * nl + 2 * d * nl * npl + npl * npl
+        self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.blocks > 0, schur_size,
                                                               sizes**2))]).astype(np.int64)
         self.width = int(sizes.max())
         self.shape = (nl, d, self.width, n_v, n_u)
@@ -267,7 +279,7 @@ class FactoredVankaSmoother:
         self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
         self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
         schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
-        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.schur, nl, d,
+        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.blocks, nl, d,
                               4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
 
     def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
@@ -308,7 +320,7 @@ class FactoredVankaSmoother:
     def _patches(self) -> tuple:
         """The kernels' patch arguments (:func:`~fbmflow.solvers._kernels.vanka_sweep_groups`)."""
         nl, d, width, n_v, n_u = self.shape
-        return self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.schur, nl, d, width, n_v, n_u
+        return self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.blocks, nl, d, width, n_v, n_u
 
     def _interface_patches(self, system: SaddlePointSystem) -> np.ndarray:
         """Patches (cells and agglomerated ones) holding a constrained velocity (fixed or
