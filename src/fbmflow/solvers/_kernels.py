@@ -606,8 +606,8 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 
 @njit(parallel=True)
-def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v, n_u,
-                       regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
+                       n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
@@ -619,8 +619,8 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
 
 
 @njit
-def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v, n_u,
-                           regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
+                           n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
     _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d,
                      width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)

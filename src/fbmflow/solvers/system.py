@@ -109,13 +109,15 @@ class SaddlePointSystem:
     @property
     def gradient(self) -> sp.csr_matrix:
         """The pressure-gradient block ``B`` (n_u, n_p) CSR: ``B^T`` (or ``gradient_BT``)
-        transposed, the rows of ``rows`` (and of ``fixed``, from ``gradient_BT``) zeroed. Kept once built, except where ``gradient_BT`` (in the divergence's
-        cell-local pattern) is given: products then use it transposed (:meth:`apply_gradient`)
-        and ``B`` is built anew on each access, for the set-up of smoothers and coarse rows (at
-        ten Cate level 1 it would hold 37 MB, 132 bytes per unknown)."""
+        transposed, the rows of ``rows`` (and of ``fixed``, from ``gradient_BT``) zeroed. Kept
+        once built, except where ``gradient_BT`` is given: products then use it transposed
+        (:meth:`apply_gradient`) and ``B`` is built anew on each access, for the set-up of
+        smoothers and coarse rows (at ten Cate level 1 it would hold 37 MB, 132 bytes per
+        unknown)."""
         if self._gradient is not None:
             return self._gradient
-        B = zero_columns(self.BT if self.gradient_BT is None else self.gradient_BT, self._gradient_zero).T.tocsr()
+        source = self.BT if self.gradient_BT is None else self.gradient_BT
+        B = zero_columns(source, self._gradient_zero).T.tocsr()
         if self.gradient_BT is None:
             self._gradient = B
         return B
