@@ -181,10 +181,15 @@ class FactoredVankaSmoother:
         the error the constraints leave is local and rough (the cycle counts they buy:
         docs/validation/).
     symmetric : bool, every second sweep backwards (symmetric Gauss–Seidel) instead of forwards
+    component_blocks : bool
+        Cells whose velocity rows couple no two components but are no one scalar row (a
+        symmetry plane's unit rows) solved through the Schur complement of their ``d``
+        component blocks (True) or by an LU of the whole block (False: 2.5 times their factors'
+        memory, the same corrections to rounding).
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single",
-                 interface_sweeps: int = 2, symmetric: bool = False):
+                 interface_sweeps: int = 2, symmetric: bool = False, component_blocks: bool = True):
         if precision not in PRECISIONS:
             raise ValueError(f"unknown precision {precision!r}; choose one of {sorted(PRECISIONS)}")
         dtype = PRECISIONS[precision]
@@ -237,8 +242,8 @@ class FactoredVankaSmoother:
         #: per patch the component inverses its Schur factors store (:func:`vanka_factor
         #: <fbmflow.solvers._kernels.vanka_factor>`): 1 for a cell of regular nodes, ``d`` for a
         #: cell whose velocity rows couple no two components, 0 (an LU of the whole block) else
-        self.blocks = np.concatenate([np.where(regular[cd[cells]].all(axis=1), 1,
-                                               np.where(crossing[cd[cells]].any(axis=1), 0, d)),
+        separate = ~crossing[cd[cells]].any(axis=1) if component_blocks else np.zeros(cells.size, dtype=bool)
+        self.blocks = np.concatenate([np.where(regular[cd[cells]].all(axis=1), 1, np.where(separate, d, 0)),
                                       np.zeros(len(merged), dtype=np.int64)]).astype(np.int64)
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int64)
