@@ -8,10 +8,10 @@ a sweep?
 Answer: ten Cate level 1 (278 739 unknowns), the last system of the first step: 1 425 of the
 9 130 cell patches of the fine level are such cells (its two mirror planes); their factors go
 from 7 225 to 2 851 values each, the fine level's factors from 92.5 to 67.6 MB (332 -> 242
-bytes per unknown). Four sweeps, 12 timings each in turn in one process: 0.296 against 0.312 s
-(median) on 2 threads, 0.560 against 0.592 s on 1; one sweep's result differs by 4.8e-8
+bytes per unknown). Four sweeps, 12 timings each in turn in one process: 0.299 against 0.312 s
+(median) on 2 threads, 0.562 against 0.582 s on 1; one sweep's result differs by 4.8e-8
 relative (the single-precision factors' rounding).
-Measured: 2026-11-28, commit f88630c; quoted in
+Measured: 2026-11-28, commit b7e7028; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench vanka_patches --threads 2 1 --repeats 12
 
