@@ -292,7 +292,7 @@ def test_scatter_scalar(space):
     ref = _dense_scalar(space, out.copy())
     for cells in _batches(space):
         local = rng.normal(size=(cells.size, nl * nl))
-        _kernels.scatter_scalar(cells, local, space.slots, out)
+        _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, out)
         for e, c in enumerate(cells.ravel()):
             if c < 0:
                 continue
@@ -313,7 +313,7 @@ def test_scatter_coupled(space):
     for cells in _batches(space):
         conv = rng.normal(size=(cells.size, nl * nl))
         react = rng.normal(size=(cells.size * d * d, ia.size))
-        _kernels.scatter_coupled(cells, conv, react, sym, scale, space.slots, space.V.cell_dofs,
+        _kernels.scatter_coupled(cells, conv, react, sym, scale, space.offsets, space.V.cell_dofs,
                                  space.indptr, d, out)
         for e, c in enumerate(cells.ravel()):
             if c < 0:
@@ -394,11 +394,11 @@ def test_patterns(case):
     C = space.coupled_matrix(np.ones(space.dim**2 * space.nnz))
     assert C.has_sorted_indices
     np.testing.assert_array_equal(C.toarray() != 0, np.tile(coupling, (space.dim, space.dim)))
-    # slots point at the (row, col) entry of the pattern
-    rows = np.repeat(np.arange(space.n_v), np.diff(space.indptr))
-    np.testing.assert_array_equal(rows[space.slots], np.broadcast_to(cd[:, :, None], space.slots.shape))
-    np.testing.assert_array_equal(space.indices[space.slots],
-                                  np.broadcast_to(cd[:, None, :], space.slots.shape))
+    # the offsets point at the (row, col) entry of the pattern, within the row
+    slots = space.indptr[cd][:, :, None] + space.offsets
+    assert space.offsets.dtype == np.uint8
+    assert np.all(space.offsets < np.diff(space.indptr)[cd][:, :, None])
+    np.testing.assert_array_equal(space.indices[slots], np.broadcast_to(cd[:, None, :], slots.shape))
 
 
 # -- assembled operators vs dense reference ---------------------------------------------------

@@ -141,16 +141,18 @@ def mass_laplace_coefficients(detJw, Jinv, alpha, beta):
 
 
 @njit(parallel=True)
-def scatter_scalar(cells, local, slots, out):
-    """``out[slots[c, a, b]] += local[e, a * nl + b]`` for a batch of cells.
+def scatter_scalar(cells, local, offsets, cell_dofs, indptr, out):
+    """``out[indptr[cell_dofs[c, a]] + offsets[c, a, b]] += local[e, a * nl + b]`` for a batch
+    of cells.
 
     cells (n_groups, length) int64, -1 = padding; local (n_groups * length, nl * nl) float64 with
-    row ``e = g * length + j`` for ``cells[g, j]``; slots (n_cells, nl, nl) int32 positions in the
-    CSR data of the scalar Q2 pattern; out (nnz,) float64, updated in place. Groups must not share
-    DOFs: they run in parallel, each sequentially.
+    row ``e = g * length + j`` for ``cells[g, j]``; offsets (n_cells, nl, nl) uint8 positions
+    within the rows of the scalar Q2 pattern (``FlowSpace.offsets``), cell_dofs (n_cells, nl)
+    int64, indptr (n + 1,) int64 of that pattern; out (nnz,) float64, updated in place. Groups
+    must not share DOFs: they run in parallel, each sequentially.
     """
     n_groups, length = cells.shape
-    nl = slots.shape[1]
+    nl = offsets.shape[1]
     for g in prange(n_groups):
         for j in range(length):
             c = cells[g, j]
@@ -158,27 +160,29 @@ def scatter_scalar(cells, local, slots, out):
                 continue
             e = g * length + j
             for a in range(nl):
+                start = indptr[cell_dofs[c, a]]
                 for b in range(nl):
-                    out[slots[c, a, b]] += local[e, a * nl + b]
+                    out[start + offsets[c, a, b]] += local[e, a * nl + b]
 
 
 @njit(parallel=True)
-def scatter_coupled(cells, conv, react, sym, scale, slots, cell_dofs, indptr, d, out):
+def scatter_coupled(cells, conv, react, sym, scale, offsets, cell_dofs, indptr, d, out):
     """Scatter ``scale * (delta_ik N + R_ik)`` into the coupled velocity matrix.
 
     The coupled matrix has rows ``(i, r)`` = ``i * n + r`` and, within a row, the columns of
     component 0, then 1, ... each in the order of the scalar pattern. Hence the entry
-    ``(i, r), (k, s)`` sits at ``i d nnz + d indptr[r] + k len_r + (slot_s(r, s) - indptr[r])``.
+    ``(i, r), (k, s)`` sits at ``i d nnz + d indptr[r] + k len_r + offset(r, s)``.
 
     cells (n_groups, length) int64, -1 = padding, groups DOF-disjoint; conv
     (n_groups * length, nl * nl) float64 local convection matrices, row ``e = g * length + j``;
     react (n_groups * length * d * d, n_sym) float64 local Newton blocks, rows ordered (e, i, k),
     stored as upper triangles (they are symmetric in ``a, b``); sym (nl, nl) int64 maps ``(a, b)``
-    to the triangle column; slots (n_cells, nl, nl) int32; cell_dofs (n_cells, nl) int64; indptr
-    (n + 1,) int64 of the scalar pattern; d int; out (d * d * nnz,) float64 updated in place.
+    to the triangle column; offsets (n_cells, nl, nl) uint8 (``FlowSpace.offsets``); cell_dofs
+    (n_cells, nl) int64; indptr (n + 1,) int64 of the scalar pattern; d int; out
+    (d * d * nnz,) float64 updated in place.
     """
     n_groups, length = cells.shape
-    nl = slots.shape[1]
+    nl = offsets.shape[1]
     nnz = indptr[-1]
     for g in prange(n_groups):
         for j in range(length):
@@ -191,10 +195,10 @@ def scatter_coupled(cells, conv, react, sym, scale, slots, cell_dofs, indptr, d,
                 start = indptr[r]
                 ln = indptr[r + 1] - start
                 for i in range(d):
-                    base = i * d * nnz + d * start - start
+                    base = i * d * nnz + d * start
                     row = (e * d + i) * d
                     for b in range(nl):
-                        off = base + slots[c, a, b]
+                        off = base + offsets[c, a, b]
                         t = sym[a, b]
                         for k in range(d):
                             out[off + k * ln] += scale * react[row + k, t]

@@ -53,7 +53,7 @@ def _assemble_scalar(space: FlowSpace, coeff: np.ndarray, table: np.ndarray) -> 
     with single_threaded_blas():
         for cells in space.batches:
             local = coeff[cells.ravel()] @ table
-            _kernels.scatter_scalar(cells, local, space.slots, data)
+            _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
     return data
 
 
@@ -67,7 +67,7 @@ def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.nda
         for cells in space.batches:
             c = cells.ravel()
             local = _kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta) @ table
-            _kernels.scatter_scalar(cells, local, space.slots, data)
+            _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
     return data
 
 
@@ -106,11 +106,12 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
                 cells.ravel(), uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
             local = conv @ space.table_convection
             if newton:
-                _kernels.scatter_coupled(cells, local, react @ mass_upper, sym, scale, space.slots,
+                _kernels.scatter_coupled(cells, local, react @ mass_upper, sym, scale, space.offsets,
                                          space.V.cell_dofs, space.indptr, d, newton_out)
             else:
                 local *= scale
-                _kernels.scatter_scalar(cells, local, space.slots, scalar_out)
+                _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr,
+                                        scalar_out)
 
 
 def expand_to_coupled(space: FlowSpace, out: np.ndarray, alpha: float, X: np.ndarray,

@@ -84,7 +84,12 @@ class FlowSpace:
         self.indptr = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(np.bincount(rows, minlength=n), out=self.indptr[1:])
         self.nnz = int(self.indptr[-1])
-        self.slots = np.searchsorted(unique, keys).astype(np.int32).reshape(-1, nl, nl)
+        if np.diff(self.indptr).max() > 256:
+            raise ValueError("FlowSpace: a pattern row longer than 256 entries")
+        #: (n_cells, nl, nl) uint8: where the pair (a, b) of cell c sits within the scalar
+        #: pattern's row of its node a (entry ``indptr[cell_dofs[c, a]] + offsets[c, a, b]``)
+        self.offsets = (np.searchsorted(unique, keys).reshape(-1, nl, nl)
+                        - self.indptr[cd][:, :, None]).astype(np.uint8)
 
     @cached_property
     def coupled_pattern(self) -> tuple[np.ndarray, np.ndarray]:

@@ -114,9 +114,10 @@ def _solve_dense(K, r, out):
 
 @njit(parallel=True)
 def vanka_full(gptr, order, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_indptr, b_indices, b_data,
-               bt, rank, cell_dofs, pblock, slots):
+               bt, rank, cell_dofs, pblock, offsets):
     """Full Vanka: the cell's whole local saddle-point block ``[[A_cc, B_c], [B_c^T, 0]]``
-    (velocity block read through the slot map ``slots (n_cells, nl, nl)``) solved by LU; cells
+    (velocity block read through the row offsets ``offsets (n_cells, nl, nl)``,
+    ``FlowSpace.offsets``) solved by LU; cells
     and groups as in :func:`vanka_diagonal`."""
     nl = cell_dofs.shape[1]
     npl = d + 1
@@ -137,13 +138,13 @@ def vanka_full(gptr, order, b, x, omega, d, nb, n_v, indptr, indices, a_data, b_
                 start = indptr[dof]
                 ln = indptr[dof + 1] - start
                 for i in range(d):
-                    base = i * nb * nnz + nb * start - start
+                    base = i * nb * nnz + nb * start
                     for k in range(d):
                         if nb == 1 and k != i:
                             continue
                         kk = k if nb > 1 else 0
                         for bb in range(nl):
-                            K[i * nl + a, k * nl + bb] = a_data[base + kk * ln + slots[c, a, bb]]
+                            K[i * nl + a, k * nl + bb] = a_data[base + kk * ln + offsets[c, a, bb]]
                     for m in range(npl):
                         v = bt[(c * npl + m) * d * nl + i * nl + rank[c, a]]
                         K[i * nl + a, d * nl + m] = v

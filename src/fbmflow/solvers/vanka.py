@@ -60,7 +60,7 @@ class VankaSmoother:
                                         diag_inv, space.dim, space.n_v)
             self._extra = (diag_inv, np.linalg.pinv(S + pblock, rcond=1e-12, hermitian=True))
         else:
-            self._extra = (space.slots,)
+            self._extra = (space.offsets,)
         mesh = space.mesh
         reach = int(ordering.unknown_reach(system).max())
         phases = ordering.slab_phases(mesh.shape, mesh.periodic, mesh.cell_indices(), np.arange(mesh.n_cells),
