@@ -6,7 +6,7 @@ import scipy.sparse as sp
 
 from fbmflow.mesh import StructuredMesh
 from fbmflow.solvers import ordering, vanka
-from fbmflow.solvers.sparse import PARALLEL_NNZ, matvec
+from fbmflow.solvers.sparse import PARALLEL_NNZ, matvec, rmatvec
 
 
 def _groups(phases):
@@ -109,6 +109,28 @@ def test_matvec_matches_scipy(n):
     assert (M.nnz >= PARALLEL_NNZ) == (n > 1000)
     assert np.array_equal(matvec(M.tocsr(), x), M @ x)
     assert np.array_equal(matvec(M.tocsc(), x), M.tocsc() @ x)
+
+
+@pytest.mark.parametrize("n", [1000, 3 * PARALLEL_NNZ // 10])
+def test_transposed_matvec_matches_scipy_and_not_the_threads(n):
+    """``M^T x`` without the transpose: SciPy's below the threshold, above it chunks of rows into
+    vectors of their own, added in order: equal to SciPy's to rounding, and the same bits on 1
+    and 2 threads."""
+    import numba
+    rng = np.random.default_rng(4)
+    M = (sp.random(n, n // 4, density=80 / n, format="csr", random_state=rng)
+         + sp.eye(n, n // 4, format="csr")).tocsr()
+    x = rng.standard_normal(n)
+    want = M.T @ x
+    assert (M.nnz >= PARALLEL_NNZ) == (n > 1000)
+    got = rmatvec(M, x)
+    assert np.allclose(got, want, rtol=0.0, atol=1e-13 * np.abs(want).max())
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert np.array_equal(rmatvec(M, x), got)
+    finally:
+        numba.set_num_threads(threads)
 
 
 def _sharp_ball_system(mesh, centre, radius):

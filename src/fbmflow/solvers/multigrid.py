@@ -32,7 +32,7 @@ from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
 from .reports import LinearReport
-from .sparse import matvec
+from .sparse import matvec, rmatvec
 from .system import SaddlePointSystem, expansion
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
@@ -121,15 +121,15 @@ class _Level:
             self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric)
         else:
             self.smoother = VankaSmoother(system, smoother, omega, symmetric=symmetric)
-        # prolongation truncated on the fine DOFs that are no PDE unknowns; restriction its transpose
+        # prolongation truncated on the fine DOFs that are no PDE unknowns; restriction its
+        # transpose, applied from it (:func:`~fbmflow.solvers.sparse.rmatvec`: no second matrix)
         self.P = truncated_prolongation(system, *system.prolongation)
-        self.R = self.P.T.tocsr()
         coarse = system.coarser
         self.coarse_fixed = coarse.fixed if coarse.fixed is not None else np.zeros(0, dtype=np.int64)
         self.coarse_orphans = coarse.orphans
 
     def restrict(self, r: np.ndarray, coarse: "_Level") -> np.ndarray:
-        rc = matvec(self.R, r)
+        rc = rmatvec(self.P, r)
         rc[self.coarse_fixed] = 0.0
         if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
             rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]

@@ -42,6 +42,39 @@ def matvec(M: sp.spmatrix, x: np.ndarray) -> np.ndarray:
     return out
 
 
+#: row chunks of a transposed product (:func:`rmatvec`), each summed into a vector of its own,
+#: the vectors then added in order: the result does not depend on the number of threads
+TRANSPOSED_CHUNKS = 8
+
+
+@njit(parallel=True)
+def _csr_rmatvec(indptr, indices, data, x, parts):
+    """``parts[t] = M[rows of chunk t]^T x[those rows]`` for the CSR arrays of ``M (m, n)``, the
+    ``k`` chunks of rows ``t m // k .. (t + 1) m // k`` in parallel; parts (k, n) float64."""
+    k = parts.shape[0]
+    m = indptr.shape[0] - 1
+    for t in prange(k):
+        part = parts[t]
+        part[:] = 0.0
+        for i in range(t * m // k, (t + 1) * m // k):
+            xi = x[i]
+            for j in range(indptr[i], indptr[i + 1]):
+                part[indices[j]] += data[j] * xi
+
+
+def rmatvec(M: sp.csr_matrix, x: np.ndarray) -> np.ndarray:
+    """``M^T x`` for a CSR ``M (m, n)`` and ``x (m,)`` float64, without the transpose stored: rows
+    in :data:`TRANSPOSED_CHUNKS` chunks in parallel, each into its own (n,) vector (for a
+    restriction, ``n`` a coarse level's size), for a float64 matrix of at least
+    :data:`PARALLEL_NNZ` entries; SciPy's product with the zero-copy transpose otherwise.
+    Returns (n,) float64."""
+    if getattr(M, "format", None) != "csr" or M.nnz < PARALLEL_NNZ or M.dtype != np.float64:
+        return M.T @ x
+    parts = np.empty((TRANSPOSED_CHUNKS, M.shape[1]))
+    _csr_rmatvec(M.indptr, M.indices, M.data, np.ascontiguousarray(x, dtype=np.float64), parts)
+    return parts.sum(axis=0)
+
+
 @njit(parallel=True)
 def _cell_rows_transposed(cells, npl, indptr, indices, data, x, out):
     """``out += M^T x`` for the CSR arrays of ``M (n_cells npl, n)`` whose rows ``c npl .. c npl +
