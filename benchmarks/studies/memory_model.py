@@ -43,7 +43,7 @@ import json, sys, time
 args = json.loads(sys.argv[1])
 if args["breakdown"]:
     import tracemalloc
-    tracemalloc.start(16)
+    tracemalloc.start(64)
 from fbmflow.scenes.registry import load_scene
 from fbmflow.solvers.choice import estimate_memory, peak_resident_memory
 scene, params, level = load_scene(args["scene"], args["level"], args["overrides"])
