@@ -342,6 +342,23 @@ def test_factored_vanka_smooths_the_sharp_boundary():
 
 
 @pytest.mark.parametrize("fbm", ["nodes", "sharp"])
+def test_block_transfers_are_the_truncated_block_matrix(fbm):
+    """Prolongation and restriction from the scalar blocks equal the products with the
+    assembled truncated block prolongation and its transpose; the dropped rows get nothing."""
+    from fbmflow.solvers.galerkin import truncated_prolongation
+    _, system, _ = _ball_system(fbm)
+    fine = system if system.preconditioner is None else system.preconditioner
+    transfer = truncated_prolongation(fine, *fine.prolongation)
+    P = transfer.tocsr()
+    assert P.shape == transfer.shape and not transfer.keep.all()
+    rng = np.random.default_rng(6)
+    e, r = rng.standard_normal(P.shape[1]), rng.standard_normal(P.shape[0])
+    assert np.allclose(transfer.prolongate(e), P @ e, rtol=0.0, atol=1e-14 * np.abs(P @ e).max())
+    assert np.all(transfer.prolongate(e)[~transfer.keep] == 0.0)
+    assert np.allclose(transfer.restrict(r), P.T @ r, rtol=0.0, atol=1e-13 * np.abs(P.T @ r).max())
+
+
+@pytest.mark.parametrize("fbm", ["nodes", "sharp"])
 def test_galerkin_coarse_rows_are_the_truncated_product(fbm):
     """Near the ball the coarse rows are ``P_t^T K P_t`` (elsewhere the re-discretisation equals
     it on nested meshes), and the coarse system is nonsingular."""
@@ -349,7 +366,7 @@ def test_galerkin_coarse_rows_are_the_truncated_product(fbm):
     _, system, _ = _ball_system(fbm, coarse_obstacle="galerkin")
     fine = system if system.preconditioner is None else system.preconditioner  # the hierarchy's top
     coarse = fine.coarser
-    P = truncated_prolongation(fine, *fine.prolongation)
+    P = truncated_prolongation(fine, *fine.prolongation).tocsr()
     G = (P.T @ fine.matrix(bordered=False) @ P).toarray()
     K = coarse.matrix(bordered=False).toarray()
     free = np.ones(K.shape[0], dtype=bool)

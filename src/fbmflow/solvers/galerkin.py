@@ -26,6 +26,7 @@ import scipy.sparse as sp
 from ..fem.constraints import zero_columns
 from . import _kernels
 from .system import SaddlePointSystem
+from .transfer import BlockTransfer
 
 
 def _cell_incidence(cell_dofs: np.ndarray, n_v: int) -> sp.csr_matrix:
@@ -63,22 +64,18 @@ def system_rows(system: SaddlePointSystem, rows: np.ndarray) -> sp.csr_matrix:
 
 
 def truncated_prolongation(system: SaddlePointSystem, P_v: sp.csr_matrix,
-                           P_p: sp.csr_matrix) -> sp.csr_matrix:
+                           P_p: sp.csr_matrix) -> BlockTransfer:
     """The block prolongation ``diag(P_v, ..., P_v, P_p)`` onto ``system``'s level with the rows
-    of the fine DOFs that are no PDE unknowns zeroed: fixed and row-constrained velocities,
-    pressure DOFs in rows of the pressure block (orphaned or continued modes). CSR."""
-    d = system.space.dim
-    P = sp.block_diag([P_v] * d + [P_p], format="csr")
-    keep = np.ones(P.shape[0])
+    of the fine DOFs that are no PDE unknowns dropped: fixed and row-constrained velocities,
+    pressure DOFs in rows of the pressure block (orphaned or continued modes)."""
+    keep = np.ones(system.n_u + system.n_p, dtype=bool)
     for dofs in (system.fixed, system.rows):
         if dofs is not None:
-            keep[dofs] = 0.0
+            keep[dofs] = False
     C = system.pressure_block
     if C is not None:
-        keep[system.n_u + np.flatnonzero(np.diff(sp.csr_matrix(C).indptr))] = 0.0
-    P = sp.diags(keep) @ P
-    P.eliminate_zeros()
-    return P.tocsr()
+        keep[system.n_u + np.flatnonzero(np.diff(sp.csr_matrix(C).indptr))] = False
+    return BlockTransfer(P_v, P_p, keep, system.space.dim)
 
 
 def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P_v: sp.csr_matrix,
@@ -99,7 +96,7 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     zone_u = np.unique(np.concatenate([cd[zone] + i * space.n_v for i in range(d)], axis=None))
     zone_p = (zone[:, None] * npl + np.arange(npl)).ravel()
     zone_rows = np.concatenate([zone_u, n_u + zone_p])
-    Pt = truncated_prolongation(fine, P_v, P_p)
+    Pt = truncated_prolongation(fine, P_v, P_p).tocsr()
     R = Pt.T.tocsr()[zone_rows]                              # (n_zone, n_fine)
     support = np.unique(R.indices)
     G = (R[:, support] @ system_rows(fine, support) @ Pt).tocsr()   # (n_zone, n_coarse)

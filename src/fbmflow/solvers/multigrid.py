@@ -32,7 +32,6 @@ from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
 from .reports import LinearReport
-from .sparse import matvec, rmatvec
 from .system import SaddlePointSystem, expansion
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
@@ -121,22 +120,22 @@ class _Level:
             self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric)
         else:
             self.smoother = VankaSmoother(system, smoother, omega, symmetric=symmetric)
-        # prolongation truncated on the fine DOFs that are no PDE unknowns; restriction its
-        # transpose, applied from it (:func:`~fbmflow.solvers.sparse.rmatvec`: no second matrix)
+        # prolongation truncated on the fine DOFs that are no PDE unknowns, restriction its
+        # transpose: both from the scalar blocks (no block matrix, no transposed copy)
         self.P = truncated_prolongation(system, *system.prolongation)
         coarse = system.coarser
         self.coarse_fixed = coarse.fixed if coarse.fixed is not None else np.zeros(0, dtype=np.int64)
         self.coarse_orphans = coarse.orphans
 
     def restrict(self, r: np.ndarray, coarse: "_Level") -> np.ndarray:
-        rc = rmatvec(self.P, r)
+        rc = self.P.restrict(r)
         rc[self.coarse_fixed] = 0.0
         if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
             rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]
         return rc
 
     def prolongate(self, e: np.ndarray, coarse: "_Level") -> np.ndarray:
-        return matvec(self.P, e)
+        return self.P.prolongate(e)
 
 
 class MultigridHierarchy(Factorization):

@@ -4,8 +4,9 @@
   coarse cell the fine nodes sit at reference coordinates ``{-1, -1/2, 0, 1/2, 1}^dim``).
 * P1disc prolongation: exact, because P1disc is linear in physical coordinates. With coarse frame
   ``(C, S)`` and fine frame ``(c, s)``, ``(x - C)/S = (c - C)/S + (s/S) (x - c)/s``.
-* Restrictions are the transposes. Injection (fine values at the coarse nodes) carries the
-  convecting velocity to coarse levels for re-discretisation.
+* Restrictions are the transposes (:class:`BlockTransfer` applies both to the saddle point's
+  velocity components and pressure from the scalar blocks). Injection (fine values at the
+  coarse nodes) carries the convecting velocity to coarse levels for re-discretisation.
 
 Periodic identification comes with the DOF maps.
 """
@@ -16,6 +17,7 @@ import scipy.sparse as sp
 
 from ..fem.dofmap import DofMap, PressureDofMap
 from ..fem.elements import ElementQ2
+from .sparse import matvec, rmatvec
 
 
 def _fine_lattice_in_coarse_cells(coarse: DofMap) -> tuple[np.ndarray, np.ndarray]:
@@ -65,3 +67,52 @@ def prolongation_p1disc(coarse: PressureDofMap, fine: PressureDofMap) -> sp.csr_
 def injection_q2(coarse: DofMap, fine: DofMap) -> np.ndarray:
     """Fine DOF at every coarse node (coarse nodes are fine nodes): (coarse.n_dofs,) int64."""
     return fine._lattice_to_dof(2 * coarse.lattice)
+
+
+class BlockTransfer:
+    """The transfers between two levels of the saddle-point system, ``d`` velocity components
+    and the pressure: the prolongation ``P = K diag(P_v, ..., P_v, P_p)`` with ``K`` the 0/1
+    diagonal ``keep`` (the fine DOFs that are no PDE unknowns get no correction), and the
+    restriction ``P^T``, applied from the scalar blocks without a block matrix of their own.
+
+    Parameters
+    ----------
+    P_v : (n_v, n_v_coarse) CSR, the scalar Q2 prolongation
+    P_p : (n_p, n_p_coarse) CSR, the P1disc prolongation
+    keep : (d n_v + n_p,) bool, the fine DOFs whose rows of ``P`` are kept
+    dim : int, ``d``
+    """
+
+    def __init__(self, P_v: sp.csr_matrix, P_p: sp.csr_matrix, keep: np.ndarray, dim: int):
+        self.P_v, self.P_p, self.keep, self.dim = sp.csr_matrix(P_v), sp.csr_matrix(P_p), keep, dim
+        self.shape = (dim * P_v.shape[0] + P_p.shape[0], dim * P_v.shape[1] + P_p.shape[1])
+
+    def _blocks(self) -> list[tuple[sp.csr_matrix, slice, slice]]:
+        """``(M, fine rows, coarse rows)`` of each diagonal block."""
+        (nf, nc), (pf, pc) = self.P_v.shape, self.P_p.shape
+        d = self.dim
+        out = [(self.P_v, slice(i * nf, (i + 1) * nf), slice(i * nc, (i + 1) * nc)) for i in range(d)]
+        return out + [(self.P_p, slice(d * nf, d * nf + pf), slice(d * nc, d * nc + pc))]
+
+    def prolongate(self, e: np.ndarray) -> np.ndarray:
+        """``P e`` for a coarse vector (n_coarse,) -> (n_fine,) float64."""
+        out = np.empty(self.shape[0])
+        for M, fine, coarse in self._blocks():
+            out[fine] = matvec(M, np.ascontiguousarray(e[coarse]))
+        out[~self.keep] = 0.0
+        return out
+
+    def restrict(self, r: np.ndarray) -> np.ndarray:
+        """``P^T r`` for a fine vector (n_fine,) -> (n_coarse,) float64."""
+        r = np.where(self.keep, r, 0.0)
+        out = np.empty(self.shape[1])
+        for M, fine, coarse in self._blocks():
+            out[coarse] = rmatvec(M, r[fine])
+        return out
+
+    def tocsr(self) -> sp.csr_matrix:
+        """``P`` assembled, (n_fine, n_coarse) CSR without the dropped rows' entries."""
+        P = sp.diags(self.keep.astype(np.float64)) @ sp.block_diag([self.P_v] * self.dim + [self.P_p],
+                                                                   format="csr")
+        P.eliminate_zeros()
+        return P.tocsr()
