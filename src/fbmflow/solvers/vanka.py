@@ -219,9 +219,16 @@ class FactoredVankaSmoother:
         cells = np.flatnonzero(plain)
         # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
         # and every other row (the kernels' "op")
+        # the scalar rows read where the block holds them (no copy): the scalar operator of a
+        # VelocityBlock with the rows it replaces at regular nodes beside it, or the component-0
+        # rows of an assembled block
         if isinstance(system.A, VelocityBlock):
             regular = system.A.regular
-            scalar = system.A.scalar_rows(regular, dtype)
+            replaced = np.zeros(n_v, dtype=bool)
+            replaced[system.A.dofs % n_v] = True
+            block = system.A
+            scalar = (block.space.indptr, block.space.indices, block.data,
+                      *block.scalar_rows(regular & replaced, np.float64))
             R = system.A.rows
             crossing = np.zeros(n_v, dtype=bool)
             crossing[system.A.dofs[_kernels.crossing_rows(R.indptr, R.indices, R.data, system.A.dofs, n_v)]
@@ -229,7 +236,8 @@ class FactoredVankaSmoother:
         else:
             A = sp.csr_matrix(system.A)
             regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
-            scalar = _rows_of(A, regular, dtype)
+            scalar = (A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
+                      A.data, np.zeros(n_v + 1, dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros(0))
             rows = np.arange(n_u, dtype=np.int64)
             crossing = np.zeros(n_v, dtype=bool)
             crossing[rows[_kernels.crossing_rows(A.indptr, A.indices, A.data, rows, n_v)] % n_v] = True
