@@ -1,10 +1,11 @@
 """The factored Vanka smoother's patches: what the component Schur patches save in memory and
-sweep time.
+sweep time, and what reading the scalar rows from the velocity block costs.
 
 Question: cells at a symmetry plane have unit rows in one velocity component, so their ``d``
 rows are no one scalar row; solved through the Schur complement of their ``d`` component blocks
 instead of an LU of the whole block, how much memory do the local factors need, and how fast is
-a sweep?
+a sweep? And is a sweep slower when it reads the scalar rows from the velocity block (float64)
+instead of a float32 copy (as before eb765b3)?
 Answer: ten Cate level 1 (278 739 unknowns), the last system of the first step: 1 425 of the
 9 130 cell patches of the fine level are such cells (its two mirror planes); their factors go
 from 7 225 to 2 851 values each, the fine level's factors from 92.5 to 67.6 MB (332 -> 242
@@ -17,7 +18,8 @@ Run: python -m fbmbench vanka_patches --threads 2 1 --repeats 12
 
 The scene is built at ``level`` and one time step taken; the last linear system it solved (its
 Picard preconditioner where it has one) gets two factored Vanka smoothers, with and without the
-component blocks (``FactoredVankaSmoother(component_blocks=...)``). For each thread count
+component blocks (``FactoredVankaSmoother(component_blocks=...)``), and a third that is the
+first with a float32 copy of the scalar rows in its operator. For each thread count
 (``numba.set_num_threads``) four sweeps of each are timed in turn, ``repeats`` times.
 
 writes benchmarks/results/vanka_patches.{json,md}: the rows of this run with the machine;
@@ -25,6 +27,7 @@ writes benchmarks/results/vanka_patches.{json,md}: the rows of this run with the
 """
 from __future__ import annotations
 
+import copy
 import json
 import time
 from pathlib import Path
@@ -87,13 +90,22 @@ def run(*, threads: list[int] = (2, 1), scene: str = "ten-cate", level: int = 1,
     system = captured[-1].preconditioner or captured[-1]
     captured.clear()
     smoothers = {name: FactoredVankaSmoother(system, component_blocks=on) for name, on in VARIANTS.items()}
+    block = system.A
+    if hasattr(block, "scalar_rows"):  # a VelocityBlock: the scalar rows copied, as before eb765b3
+        copied = copy.copy(smoothers["component blocks"])
+        n_v = block.space.n_v
+        op = list(copied.op)
+        op[1:7] = [*block.scalar_rows(block.regular, np.float32), np.zeros(n_v + 1, dtype=np.int64),
+                   np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.float32)]
+        copied.op = tuple(op)
+        smoothers["component blocks, scalar rows copied in float32"] = copied
     n = system.n_u + system.n_p
     b = np.random.default_rng(0).standard_normal(n)
     once = {}
     for name, smoother in smoothers.items():
         once[name] = np.zeros(n)
         smoother.smooth(b, once[name], 1)
-    first, second = once.values()
+    first, second = once["component blocks"], once["LU of the whole block"]
     difference = float(np.abs(first - second).max() / np.abs(second).max())
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "vanka_patches.json"

@@ -343,18 +343,12 @@ def crossing_rows(ptr, idx, val, rows, n_v):
 #   regular (n_v,) bool; (s_ptr, s_idx, s_val): scalar rows (node columns) of the regular nodes,
 #   node a's row a (other rows are not read: the scalar operator of a VelocityBlock, or the
 #   component-0 rows of an assembled block, shared), except where (o_ptr, o_idx, o_val), (n_v + 1,)
-#   pointers, hold a row of the node (a regular node whose rows a VelocityBlock replaced);
+#   pointers, hold a row of the node (a regular node whose rows a VelocityBlock replaced). The
+#   kernels branch on the two sources rather than pass the arrays around: a returned array costs
+#   an atomic reference count per row, which threads contend for;
 #   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
 #   velocity rows; (k_ptr, k_idx, k_val): every other row of K (irregular velocity rows, A and G,
 #   and the pressure rows), global columns. Velocity row (i, a) is i n_v + a.
-@njit
-def _scalar_row(node, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val):
-    """The scalar row of the regular ``node``: ``(indices, values, start, end)``."""
-    if o_ptr[node + 1] > o_ptr[node]:
-        return o_idx, o_val, o_ptr[node], o_ptr[node + 1]
-    return s_idx, s_val, s_ptr[node], s_ptr[node + 1]
-
-
 @njit
 def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val,
                  k_ptr, k_idx, k_val):
@@ -362,9 +356,12 @@ def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_v
     s = 0.0
     if q < n_u and regular[q % n_v]:
         a, off = q % n_v, q - q % n_v
-        idx, val, lo, hi = _scalar_row(a, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val)
-        for j in range(lo, hi):
-            s += val[j] * x[off + idx[j]]
+        if o_ptr[a + 1] > o_ptr[a]:
+            for j in range(o_ptr[a], o_ptr[a + 1]):
+                s += o_val[j] * x[off + o_idx[j]]
+        else:
+            for j in range(s_ptr[a], s_ptr[a + 1]):
+                s += s_val[j] * x[off + s_idx[j]]
         for j in range(g_ptr[q], g_ptr[q + 1]):
             s += g_val[j] * x[n_u + g_idx[j]]
     else:
@@ -383,11 +380,16 @@ def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_id
         q = S[a]
         if q < n_u and regular[q % n_v]:
             node, off = q % n_v, q - q % n_v
-            idx, val, lo, hi = _scalar_row(node, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val)
-            for j in range(lo, hi):
-                col = loc[off + idx[j]]
-                if col >= 0:
-                    K[a, col] += val[j]
+            if o_ptr[node + 1] > o_ptr[node]:
+                for j in range(o_ptr[node], o_ptr[node + 1]):
+                    col = loc[off + o_idx[j]]
+                    if col >= 0:
+                        K[a, col] += o_val[j]
+            else:
+                for j in range(s_ptr[node], s_ptr[node + 1]):
+                    col = loc[off + s_idx[j]]
+                    if col >= 0:
+                        K[a, col] += s_val[j]
             for j in range(g_ptr[q], g_ptr[q + 1]):
                 col = loc[n_u + g_idx[j]]
                 if col >= 0:
@@ -597,12 +599,18 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                     continue
                 for i in range(d):
                     r[i * nl + a] = 0.0
-                idx, val, lo, hi = _scalar_row(node, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val)
-                for j in range(lo, hi):
-                    v = val[j]
-                    col = idx[j]
-                    for i in range(d):
-                        r[i * nl + a] += v * x[i * n_v + col]
+                if o_ptr[node + 1] > o_ptr[node]:
+                    for j in range(o_ptr[node], o_ptr[node + 1]):
+                        v = o_val[j]
+                        col = o_idx[j]
+                        for i in range(d):
+                            r[i * nl + a] += v * x[i * n_v + col]
+                else:
+                    for j in range(s_ptr[node], s_ptr[node + 1]):
+                        v = s_val[j]
+                        col = s_idx[j]
+                        for i in range(d):
+                            r[i * nl + a] += v * x[i * n_v + col]
                 for i in range(d):
                     q = i * n_v + node
                     s = r[i * nl + a]
