@@ -344,8 +344,8 @@ def crossing_rows(ptr, idx, val, rows, n_v):
 #   node a's row a (other rows are not read: the scalar operator of a VelocityBlock, or the
 #   component-0 rows of an assembled block, shared), except where (o_ptr, o_idx, o_val), (n_v + 1,)
 #   pointers, hold a row of the node (a regular node whose rows a VelocityBlock replaced). The
-#   kernels branch on the two sources rather than pass the arrays around: a returned array costs
-#   an atomic reference count per row, which threads contend for;
+#   kernels branch on the two sources rather than return a row's arrays from a helper (a
+#   reference count per row);
 #   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
 #   velocity rows; (k_ptr, k_idx, k_val): every other row of K (irregular velocity rows, A and G,
 #   and the pressure rows), global columns. Velocity row (i, a) is i n_v + a.
