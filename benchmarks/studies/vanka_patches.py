@@ -96,10 +96,8 @@ def run(*, threads: list[int] = (2, 1), scene: str = "ten-cate", level: int = 1,
     block = system.A
     if hasattr(block, "scalar_rows"):  # a VelocityBlock: the scalar rows copied, as before eb765b3
         copied = copy.copy(smoothers["component blocks"])
-        n_v = block.space.n_v
         op = list(copied.op)
-        op[1:7] = [*block.scalar_rows(block.regular, np.float32), np.zeros(n_v + 1, dtype=np.int64),
-                   np.zeros(0, dtype=np.int32), np.zeros(0, dtype=np.float32)]
+        op[1:4] = block.scalar_rows(op[0], np.float32)  # the rows of the nodes op[0] marks
         copied.op = tuple(op)
         smoothers["component blocks, scalar rows copied in float32"] = copied
     n = system.n_u + system.n_p

@@ -340,28 +340,21 @@ def crossing_rows(ptr, idx, val, rows, n_v):
     return out
 
 # A factored Vanka operator ("op" below) is the saddle-point matrix in three CSR parts:
-#   regular (n_v,) bool; (s_ptr, s_idx, s_val): scalar rows (node columns) of the regular nodes,
-#   node a's row a (other rows are not read: the scalar operator of a VelocityBlock, or the
-#   component-0 rows of an assembled block, shared), except where (o_ptr, o_idx, o_val), (n_v + 1,)
-#   pointers, hold a row of the node (a regular node whose rows a VelocityBlock replaced). The
-#   kernels branch on the two sources rather than return a row's arrays from a helper (a
-#   reference count per row);
+#   regular (n_v,) bool, the nodes whose d rows are one scalar row held in (s_ptr, s_idx, s_val):
+#   node a's row a, node columns (other rows are not read: the scalar operator of a
+#   VelocityBlock, or the component-0 rows of an assembled block, shared);
 #   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
 #   velocity rows; (k_ptr, k_idx, k_val): every other row of K (irregular velocity rows, A and G,
 #   and the pressure rows), global columns. Velocity row (i, a) is i n_v + a.
 @njit
-def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val,
+def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
                  k_ptr, k_idx, k_val):
     """``(K x)[q]``."""
     s = 0.0
     if q < n_u and regular[q % n_v]:
         a, off = q % n_v, q - q % n_v
-        if o_ptr[a + 1] > o_ptr[a]:
-            for j in range(o_ptr[a], o_ptr[a + 1]):
-                s += o_val[j] * x[off + o_idx[j]]
-        else:
-            for j in range(s_ptr[a], s_ptr[a + 1]):
-                s += s_val[j] * x[off + s_idx[j]]
+        for j in range(s_ptr[a], s_ptr[a + 1]):
+            s += s_val[j] * x[off + s_idx[j]]
         for j in range(g_ptr[q], g_ptr[q + 1]):
             s += g_val[j] * x[n_u + g_idx[j]]
     else:
@@ -371,7 +364,7 @@ def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_v
 
 
 @njit
-def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val,
+def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
                   k_ptr, k_idx, k_val):
     """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
     n = S.shape[0]
@@ -380,16 +373,10 @@ def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_id
         q = S[a]
         if q < n_u and regular[q % n_v]:
             node, off = q % n_v, q - q % n_v
-            if o_ptr[node + 1] > o_ptr[node]:
-                for j in range(o_ptr[node], o_ptr[node + 1]):
-                    col = loc[off + o_idx[j]]
-                    if col >= 0:
-                        K[a, col] += o_val[j]
-            else:
-                for j in range(s_ptr[node], s_ptr[node + 1]):
-                    col = loc[off + s_idx[j]]
-                    if col >= 0:
-                        K[a, col] += s_val[j]
+            for j in range(s_ptr[node], s_ptr[node + 1]):
+                col = loc[off + s_idx[j]]
+                if col >= 0:
+                    K[a, col] += s_val[j]
             for j in range(g_ptr[q], g_ptr[q + 1]):
                 col = loc[n_u + g_idx[j]]
                 if col >= 0:
@@ -419,7 +406,7 @@ def _inverse(K, piv, inv, rel):
 
 @njit(parallel=True)
 def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
-                 s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+                 s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
@@ -455,7 +442,7 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, 
             for a in range(nk):
                 loc[S[a]] = a
             K = work[:nk, :nk]
-            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr,
+            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr,
                           g_idx, g_val, k_ptr, k_idx, k_val)
             for a in range(nk):
                 loc[S[a]] = -1
@@ -572,7 +559,7 @@ def _schur_solve(store, base, nb, nl, d, r, w, out):
 
 @njit
 def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                     n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val, k_ptr,
+                     n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
                      k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
@@ -592,25 +579,17 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                 node = S[a]
                 if not regular[node]:
                     for i in range(d):
-                        r[i * nl + a] = b[S[i * nl + a]] - _row_product(S[i * nl + a], x, n_v, n_u, regular,
-                                                                        s_ptr, s_idx, s_val, o_ptr, o_idx,
-                                                                        o_val, g_ptr, g_idx, g_val, k_ptr,
-                                                                        k_idx, k_val)
+                        q = S[i * nl + a]
+                        r[i * nl + a] = b[q] - _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val,
+                                                            g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
                     continue
                 for i in range(d):
                     r[i * nl + a] = 0.0
-                if o_ptr[node + 1] > o_ptr[node]:
-                    for j in range(o_ptr[node], o_ptr[node + 1]):
-                        v = o_val[j]
-                        col = o_idx[j]
-                        for i in range(d):
-                            r[i * nl + a] += v * x[i * n_v + col]
-                else:
-                    for j in range(s_ptr[node], s_ptr[node + 1]):
-                        v = s_val[j]
-                        col = s_idx[j]
-                        for i in range(d):
-                            r[i * nl + a] += v * x[i * n_v + col]
+                for j in range(s_ptr[node], s_ptr[node + 1]):
+                    v = s_val[j]
+                    col = s_idx[j]
+                    for i in range(d):
+                        r[i * nl + a] += v * x[i * n_v + col]
                 for i in range(d):
                     q = i * n_v + node
                     s = r[i * nl + a]
@@ -618,13 +597,13 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                         s += g_val[j] * x[n_u + g_idx[j]]
                     r[i * nl + a] = b[q] - s
             for a in range(nu, nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx,
-                                             o_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
+                                             g_val, k_ptr, k_idx, k_val)
             _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out)
         else:
             for a in range(nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx,
-                                             o_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
+                                             g_val, k_ptr, k_idx, k_val)
             _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]],
                              r, w, out)
         for a in range(nk):
@@ -633,7 +612,7 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 @njit(parallel=True)
 def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                       n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val, k_ptr,
+                       n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
                        k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
@@ -641,17 +620,17 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
         _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl,
-                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx,
+                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
                          g_val, k_ptr, k_idx, k_val)
 
 
 @njit
 def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                           n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val, k_ptr,
+                           n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
                            k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
     _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d,
-                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, o_ptr, o_idx, o_val, g_ptr, g_idx, g_val,
+                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
                      k_ptr, k_idx, k_val)
 
 

@@ -220,31 +220,33 @@ class FactoredVankaSmoother:
         # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
         # and every other row (the kernels' "op")
         # the scalar rows read where the block holds them (no copy): the scalar operator of a
-        # VelocityBlock with the rows it replaces at regular nodes beside it, or the component-0
-        # rows of an assembled block
+        # VelocityBlock, or the component-0 rows of an assembled block. ``regular``: the nodes
+        # whose d rows are one scalar row (those a Schur patch may share); ``scalar``: those of
+        # them whose row is held there (a VelocityBlock's replaced rows, fully fixed nodes' unit
+        # rows, are read as other rows)
         if isinstance(system.A, VelocityBlock):
-            regular = system.A.regular
-            replaced = np.zeros(n_v, dtype=bool)
-            replaced[system.A.dofs % n_v] = True
             block = system.A
-            scalar = (block.space.indptr, block.space.indices, block.data,
-                      *block.scalar_rows(regular & replaced, np.float64))
-            R = system.A.rows
+            regular = block.regular
+            held = regular.copy()
+            held[block.dofs % n_v] = False
+            scalar_rows = (block.space.indptr, block.space.indices, block.data)
+            R = block.rows
             crossing = np.zeros(n_v, dtype=bool)
-            crossing[system.A.dofs[_kernels.crossing_rows(R.indptr, R.indices, R.data, system.A.dofs, n_v)]
+            crossing[block.dofs[_kernels.crossing_rows(R.indptr, R.indices, R.data, block.dofs, n_v)]
                      % n_v] = True
         else:
             A = sp.csr_matrix(system.A)
             regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
-            scalar = (A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
-                      A.data, np.zeros(n_v + 1, dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros(0))
+            held = regular
+            scalar_rows = (A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
+                           A.data)
             rows = np.arange(n_u, dtype=np.int64)
             crossing = np.zeros(n_v, dtype=bool)
             crossing[rows[_kernels.crossing_rows(A.indptr, A.indices, A.data, rows, n_v)] % n_v] = True
-        regular_u = np.tile(regular, d)
+        held_u = np.tile(held, d)
         G = system.gradient  # once: a system may build it anew on each access
-        self.op = (regular, *scalar, *_rows_of(G, regular_u, dtype),
-                   *saddle_point_csr(system, dtype, ~regular_u, G))
+        self.op = (held, *scalar_rows, *_rows_of(G, held_u, dtype),
+                   *saddle_point_csr(system, dtype, ~held_u, G))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
         #: per patch the component inverses its Schur factors store (:func:`vanka_factor
