@@ -168,9 +168,9 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 1
 #: hierarchy: the scalar velocity operator stored once, :class:`~fbmflow.fem.velocity_block.VelocityBlock`,
 #: instead of the coupled Newton block); fitted, with a margin of 17-31 %, to ten-cate levels
 #: 0 / 1 / 2 (64 547 / 278 739 / 2 012 403 unknowns, one step): 0.38 / 0.75 / 3.74 GB
-#: (``python -m fbmbench memory_model``, benchmarks/results/memory_model.md; level 0 at an
-#: earlier commit, which needed more); level 3 (15.8 M unknowns) then estimates 37 GB where the
-#: steady model says 103 GB
+#: (``python -m fbmbench memory_model``, benchmarks/results/memory_model.md, 3f1af54; level 0
+#: at an earlier commit, which needed more); level 3 (15.8 M unknowns) then estimates 37.7 GB
+#: where the steady model says 103 GB
 TRANSIENT_MODEL = {(3, "multigrid"): (2_000, 2_000_000, 0.08)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
