@@ -10,12 +10,12 @@ Answer: ten Cate level 1 (278 739 unknowns), the last system of the first step: 
 9 130 cell patches of the fine level are such cells (its two mirror planes); their factors go
 from 7 225 to 2 851 values each, the fine level's factors from 92.5 to 67.6 MB (332 -> 242
 bytes per unknown). Four sweeps, 12 timings each in turn in one process: 0.299 against 0.312 s
-(median) on 2 threads, 0.562 against 0.582 s on 1 (b7e7028; in a slower phase of the machine at
-0dcbbb5: 0.342 / 0.357 and 0.697 / 0.700 s); one sweep's result differs by 4.8e-8 relative
-(the single-precision factors' rounding). The scalar rows read from the velocity block in
-float64 instead of a float32 copy (37 MB, 134 bytes per unknown): 0.342 against 0.340 s on 2
-threads, 0.697 against 0.690 s on 1, within the repeats' spread.
-Measured: 2026-11-28, commits b7e7028 and 0dcbbb5; quoted in
+(median) on 2 threads, 0.562 against 0.582 s on 1 (b7e7028; at 67f4d95 0.397 / 0.393 s on 2
+threads, within the repeats' spread of 0.31-0.40 s, and 0.578 / 0.604 s on 1); one sweep's
+result differs by 4.8e-8 relative (the single-precision factors' rounding). The scalar rows
+read from the velocity block in float64 instead of a float32 copy (37 MB, 134 bytes per
+unknown): 0.578 against 0.565 s on 1 thread (2 % slower), 0.397 against 0.392 s on 2.
+Measured: 2026-11-28, commit 67f4d95 (the first comparison also at b7e7028); quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench vanka_patches --threads 2 1 --repeats 12
 
