@@ -49,6 +49,30 @@ def _best(f, repeats: int) -> float:
     return min(times)
 
 
+def last_system(scene: str, level: int):
+    """The last linear system one time step of ``scene`` at ``level`` solved (its Picard
+    preconditioner where it has one): the scene is built, every flow problem hands over the
+    systems it solves, and one step is taken."""
+    import fbmflow.flow.navier_stokes as ns
+    from fbmflow.scenes.registry import load_scene
+
+    captured = []
+    init = ns.NavierStokesProblem.__init__
+
+    def hooked(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.on_linear_solve = lambda report, system: captured.append(system)
+
+    ns.NavierStokesProblem.__init__ = hooked
+    try:
+        sc, params, lvl = load_scene(scene, level, [])
+        setup = sc.build(params, lvl)
+        setup.sim.step(setup.dt)
+    finally:
+        ns.NavierStokesProblem.__init__ = init
+    return captured[-1].preconditioner or captured[-1]
+
+
 def table(rows: list[dict]) -> str:
     lines = ["# One smoothing sweep against threads (python -m fbmbench smoother_threads)", "",
              "Times in ms, best of the repeats, one process per tag; `groups`: groups per phase of the "
@@ -88,23 +112,10 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     import numba
     import numpy as np
 
-    import fbmflow.flow.navier_stokes as ns
-    from fbmflow.scenes.registry import load_scene
     from fbmflow.solvers import ordering
     from fbmflow.solvers.vanka import FactoredVankaSmoother
 
-    captured = []
-    init = ns.NavierStokesProblem.__init__
-
-    def hooked(self, *args, **kwargs):  # every flow problem hands over the systems it solves
-        init(self, *args, **kwargs)
-        self.on_linear_solve = lambda report, system: captured.append(system)
-
-    ns.NavierStokesProblem.__init__ = hooked
-    sc, params, lvl = load_scene(scene, level, [])
-    setup = sc.build(params, lvl)
-    setup.sim.step(setup.dt)
-    system = captured[-1].preconditioner or captured[-1]
+    system = last_system(scene, level)
     smoothers = {"blocks, far set aside": FactoredVankaSmoother(system)}
     block_cells, far_share = ordering.BLOCK_CELLS, ordering.FAR_SHARE
     ordering.BLOCK_CELLS, ordering.FAR_SHARE = 10**18, 0.0  # the slab order: one axis, the widest gap

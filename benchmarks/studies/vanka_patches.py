@@ -35,6 +35,7 @@ import json
 import time
 from pathlib import Path
 
+from studies.smoother_threads import last_system
 from studies.thread_scaling import machine
 
 BENCHMARKS = Path(__file__).resolve().parents[1]
@@ -75,23 +76,9 @@ def run(*, threads: list[int] = (2, 1), scene: str = "ten-cate", level: int = 1,
     import numba
     import numpy as np
 
-    import fbmflow.flow.navier_stokes as ns
-    from fbmflow.scenes.registry import load_scene
     from fbmflow.solvers.vanka import FactoredVankaSmoother
 
-    captured = []
-    init = ns.NavierStokesProblem.__init__
-
-    def hooked(self, *args, **kwargs):  # every flow problem hands over the systems it solves
-        init(self, *args, **kwargs)
-        self.on_linear_solve = lambda report, system: captured.append(system)
-
-    ns.NavierStokesProblem.__init__ = hooked
-    sc, params, lvl = load_scene(scene, level, [])
-    setup = sc.build(params, lvl)
-    setup.sim.step(setup.dt)
-    system = captured[-1].preconditioner or captured[-1]
-    captured.clear()
+    system = last_system(scene, level)
     smoothers = {name: FactoredVankaSmoother(system, component_blocks=on) for name, on in VARIANTS.items()}
     block = system.A
     if hasattr(block, "scalar_rows"):  # a VelocityBlock: the scalar rows copied, as before eb765b3
