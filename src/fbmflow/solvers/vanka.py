@@ -217,13 +217,12 @@ class FactoredVankaSmoother:
             velocity = np.unique(cell_dofs[cluster, :-npl].ravel())
             merged.append(np.concatenate([velocity[free[velocity]], cell_dofs[cluster, -npl:].ravel()]))
         cells = np.flatnonzero(plain)
-        # the operator in three parts: the scalar rows of the regular nodes, their gradient rows,
-        # and every other row (the kernels' "op")
-        # the scalar rows read where the block holds them (no copy): the scalar operator of a
-        # VelocityBlock, or the component-0 rows of an assembled block. ``regular``: the nodes
-        # whose d rows are one scalar row (those a Schur patch may share); ``scalar``: those of
-        # them whose row is held there (a VelocityBlock's replaced rows, fully fixed nodes' unit
-        # rows, are read as other rows)
+        # the operator in three parts (the kernels' "op"): the scalar rows of the nodes ``held``,
+        # read where the block holds them (no copy: a VelocityBlock's scalar operator, or an
+        # assembled block's component-0 rows), their gradient rows, and every other row.
+        # ``regular``: the nodes whose d rows are one scalar row (a Schur patch shares one block
+        # over them); ``held``: those whose row the block's scalar part holds (a VelocityBlock's
+        # replaced rows, the unit rows of fully fixed nodes, are read as other rows)
         if isinstance(system.A, VelocityBlock):
             block = system.A
             regular = block.regular
