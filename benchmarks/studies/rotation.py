@@ -4,13 +4,14 @@ torque-free one turns in simple shear, per resolution.
 Question: how close do the torque on a disk / sphere turning at omega (exact, unbounded:
 4 pi mu a^2 omega / 8 pi mu a^3 omega) and the torque-free rotation rate in simple shear (exact
 in Stokes flow: gamma / 2) come at 4-16 cells per diameter?
-Answer: the free sphere turns at 0.9938 / 0.9933 of gamma / 2 at 4 / 6 cells per diameter in a
-box of 4 diameters and 0.9982 at 4 in a box of 6 (the deficit is the walls'; every estimator
-alike), the disk at 0.993 at 4-16; the turning sphere's torque is within 1 % of the walls' bounds
-at 6 cells per diameter with the volume and test-function forces, 5 % low with the surface force
-(benchmarks/results/rotation.md).
-Measured: 2026-11-28, commit a547da0; quoted in docs/validation/converged-answers.md.
-Run: python -m fbmbench rotation --dim 3 --cells 4 6 --width 4
+Answer: the free sphere turns at 0.9938 / 0.9933 / 0.9934 of gamma / 2 at 4 / 6 / 8 cells per
+diameter in a box of 4 diameters and 0.9982 at 4 in a box of 6 (the deficit is the walls'; every
+estimator alike), the disk at 0.993 at 4-16; the turning sphere's torque is within 1 % of the
+walls' bounds at 6 and 8 cells per diameter with the volume and test-function forces, 5 / 2 % low
+at 6 / 8 with the surface force (benchmarks/results/rotation.md).
+Measured: 2026-11-28, commit a547da0 (8 cells per diameter: commit 1d56541); quoted in
+docs/validation/converged-answers.md.
+Run: python -m fbmbench rotation --dim 3 --cells 4 6 8 --width 4
 
 A ball of diameter 1 sits in the middle of a box of ``width`` diameters, mu = 1, rho = 1e-3 (Re
 below 1e-3), one steady solve per case (Stokes flow is linear):
