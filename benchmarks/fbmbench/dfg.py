@@ -24,6 +24,11 @@ from .common import (
 
 SCENES = ("dfg-2d-1", "dfg-3d-1z")
 QUANTITIES = ("drag_coefficient", "lift_coefficient", "pressure_difference")
+#: each scene's mesh as the rows record it: dfg-2d-1's is ``centred`` (the cylinder's centre on a
+#: node at every level, fbmflow.scenes.dfg.centred_axis) since 2026-11-28; rows from before it
+#: ran on the uniform ``box``
+MESH = {"dfg-2d-1": "centred", "dfg-3d-1z": "graded"}
+OLD_MESH = {"dfg-2d-1": "box", "dfg-3d-1z": "graded"}
 
 
 def run(scene: str, level: int, solver: str = "direct", boundary: str | None = None) -> dict:
@@ -34,6 +39,7 @@ def run(scene: str, level: int, solver: str = "direct", boundary: str | None = N
     q = s["quantities"]
     row = dict(
         level=level,
+        mesh=MESH[scene],
         solver=solver,
         boundary=s["params"]["fbm"]["boundary"],
         cells_per_diameter=q["cells_per_diameter"],
@@ -56,19 +62,25 @@ def run(scene: str, level: int, solver: str = "direct", boundary: str | None = N
     return row
 
 
-def _key(r: dict) -> tuple:
+def _key(scene: str, r: dict) -> tuple:
     """Rows from before the boundary was recorded ran the nodal one."""
-    return r["level"], r.get("solver", "direct"), r.get("boundary", "nodes")
+    return r["level"], r.get("solver", "direct"), r.get("boundary", "nodes"), mesh(scene, r)
+
+
+def mesh(scene: str, r: dict) -> str:
+    """The mesh a row ran on (:data:`MESH`)."""
+    return r.get("mesh", OLD_MESH[scene])
 
 
 def record(scene: str, row: dict) -> list[dict]:
-    rows = merge_row(scene, row, lambda a, b: _key(a) == _key(b))
+    rows = merge_row(scene, row, lambda a, b: _key(scene, a) == _key(scene, b))
     write(scene, rows)
     return rows
 
 
 def write(scene: str, rows: list[dict]) -> None:
-    rows = sorted(rows, key=lambda r: (r.get("boundary", "nodes"), r.get("solver", "direct"), r["level"]))
+    rows = sorted(rows, key=lambda r: (mesh(scene, r) != MESH[scene], r.get("boundary", "nodes"),
+                                       r.get("solver", "direct"), r["level"]))
     the_scene = load_scene(scene)[0]
     refs = ", ".join(f"{k} = {v}" for k, v in the_scene.reference.items())
     lines = [
@@ -78,17 +90,21 @@ def write(scene: str, rows: list[dict]) -> None:
         "(assembly, all Newton "
         "steps and the force evaluation, not the JIT compilation); PARDISO, when installed, takes 3D "
         "systems and 2D ones from 40 000 unknowns. Reproduce a row: `python -m fbmbench dfg "
-        f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`.",
+        f"--scene {scene} --levels L`, or `python -m pytest benchmarks -k {scene.replace('-', '_')}`. "
+        "Mesh: the scene's (" + MESH[scene] + "), or the one it had when the row was measured "
+        "(docstring of fbmbench.dfg.MESH).",
         "",
-        "| boundary | level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D | C_L "
-        "| err C_L | dp | err dp | measured |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| mesh | boundary | level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D "
+        "| C_L | err C_L | dp | err dp | measured |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
-        f"| {r.get('boundary', 'nodes')} | {r['level']} | {r['cells_per_diameter']:.1f} | {r['n_dofs']} | {r['linear_solver']} | "
+        f"| {mesh(scene, r)} | {r.get('boundary', 'nodes')} | {r['level']} | {r['cells_per_diameter']:.1f} | "
+        f"{r['n_dofs']} | {r['linear_solver']} | "
         f"{r['wall_s']:.1f} | {cpu(r)} | "
         f"{r['newton']} | {r['drag_coefficient']:.4f} | {percent(r['drag_coefficient_error'], '.2f')} | "
-        f"{r['lift_coefficient']:+.4f} | {signed(r['lift_coefficient'], the_scene.reference['lift_coefficient'])} | "
+        f"{r['lift_coefficient']:+.4f} | "
+        f"{signed(r['lift_coefficient'], the_scene.reference['lift_coefficient'])} | "
         f"{r['pressure_difference']:.4f} | "
         f"{percent(r.get('pressure_difference_error'), '.2f')} | {r.get('date', 'earlier session')} "
         f"{r.get('commit', '')} |"
@@ -98,7 +114,8 @@ def write(scene: str, rows: list[dict]) -> None:
     plot(scene, rows)
     curves = {}
     for r in rows:
-        curves.setdefault(f"{scene}, {r.get('boundary', 'nodes')}, {r.get('solver', 'direct')} solver", []).append(
+        label = f"{scene}, {mesh(scene, r)} mesh, {r.get('boundary', 'nodes')}, {r.get('solver', 'direct')} solver"
+        curves.setdefault(label, []).append(
             (r["wall_s"], abs(r["drag_coefficient_error"]), f"{r['cells_per_diameter']:g}/D")
         )
     tradeoff_plot(
@@ -126,13 +143,14 @@ def plot(scene: str, rows: list[dict]) -> None:
 
     rows = [r for r in rows if r.get("solver", "direct") == "direct"] or rows
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.6))
-    for boundary in sorted({r.get("boundary", "nodes") for r in rows}):
-        these = [r for r in rows if r.get("boundary", "nodes") == boundary]
+    for kind, boundary in sorted({(mesh(scene, r), r.get("boundary", "nodes")) for r in rows}):
+        these = [r for r in rows if (mesh(scene, r), r.get("boundary", "nodes")) == (kind, boundary)]
         err = [100 * abs(r["drag_coefficient_error"]) for r in these]
         cells = [r["cells_per_diameter"] for r in these]
-        a.loglog(cells, err, "o-", label=f"{boundary} boundary")
+        label = f"{kind} mesh, {boundary} boundary"
+        a.loglog(cells, err, "o-", label=label)
         a.set_xticks(cells, [f"{c:g}" for c in cells])
-        b.loglog([r["wall_s"] for r in these], err, "s-", label=f"{boundary} boundary")
+        b.loglog([r["wall_s"] for r in these], err, "s-", label=label)
         for r, e in zip(these, err):
             b.annotate(
                 f"level {r['level']}", (r["wall_s"], e), textcoords="offset points", xytext=(4, 4), fontsize=8

@@ -20,19 +20,25 @@ import numpy as np
 from fbmflow.config import from_dict
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.scenes import get_scene
-from fbmflow.scenes.dfg import D, H, REFERENCE
+from fbmflow.scenes.dfg import REFERENCE, D, H, centred_axis
 
 
 def mesh(kind: str, level: int) -> StructuredMesh:
     """The 2D channel graded along x about the cylinder and, along y, like dfg-3d-1z
     (``graded``: zone [0.1, 0.3]), with the zone symmetric about the middle (``symmetric``:
-    [0.105, 0.305]) or uniform (``uniform``)."""
+    [0.105, 0.305]) or uniform (``uniform``); or uniform along x and, along y, the scene's
+    (``centred``: the cylinder's centre on a node at every level) or the scene's before it
+    (``box``: uniform, the centre at a quarter, five eighths, ... of a cell)."""
     h = D / 2**level
     x = graded_axis(0.0, 2.2, (0.1, 0.3), h)
     if kind == "graded":
         return StructuredMesh.rectilinear([x, graded_axis(0.0, H, (0.1, 0.3), h)])
     if kind == "symmetric":
         return StructuredMesh.rectilinear([x, graded_axis(0.0, H, (0.105, 0.305), h)])
+    if kind == "centred":
+        return StructuredMesh.rectilinear([np.linspace(0.0, 2.2, 22 * 2**level + 1), centred_axis(level)])
+    if kind == "box":
+        return StructuredMesh.box((22 * 2**level, 4 * 2**level), upper=(2.2, H))
     return StructuredMesh.rectilinear([x, np.linspace(0.0, H, int(round(H / h)) + 1)])
 
 
@@ -43,7 +49,7 @@ def run(*, levels: list[int] = (3, 4), meshes: list[str] = ("graded", "symmetric
     Parameters
     ----------
     levels : cells per diameter 2^level
-    meshes : of graded, symmetric, uniform
+    meshes : of graded, symmetric, uniform, centred (the scene's), box (the scene's before)
     boundaries : of nodes, sharp
     """
     scene = get_scene("dfg-2d-1")
@@ -52,6 +58,6 @@ def run(*, levels: list[int] = (3, 4), meshes: list[str] = ("graded", "symmetric
         for boundary in boundaries:
             for level in levels:
                 q = scene.run(from_dict(scene.Params, {"fbm": {"boundary": boundary}}), level).quantities
-                print(f"{kind} {boundary} level {level} ({2**level} cells/D): C_D {q['drag_coefficient']:.5f} "
-                      f"C_L {q['lift_coefficient']:+.5f} (reference {REFERENCE['lift_coefficient']:+.5f})",
+                print(f"{kind} {boundary} level {level} ({2**level} cells/D): "
+                      f"C_D {q['drag_coefficient']:.5f} C_L {q['lift_coefficient']:+.5f} (reference {REFERENCE['lift_coefficient']:+.5f})",
                       flush=True)
