@@ -4,8 +4,8 @@ Measured values from ``benchmarks/results/dfg-2d-1.md`` and ``dfg-3d-1z.md`` at 
 default boundaries (2D the sharp one, 3D the nodal one) and meshes; each test asserts ``|error|
 <= bound(measured)`` (fbmbench.common.bound), from 16 cells per diameter the 2D lift's sign and at
 32 (dfg-2d-1's default level) its error.
-Times on the 2-core machine: 2D levels 1-4 1-54 s (SuperLU), level 5 86 s on multigrid beside
-another job (``auto`` picks it); 3D levels 1-2 3-13 s, level 3 72 s on multigrid (2.4 GB; the
+Times on the 2-core machine: 2D levels 1-4 0.4-41 s (SuperLU), level 5 30 s on multigrid (2.1 GB;
+``auto`` picks it); 3D levels 1-2 3-13 s, level 3 72 s on multigrid (2.4 GB; the
 direct solver: 135 s with ``pardiso``).
 """
 
