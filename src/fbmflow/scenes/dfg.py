@@ -46,8 +46,8 @@ def centred_axis(level: int) -> np.ndarray:
 
     On the uniform mesh (``4 2^L`` cells of ``H / 2^(L+2)``) the centre sits at another fraction of
     a cell on each level, and the cut-cell forces' error changed sign from level to level (C_D
-    +1.12 / -1.65 / -0.26 / -0.08 %, C_L +0.0093 / +0.0117 at levels 2-5), too irregular for an
-    error estimate (docs/validation/converged-answers.md, "The lift of the DFG cylinder").
+    +1.12 / -1.65 / -0.26 / -0.08 % at levels 2-5, C_L -12 / +10.5 % at levels 4 and 5), too
+    irregular for an error estimate (docs/validation/converged-answers.md, "The lift of the DFG cylinder").
     """
     n = 2**level
     return np.concatenate([np.linspace(0.0, 0.1, n + 1)[:-1], np.linspace(0.1, 0.3, 2 * n + 1)[:-1],
