@@ -13,8 +13,8 @@ resolution of a test (benchmarks/studies/rotation.py measures finer ones).
 import numpy as np
 import pytest
 
-from fbmflow import Simulation
-from fbmflow.coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
+from fbmflow import Simulation, coupling
+from fbmflow.coupling import FixedObstacles, hydrodynamic_forces, node_owner
 from fbmflow.coupling.settings import FictitiousBoundaryParams
 from fbmflow.flow import Dirichlet, NoSlip
 from fbmflow.mesh import StructuredMesh
@@ -41,7 +41,8 @@ def spinning_torque(dim: int, cells_per_diameter: int, width: float, boundary: s
     owner = node_owner(space.V, centre, [ball])
     _, volume = hydrodynamic_forces(space, owner, centre, u, p, mu)
     walls = problem.constraints().fixed
-    tested_force = TestFunctionForces(space, owner, centre, [ball], walls=walls[walls < space.n_v])
+    # the class through its module: imported by name, pytest would try to collect it as a test class
+    tested_force = coupling.TestFunctionForces(space, owner, centre, [ball], walls=walls[walls < space.n_v])
     _, tested = tested_force(u, p, mu, 1e-3)
     radii = np.array([L / 2, L / 2 * np.sqrt(dim)])
     if dim == 2:
