@@ -94,8 +94,8 @@ def write(scene: str, rows: list[dict]) -> None:
         "Mesh: the scene's (" + MESH[scene] + "), or the one it had when the row was measured "
         "(docstring of fbmbench.dfg.MESH).",
         "",
-        "| mesh | boundary | level | cells/D | unknowns | linear solver | wall s | CPU s | Newton | C_D | err C_D "
-        "| C_L | err C_L | dp | err dp | measured |",
+        "| mesh | boundary | level | cells/D | unknowns | linear solver | wall s | CPU s | Newton "
+        "| C_D | err C_D | C_L | err C_L | dp | err dp | measured |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     lines += [
@@ -114,7 +114,8 @@ def write(scene: str, rows: list[dict]) -> None:
     plot(scene, rows)
     curves = {}
     for r in rows:
-        label = f"{scene}, {mesh(scene, r)} mesh, {r.get('boundary', 'nodes')}, {r.get('solver', 'direct')} solver"
+        label = (f"{scene}, {mesh(scene, r)} mesh, {r.get('boundary', 'nodes')}, "
+                 f"{r.get('solver', 'direct')} solver")
         curves.setdefault(label, []).append(
             (r["wall_s"], abs(r["drag_coefficient_error"]), f"{r['cells_per_diameter']:g}/D")
         )

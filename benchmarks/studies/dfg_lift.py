@@ -20,7 +20,7 @@ import numpy as np
 from fbmflow.config import from_dict
 from fbmflow.mesh import StructuredMesh, graded_axis
 from fbmflow.scenes import get_scene
-from fbmflow.scenes.dfg import REFERENCE, D, H, centred_axis
+from fbmflow.scenes.dfg import DFG2D1, REFERENCE, D, H
 
 
 def mesh(kind: str, level: int) -> StructuredMesh:
@@ -36,7 +36,7 @@ def mesh(kind: str, level: int) -> StructuredMesh:
     if kind == "symmetric":
         return StructuredMesh.rectilinear([x, graded_axis(0.0, H, (0.105, 0.305), h)])
     if kind == "centred":
-        return StructuredMesh.rectilinear([np.linspace(0.0, 2.2, 22 * 2**level + 1), centred_axis(level)])
+        return DFG2D1().mesh(level)  # a fresh instance: run() replaces only its own scene's mesh
     if kind == "box":
         return StructuredMesh.box((22 * 2**level, 4 * 2**level), upper=(2.2, H))
     return StructuredMesh.rectilinear([x, np.linspace(0.0, H, int(round(H / h)) + 1)])
@@ -58,6 +58,6 @@ def run(*, levels: list[int] = (3, 4), meshes: list[str] = ("graded", "symmetric
         for boundary in boundaries:
             for level in levels:
                 q = scene.run(from_dict(scene.Params, {"fbm": {"boundary": boundary}}), level).quantities
-                print(f"{kind} {boundary} level {level} ({2**level} cells/D): "
-                      f"C_D {q['drag_coefficient']:.5f} C_L {q['lift_coefficient']:+.5f} (reference {REFERENCE['lift_coefficient']:+.5f})",
+                print(f"{kind} {boundary} level {level} ({2**level} cells/D): C_D {q['drag_coefficient']:.5f} "
+                      f"C_L {q['lift_coefficient']:+.5f} (reference {REFERENCE['lift_coefficient']:+.5f})",
                       flush=True)

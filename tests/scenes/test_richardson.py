@@ -63,7 +63,7 @@ def test_estimate_error_runs_the_coarser_levels_and_writes_the_estimates(tmp_pat
 
 def test_dfg_2d1_default_level_meets_its_targets_and_estimates_its_error(tmp_path):
     """dfg-2d-1 at its default level 5 (32 cells per diameter, the sharp boundary on the mesh that
-    centres the cylinder) with ``--estimate-error`` (levels 3-5, about 50 s): C_D -0.09 % and C_L
+    centres the cylinder) with ``--estimate-error`` (levels 3-5, about a minute): C_D -0.09 % and C_L
     -3.5 % measured, within the targets of 0.3 % and 5 %; the estimates of C_D's and Δp's errors
     1.00x and 1.10x the actual errors, within the factor 2 asserted. The lift's estimate is 0.43x
     its error (docs/validation/converged-answers.md, "Error estimates"): not asserted. On the
