@@ -52,11 +52,24 @@ class FlowSpace:
         self.phi, self.dphi = self.V.element.tabulate(self.points)
         _, dN = ElementQ1(d).tabulate(self.points)
         coords = mesh.cell_coordinates()
-        self.detJw, self.Jinv = _kernels.cell_geometry(coords, dN, self.weights)
-        self.xq = mesh.map_to_physical(self.points)  # (n_cells, nq, d)
-        self.psi = self.Q.element.tabulate(self.xq, self.Q.centre[:, None, :], self.Q.scale[:, None, :])
+        self.detJw, Jinv = _kernels.cell_geometry(coords, dN, self.weights)
+        #: (n_cells, nq, d, d) float64 ``d xi / d x`` at the quadrature points: a read-only view of
+        #: one matrix per cell where every cell's map is affine (the structured boxes)
+        self.Jinv = _uniform_along(Jinv, axis=1)
+        #: (n_cells, nq, d + 1) float64 pressure basis at the quadrature points: a read-only
+        #: view of one table where every cell's is the same (cells whose map is affine and
+        #: diagonal: the P1disc frame is then the reference coordinates)
+        self.psi = _uniform_along(self.Q.element.tabulate(self.xq, self.Q.centre[:, None, :],
+                                                          self.Q.scale[:, None, :]), axis=0)
         self.batch_size = batch_size or (4096 if d == 2 else 512)
         self._build_pattern()
+
+    @property
+    def xq(self) -> np.ndarray:
+        """The quadrature points in physical coordinates, (n_cells, nq, d) float64, computed on
+        each access (a body force's load and the volume force's set-up read them; held, they
+        were 650 bytes per cell)."""
+        return self.mesh.map_to_physical(self.points)
 
     @staticmethod
     def estimate_dofs(mesh: StructuredMesh) -> int:
@@ -227,3 +240,13 @@ class FlowSpace:
     def __repr__(self) -> str:
         return (f"FlowSpace(dim={self.dim}, cells={self.mesh.n_cells}, n_v={self.n_v}, "
                 f"n_p={self.n_p}, n_dofs={self.n_dofs})")
+
+
+def _uniform_along(a: np.ndarray, axis: int, rtol: float = 1e-13) -> np.ndarray:
+    """``a`` itself, or, where its slices along ``axis`` all equal the first one to ``rtol``
+    of ``a``'s largest entry, a read-only broadcast view of that slice with ``a``'s shape (the
+    memory of one slice: the cell geometry of a structured box mesh is 27 times smaller)."""
+    first = np.take(a, [0], axis=axis)
+    if a.size == 0 or np.abs(a - first).max() > rtol * np.abs(a).max():
+        return a
+    return np.broadcast_to(first.copy(), a.shape)

@@ -339,35 +339,58 @@ def crossing_rows(ptr, idx, val, rows, n_v):
                 break
     return out
 
-# A factored Vanka operator ("op" below) is the saddle-point matrix in three CSR parts:
-#   regular (n_v,) bool, the nodes whose d rows are one scalar row held in (s_ptr, s_idx, s_val):
-#   node a's row a, node columns (other rows are not read: the scalar operator of a
-#   VelocityBlock, or the component-0 rows of an assembled block, shared);
-#   (g_ptr, g_idx, g_val): the pressure-gradient rows (pressure columns) of the regular
-#   velocity rows; (k_ptr, k_idx, k_val): every other row of K (irregular velocity rows, A and G,
-#   and the pressure rows), global columns. Velocity row (i, a) is i n_v + a.
+# A factored Vanka operator ("op" below) is the saddle-point matrix in four parts, none of them
+# a copy of the system's blocks:
+#   held (n_v,) bool, the nodes whose d velocity rows are one scalar row held in
+#   (s_ptr, s_idx, s_val): node a's row a, node columns (the scalar operator of a VelocityBlock,
+#   or the component-0 rows of an assembled block, shared);
+#   their pressure-gradient rows, read from the divergence in its cell-local pattern
+#   (nc_ptr, nc_cell, nc_rank, gt): node a lies in the cells nc_cell[nc_ptr[a]:nc_ptr[a + 1]], at
+#   position nc_rank among each one's nodes in ascending order, and ``B[(i, a), c (d + 1) + m] =
+#   gt[c, m, i nl + nc_rank]`` (gt (n_cells, d + 1, d nl): the divergence's values, a view);
+#   (d_ptr, d_idx, d_val): the continuity rows (the system's B^T, velocity columns);
+#   (k_ptr, k_idx, k_val): every other row of K (the velocity rows of the other nodes, A and G,
+#   and the pressure block's rows), global columns. Velocity row (i, a) is i n_v + a.
 @njit
-def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
-                 k_ptr, k_idx, k_val):
+def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
+    """``(B p)[(i, node)]`` for a held node, ``p = x[n_u:]``, from the divergence's cells."""
+    npl, w = gt.shape[1], gt.shape[2]
+    nl = w // (npl - 1)
+    s = 0.0
+    for j in range(nc_ptr[node], nc_ptr[node + 1]):
+        c = nc_cell[j]
+        col = i * nl + nc_rank[j]
+        for m in range(npl):
+            s += gt[c, m, col] * x[n_u + c * npl + m]
+    return s
+
+
+@njit
+def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
+                 d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
     """``(K x)[q]``."""
     s = 0.0
     if q < n_u and regular[q % n_v]:
         a, off = q % n_v, q - q % n_v
         for j in range(s_ptr[a], s_ptr[a + 1]):
             s += s_val[j] * x[off + s_idx[j]]
-        for j in range(g_ptr[q], g_ptr[q + 1]):
-            s += g_val[j] * x[n_u + g_idx[j]]
+        s += _gradient_dot(a, q // n_v, x, n_u, nc_ptr, nc_cell, nc_rank, gt)
     else:
         for j in range(k_ptr[q], k_ptr[q + 1]):
             s += k_val[j] * x[k_idx[j]]
+        if q >= n_u:
+            for j in range(d_ptr[q - n_u], d_ptr[q - n_u + 1]):
+                s += d_val[j] * x[d_idx[j]]
     return s
 
 
 @njit
-def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
-                  k_ptr, k_idx, k_val):
+def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
+                  d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
     """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
     n = S.shape[0]
+    npl, w = gt.shape[1], gt.shape[2]
+    nl = w // (npl - 1)
     K[:, :] = 0.0
     for a in range(n):
         q = S[a]
@@ -377,15 +400,23 @@ def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_id
                 col = loc[off + s_idx[j]]
                 if col >= 0:
                     K[a, col] += s_val[j]
-            for j in range(g_ptr[q], g_ptr[q + 1]):
-                col = loc[n_u + g_idx[j]]
-                if col >= 0:
-                    K[a, col] += g_val[j]
+            i = q // n_v
+            for j in range(nc_ptr[node], nc_ptr[node + 1]):
+                c = nc_cell[j]
+                for m in range(npl):
+                    col = loc[n_u + c * npl + m]
+                    if col >= 0:
+                        K[a, col] += gt[c, m, i * nl + nc_rank[j]]
         else:
             for j in range(k_ptr[q], k_ptr[q + 1]):
                 col = loc[k_idx[j]]
                 if col >= 0:
                     K[a, col] += k_val[j]
+            if q >= n_u:
+                for j in range(d_ptr[q - n_u], d_ptr[q - n_u + 1]):
+                    col = loc[d_idx[j]]
+                    if col >= 0:
+                        K[a, col] += d_val[j]
 
 
 @njit
@@ -406,7 +437,7 @@ def _inverse(K, piv, inv, rel):
 
 @njit(parallel=True)
 def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
-                 s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr, k_idx, k_val):
+                 s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
@@ -442,8 +473,8 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, 
             for a in range(nk):
                 loc[S[a]] = a
             K = work[:nk, :nk]
-            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr,
-                          g_idx, g_val, k_ptr, k_idx, k_val)
+            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
+                          d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
             for a in range(nk):
                 loc[S[a]] = -1
             base = lu_ptr[k]
@@ -559,8 +590,8 @@ def _schur_solve(store, base, nb, nl, d, r, w, out):
 
 @njit
 def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                     n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
-                     k_idx, k_val):
+                     n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
+                     k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
     residual is taken."""
@@ -569,6 +600,7 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
     w64 = np.empty(width)
     out = np.empty(width)
     nu = d * nl
+    npl = d + 1
     for e in range(start, end):
         k = order[e]
         S = dofs[ptr[k]:ptr[k + 1]]
@@ -581,7 +613,8 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                     for i in range(d):
                         q = S[i * nl + a]
                         r[i * nl + a] = b[q] - _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val,
-                                                            g_ptr, g_idx, g_val, k_ptr, k_idx, k_val)
+                                                            nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
+                                                            k_ptr, k_idx, k_val)
                     continue
                 for i in range(d):
                     r[i * nl + a] = 0.0
@@ -590,20 +623,23 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                     col = s_idx[j]
                     for i in range(d):
                         r[i * nl + a] += v * x[i * n_v + col]
+                for j in range(nc_ptr[node], nc_ptr[node + 1]):  # the gradient, cell by cell
+                    c = nc_cell[j]
+                    rank = nc_rank[j]
+                    for m in range(npl):
+                        pm = x[n_u + c * npl + m]
+                        for i in range(d):
+                            r[i * nl + a] += gt[c, m, i * nl + rank] * pm
                 for i in range(d):
-                    q = i * n_v + node
-                    s = r[i * nl + a]
-                    for j in range(g_ptr[q], g_ptr[q + 1]):
-                        s += g_val[j] * x[n_u + g_idx[j]]
-                    r[i * nl + a] = b[q] - s
+                    r[i * nl + a] = b[i * n_v + node] - r[i * nl + a]
             for a in range(nu, nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
-                                             g_val, k_ptr, k_idx, k_val)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
+                                              nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
             _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out)
         else:
             for a in range(nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
-                                             g_val, k_ptr, k_idx, k_val)
+                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
+                                              nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
             _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]],
                              r, w, out)
         for a in range(nk):
@@ -612,26 +648,26 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 @njit(parallel=True)
 def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                       n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
-                       k_idx, k_val):
+                       n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
+                       k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
         _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl,
-                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx,
-                         g_val, k_ptr, k_idx, k_val)
+                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
+                         d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
 
 
 @njit
 def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                           n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val, k_ptr,
-                           k_idx, k_val):
+                           n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx,
+                           d_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
     _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d,
-                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, g_ptr, g_idx, g_val,
-                     k_ptr, k_idx, k_val)
+                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
+                     d_idx, d_val, k_ptr, k_idx, k_val)
 
 
 @njit(parallel=True)

@@ -91,17 +91,20 @@ VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.
 
 
 def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None,
-                     gradient: sp.csr_matrix | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     gradient: sp.csr_matrix | None = None,
+                     continuity: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(indptr, indices, data)`` of ``K = [[A, G], [D, C]]`` (the system's blocks, whatever
     their row patterns; ``C`` may be None): int64 row pointers, int32 column indices, ``dtype``
     values, (n_u + n_p + 1,), (nnz,), (nnz,). Velocity rows where ``keep_u`` (n_u,) bool is
-    False are left empty. ``gradient``: the system's ``G`` where the caller has built it."""
+    False are left empty, and the continuity block ``D`` where ``continuity`` is False (the
+    pressure rows then hold ``C`` only). ``gradient``: the system's ``G`` where the caller has
+    built it."""
     n_u, n_p = system.n_u, system.n_p
     keep_u = np.ones(n_u, dtype=bool) if keep_u is None else keep_u
     blocks = []
     A = system.A.select(keep_u) if isinstance(system.A, VelocityBlock) else system.A
     G = system.gradient if gradient is None else gradient
-    for M, shape in ((A, (n_u, n_u)), (G, (n_u, n_p)), (system.BT, (n_p, n_u)),
+    for M, shape in ((A, (n_u, n_u)), (G, (n_u, n_p)), (system.BT if continuity else None, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else sp.csr_matrix(M)
         blocks += [M.indptr, M.indices, M.data]
@@ -136,14 +139,30 @@ def _clusters(system: SaddlePointSystem, npl: int) -> list[np.ndarray]:
     return [np.flatnonzero(label == part) for part in np.flatnonzero(size > 1)]
 
 
-def _rows_of(M: sp.csr_matrix, keep: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR arrays of the rows ``keep`` (n_rows,) bool of ``M`` (the other rows empty): int64
-    pointers, int32 indices, ``dtype`` values."""
-    lengths = np.diff(M.indptr[:keep.size + 1])
-    sel = np.repeat(keep, lengths)
-    ptr = np.concatenate([[0], np.cumsum(np.where(keep, lengths, 0))]).astype(np.int64)
-    end = M.indptr[keep.size]
-    return ptr, M.indices[:end][sel].astype(np.int32), M.data[:end][sel].astype(dtype)
+def _cell_gradient(system: SaddlePointSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The gradient rows of the free velocity DOFs as the kernels read them from the divergence
+    in its cell-local pattern (``gradient_BT``, else ``BT``; see the operator's layout in
+    :mod:`fbmflow.solvers._kernels`): ``(nc_ptr (n_v + 1,) int64, nc_cell int32, nc_rank uint8,
+    gt (n_cells, d + 1, d nl) float64)``, ``gt`` a view of the divergence's values. Raises
+    ValueError where the divergence is not in that pattern."""
+    space = system.space
+    cd = space.V.cell_dofs
+    n_cells, nl = cd.shape
+    d, n_v = space.dim, space.n_v
+    npl, width = d + 1, d * nl
+    source = system.gradient_BT if system.gradient_BT is not None else system.BT
+    flat = cd.ravel()
+    order = np.argsort(flat, kind="stable")
+    nc_cell = (order // nl).astype(np.int32)
+    nc_rank = space.local_rank.ravel()[order].astype(np.uint8)
+    nc_ptr = np.zeros(n_v + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=n_v), out=nc_ptr[1:])
+    uniform = (source.shape[0] == n_cells * npl and source.nnz == source.shape[0] * width
+               and np.array_equal(source.indptr, np.arange(source.shape[0] + 1) * width))
+    if not uniform or not np.array_equal(source.indices[nc_cell.astype(np.int64) * (npl * width) + nc_rank],
+                                         flat[order]):
+        raise ValueError("the factored Vanka smoother needs the divergence in its cell-local pattern")
+    return nc_ptr, nc_cell, nc_rank, source.data.reshape(n_cells, npl, width)
 
 
 class FactoredVankaSmoother:
@@ -217,12 +236,14 @@ class FactoredVankaSmoother:
             velocity = np.unique(cell_dofs[cluster, :-npl].ravel())
             merged.append(np.concatenate([velocity[free[velocity]], cell_dofs[cluster, -npl:].ravel()]))
         cells = np.flatnonzero(plain)
-        # the operator in three parts (the kernels' "op"): the scalar rows of the nodes ``held``,
-        # read where the block holds them (no copy: a VelocityBlock's scalar operator, or an
-        # assembled block's component-0 rows), their gradient rows, and every other row.
+        # the operator in four parts (the kernels' "op"), three of them the system's own arrays:
+        # the scalar rows of the nodes ``held``, read where the block holds them (a
+        # VelocityBlock's scalar operator, or an assembled block's component-0 rows), their
+        # gradient rows from the divergence cell by cell, the continuity rows from ``B^T``, and
+        # a copy of every other row (the other velocity rows, the pressure block).
         # ``regular``: the nodes whose d rows are one scalar row (a Schur patch shares one block
-        # over them); ``held``: those whose row the block's scalar part holds (a VelocityBlock's
-        # replaced rows, the unit rows of fully fixed nodes, are read as other rows)
+        # over them); ``held``: those whose row the block's scalar part holds and whose gradient
+        # rows are the divergence's (the constrained nodes' rows are read as other rows)
         if isinstance(system.A, VelocityBlock):
             block = system.A
             regular = block.regular
@@ -236,16 +257,21 @@ class FactoredVankaSmoother:
         else:
             A = sp.csr_matrix(system.A)
             regular = _kernels.regular_nodes(A.indptr, A.indices, A.data, n_v, d)
-            held = regular
+            held = regular.copy()
             scalar_rows = (A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int32, copy=False),
                            A.data)
             rows = np.arange(n_u, dtype=np.int64)
             crossing = np.zeros(n_v, dtype=bool)
             crossing[rows[_kernels.crossing_rows(A.indptr, A.indices, A.data, rows, n_v)] % n_v] = True
+        for dofs in (system.fixed, system.rows):
+            if dofs is not None:
+                held[dofs % n_v] = False
         held_u = np.tile(held, d)
         G = system.gradient  # once: a system may build it anew on each access
-        self.op = (held, *scalar_rows, *_rows_of(G, held_u, dtype),
-                   *saddle_point_csr(system, dtype, ~held_u, G))
+        BT = system.BT
+        self.op = (held, *scalar_rows, *_cell_gradient(system),
+                   BT.indptr.astype(np.int64, copy=False), BT.indices, BT.data,
+                   *saddle_point_csr(system, dtype, ~held_u, G, continuity=False))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
         #: per patch the component inverses its Schur factors store (:func:`vanka_factor
