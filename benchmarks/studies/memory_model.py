@@ -4,17 +4,16 @@ Question: how close is the memory guard's estimate (``fbmflow.solvers.choice.est
 to the peak a run measures, in 2D and 3D at three sizes, and which arrays hold the memory of a
 3D particle time step?
 Answer: the process's peak after one step of ten-cate at levels 0 / 1 / 2 (64 547 / 278 739 /
-2 012 403 unknowns, multigrid) is 0.38 / 0.91 / 4.89 GB, 5 870 / 3 277 / 2 429 bytes per
-unknown (0.48 / 1.27 / 7.63 GB at commit 1775983, before the velocity block was stored once per
-scalar and the mass, Laplace and fine gradient matrices were dropped); a process's peak varies
-by a few per cent between runs. The guard's time-step model (fitted to these) estimates
-1.15-1.41 times that. glowinski-free-fall at levels 2 / 3 / 4 (SuperLU): 0.28 / 0.53 / 1.49 GB.
-After one ten Cate level-1 step NumPy and SciPy hold 0.647 GB (2 323 bytes per unknown; 1.02 GB
-at 1775983): the smoother's factors 107 MB and its float32 copy of the rows about 100 MB, the
-scalar velocity operator 39 MB, the divergence and its copies about 85 MB, the space's patterns
-about 85 MB, the transfers about 50 MB.
-Measured: 2026-11-28, commit a1bb209 (ten-cate levels 1 and 2, the breakdown; the other rows at
-c34e364); quoted in docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
+2 012 403 unknowns, multigrid) is 0.38 / 0.68 / 3.08 GB, 5 870 / 2 448 / 1 532 bytes per
+unknown (0.48 / 1.27 / 7.63 GB at commit 1775983); a process's peak varies by a few per cent
+between runs. The guard's time-step model (fitted to these) estimates 1.15-1.26 times that.
+glowinski-free-fall at levels 2 / 3 / 4 (SuperLU): 0.28 / 0.53 / 1.49 GB. After one ten Cate
+level-1 step NumPy and SciPy hold 0.400 GB (1 433 bytes per unknown; 1.02 GB at 1775983): the
+smoother's factors 76 MB, the scalar velocity operator 39 MB, the divergence and its constrained
+copy about 72 MB, the space's geometry and patterns about 42 MB.
+Measured: 2026-11-28, commit a94f062 (ten-cate levels 1 and 2, the breakdown; level 0 at
+a1bb209, the glowinski rows at c34e364); quoted in
+docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench memory_model
 
 Every case is one process, one after the other: the scene is built at its level, ``steps`` time

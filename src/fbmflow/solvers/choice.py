@@ -166,12 +166,12 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 1
                 (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (6_500, 280_000, 0.0)}
 #: the same for the time steps of particle scenes where they need less (multigrid's Picard
 #: hierarchy: the scalar velocity operator stored once, :class:`~fbmflow.fem.velocity_block.VelocityBlock`,
-#: instead of the coupled Newton block); fitted, with a margin of 17-31 %, to ten-cate levels
-#: 0 / 1 / 2 (64 547 / 278 739 / 2 012 403 unknowns, one step): 0.38 / 0.75 / 3.74 GB
-#: (``python -m fbmbench memory_model``, benchmarks/results/memory_model.md, 3f1af54; level 0
-#: at an earlier commit, which needed more); level 3 (15.8 M unknowns) then estimates 37.7 GB
-#: where the steady model says 103 GB
-TRANSIENT_MODEL = {(3, "multigrid"): (2_000, 2_000_000, 0.08)}
+#: instead of the coupled Newton block); fitted, with a margin of 15-18 %, to ten-cate levels
+#: 1 / 2 (278 739 / 2 012 403 unknowns, one step): 0.68 / 3.08 GB (``python -m fbmbench
+#: memory_model``, benchmarks/results/memory_model.md, a94f062; level 0, 0.38 GB at an earlier
+#: commit, gets 26 %); level 3 (15.8 M unknowns) then estimates 30.2 GB where the steady model
+#: says 103 GB
+TRANSIENT_MODEL = {(3, "multigrid"): (1_600, 2_000_000, 0.08)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
 #: peak memory per unknown of each response the implicit coupling keeps [bytes]: about ten float64
