@@ -249,4 +249,4 @@ def _uniform_along(a: np.ndarray, axis: int, rtol: float = 1e-13) -> np.ndarray:
     first = np.take(a, [0], axis=axis)
     if a.size == 0 or np.abs(a - first).max() > rtol * np.abs(a).max():
         return a
-    return np.broadcast_to(first.copy(), a.shape)
+    return np.broadcast_to(first, a.shape)  # np.take made ``first`` a copy
