@@ -7,7 +7,7 @@ import pytest
 
 from fbmflow.solvers import DirectSolver
 from fbmflow.solvers import system as system_module
-from fbmflow.solvers.system import _rank_deficient
+from fbmflow.solvers.system import _rank_deficient, _without_modes
 
 
 def test_the_gram_prefilter_decides_as_the_svd():
@@ -32,6 +32,28 @@ def test_the_gram_prefilter_decides_as_the_svd():
         ref = (np.linalg.svd(blocks[pick], compute_uv=False) <= threshold).any(axis=1)
         assert ref.any() and not ref.all()
         assert np.array_equal(_rank_deficient(blocks[pick], threshold), ref)
+
+
+@pytest.mark.parametrize("cells", [[1], [0, 2]])
+def test_removing_the_modes_keeps_the_divergence_pattern_where_it_can(cells):
+    """``B^T - C B^T`` for a projector ``C`` onto one mode: on ``B^T``'s own index arrays when the
+    mode lives on one cell (its rows change within their pattern), a new matrix when it spans two
+    cells that share no velocity (cells 0 and 2); the values equal the dense product either way."""
+    import scipy.sparse as sp
+    rng = np.random.default_rng(3)
+    npl, width, n_cells = 3, 6, 3
+    cols = np.repeat(3 * np.arange(n_cells)[:, None] + np.arange(width), npl, axis=0)  # cells overlap
+    BT = sp.csr_matrix((rng.normal(size=cols.size), cols.ravel(), np.arange(0, cols.size + 1, width)),
+                       shape=(n_cells * npl, 3 * n_cells + 3))
+    q = np.zeros(BT.shape[0])
+    for c in cells:
+        q[c * npl:(c + 1) * npl] = rng.normal(size=npl)
+    q /= np.linalg.norm(q)
+    C = sp.csr_matrix(np.outer(q, q))
+    out = _without_modes(BT, C)
+    assert np.allclose(out.toarray(), BT.toarray() - C.toarray() @ BT.toarray(), rtol=0, atol=1e-14)
+    assert np.shares_memory(out.indices, BT.indices) == (len(cells) == 1)
+    assert not np.shares_memory(out.data, BT.data)
 
 
 @pytest.mark.parametrize("sharp", [False, True])

@@ -334,20 +334,23 @@ def _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq):
 @njit(parallel=True)
 def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv):
     """``|det J| w_q d u_i / d x_k`` at every cell's quadrature points, (n_cells, nq, d, d)
-    float64, for ``u (d, n_v)``; cell_dofs (n_cells, nl) int64, phi (nq, nl), dphi (nq, nl, d)
-    reference tabulation, detJw (n_cells, nq), Jinv (n_cells, nq, d, d)."""
+    float32 (computed in float64, stored rounded: a Jacobian's term, where 1e-7 relative changes
+    only the Newton step's convergence, not its residual), for ``u (d, n_v)``; cell_dofs
+    (n_cells, nl) int64, phi (nq, nl), dphi (nq, nl, d) reference tabulation, detJw
+    (n_cells, nq), Jinv (n_cells, nq, d, d)."""
     n_cells, nl = cell_dofs.shape
     nq = phi.shape[0]
     d = u.shape[0]
-    react = np.empty((n_cells, nq, d, d))
+    react = np.empty((n_cells, nq, d, d), dtype=np.float32)
     for c in prange(n_cells):
         ul = np.empty((d, nl))
         uq = np.empty((nq, d))
-        _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, react[c])
+        gq = np.empty((nq, d, d))
+        _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq)
         for q in range(nq):
             for i in range(d):
                 for k in range(d):
-                    react[c, q, i, k] *= detJw[c, q]
+                    react[c, q, i, k] = gq[q, i, k] * detJw[c, q]
     return react
 
 
@@ -386,7 +389,7 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
     applied without a matrix, ``out[i, a] += scale sum_q phi_a(q) sum_k react[c, q, i, k] w_k(q)``.
 
     cells (n_groups, length) int64, -1 = padding, groups DOF-disjoint (they run in parallel, each
-    sequentially); react (n_cells, nq, d, d) float64, ``|det J| w_q d u_i / d x_k``; cell_dofs
+    sequentially); react (n_cells, nq, d, d) float32 or float64, ``|det J| w_q d u_i / d x_k``; cell_dofs
     (n_cells, nl) int64; phi (nq, nl); w (d, n_v) float64; out (d, n_v) float64, updated in place.
     """
     n_groups, length = cells.shape

@@ -436,8 +436,9 @@ def _inverse(K, piv, inv, rel):
 
 
 @njit(parallel=True)
-def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, schur_tol, n_v, n_u, regular,
-                 s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
+def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks, width, schur_tol, n_v,
+                 n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr,
+                 k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
@@ -449,8 +450,9 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, 
       (nl, nl) is solved through its Schur complement. Stored are the ``blocks[k]`` inverses
       ``A_i^-1`` (one, ``A_0^-1``, where all components share one scalar block: the cell's nodes
       are regular; ``d`` where some rows differ, e.g. a symmetry plane's unit rows), then
-      ``Y = diag(A_i^-1) B`` (d nl, d + 1), ``D`` (d + 1, d nl) and ``(C - D Y)^-1``
-      (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
+      ``Y = diag(A_i^-1) B`` (d nl, d + 1), ``D`` (d + 1, d nl) unless ``d_read[k]`` (then
+      the solve reads ``D`` from the continuity rows, :func:`continuity_in_patch_order`) and
+      ``(C - D Y)^-1`` (d + 1, d + 1), the last through :func:`_inverse` with the pivot tolerance
       ``schur_tol``: a pressure mode that the cell's free velocities barely see (a cell with one
       free node among constrained ones) is left uncorrected, as an orphaned one, rather than
       amplifying the rounding of stored single-precision factors.
@@ -508,10 +510,11 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, 
                     for mm in range(npl):
                         store[pos] = Y[j, mm]
                         pos += 1
-                for mm in range(npl):
-                    for j in range(nu):
-                        store[pos] = K[nu + mm, j]
-                        pos += 1
+                if not d_read[k]:
+                    for mm in range(npl):
+                        for j in range(nu):
+                            store[pos] = K[nu + mm, j]
+                            pos += 1
                 for mm in range(npl):
                     for q in range(npl):
                         store[pos] = Sinv[mm, q]
@@ -521,6 +524,34 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, nl, d, n_chunks, width, 
                 for a in range(nk):
                     for b in range(nk):
                         store[base + a * nk + b] = K[a, b]
+
+
+@njit
+def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_ptr, d_idx):
+    """Whether each Schur patch's (``blocks[k] > 0``) continuity rows, those of its pressures
+    ``dofs[ptr[k] + nu:]`` in the CSR ``(d_ptr, d_idx)``, hold exactly its velocities
+    ``dofs[ptr[k]:ptr[k] + nu]``, in that order (a cell's rows of the divergence in its
+    cell-local pattern, the patch's nodes in ascending order): its ``D`` is then those rows'
+    values. (n_patches,) bool."""
+    m = ptr.shape[0] - 1
+    out = np.zeros(m, dtype=np.bool_)
+    for k in range(m):
+        if blocks[k] <= 0 or ptr[k + 1] - ptr[k] != nu + npl:
+            continue
+        ok = True
+        for mm in range(npl):
+            row = dofs[ptr[k] + nu + mm] - n_u
+            if d_ptr[row + 1] - d_ptr[row] != nu or (mm > 0 and row != dofs[ptr[k] + nu] - n_u + mm):
+                ok = False
+                break
+            for j in range(nu):
+                if d_idx[d_ptr[row] + j] != dofs[ptr[k] + j]:
+                    ok = False
+                    break
+            if not ok:
+                break
+        out[k] = ok
+    return out
 
 
 @njit(fastmath=True)
@@ -553,16 +584,17 @@ def _lu_solve_stored(LU, piv, r, w, out):
 
 
 @njit(fastmath=True)
-def _schur_solve(store, base, nb, nl, d, r, w, out):
+def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, d_ptr, d_val):
     """The correction of a Schur patch with ``nb`` stored component inverses (see
     :func:`vanka_factor`) from its residual ``r`` (d nl + d + 1,) float64 into ``out``; ``w``
     float64 work, (d nl + d + 1,). Accumulated in float64 whatever the storage: the continuity
-    rows ``r_p - D z`` cancel."""
+    rows ``r_p - D z`` cancel. ``p_row``: the first of the patch's continuity rows in ``(d_ptr,
+    d_val)`` where ``D`` is read from them (in the patch's order), -1 where it is stored."""
     npl = d + 1
     nu = d * nl
     y0 = base + nb * nl * nl
     d0 = y0 + nu * npl
-    s0 = d0 + npl * nu
+    s0 = d0 + npl * nu if p_row < 0 else d0
     for i in range(d):  # z = diag(A_i^-1) r_u into w[:nu]
         inv = base + (i if nb > 1 else 0) * nl * nl
         for a in range(nl):
@@ -573,8 +605,13 @@ def _schur_solve(store, base, nb, nl, d, r, w, out):
             w[i * nl + a] = s
     for mm in range(npl):  # t = r_p - D z into w[nu:]
         s = 0.0
-        for j in range(nu):
-            s += store[d0 + mm * nu + j] * w[j]
+        if p_row < 0:
+            for j in range(nu):
+                s += store[d0 + mm * nu + j] * w[j]
+        else:
+            first = d_ptr[p_row + mm]
+            for j in range(nu):
+                s += d_val[first + j] * w[j]
         w[nu + mm] = r[nu + mm] - s
     for mm in range(npl):  # p = (C - D Y)^-1 t
         s = 0.0
@@ -589,9 +626,9 @@ def _schur_solve(store, base, nb, nl, d, r, w, out):
 
 
 @njit
-def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                     n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
-                     k_ptr, k_idx, k_val):
+def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
+                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
+                     d_idx, d_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
     residual is taken."""
@@ -635,7 +672,8 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
             for a in range(nu, nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
                                               nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
-            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out)
+            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, d_ptr,
+                         d_val)
         else:
             for a in range(nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
@@ -647,27 +685,27 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 
 @njit(parallel=True)
-def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                       n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
-                       k_ptr, k_idx, k_val):
+def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
+                       width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
+                       d_idx, d_val, k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
     the number of threads."""
     for g in prange(gptr.shape[0] - 1):
-        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl,
-                         d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                         d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
+        _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks,
+                         d_read, nl, d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell,
+                         nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
 
 
 @njit
-def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d, width, n_v,
-                           n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx,
+def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, width,
+                           n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx,
                            d_val, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
-    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, nl, d,
-                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
-                     d_idx, d_val, k_ptr, k_idx, k_val)
+    _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read,
+                     nl, d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
+                     d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
 
 
 @njit(parallel=True)

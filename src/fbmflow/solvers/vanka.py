@@ -216,8 +216,10 @@ class FactoredVankaSmoother:
         d, npl, n_u, n_v = space.dim, space.dim + 1, system.n_u, space.n_v
         cd = space.V.cell_dofs
         n_cells, nl = cd.shape
-        cell_dofs = np.concatenate([cd + i * n_v for i in range(d)]
+        nodes = np.sort(cd, axis=1)  # a cell patch's nodes ascending: its divergence rows' order
+        cell_dofs = np.concatenate([nodes + i * n_v for i in range(d)]
                                    + [n_u + np.arange(n_cells)[:, None] * npl + np.arange(npl)], axis=1)
+        del nodes
         plain = np.ones(n_cells, dtype=bool)
         merged = []
         if system.extension is not None:
@@ -282,7 +284,12 @@ class FactoredVankaSmoother:
                                       np.zeros(len(merged), dtype=np.int64)]).astype(np.int64)
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int64)
-        schur_size = self.blocks * nl * nl + 2 * d * nl * npl + npl * npl
+        #: per patch whether its Schur factors leave ``D`` out, the solve reading it from the
+        #: continuity rows (a cell whose rows are the divergence's in its own pattern; ten Cate
+        #: level 2: 46 bytes per unknown)
+        self.d_read = _kernels.continuity_in_patch_order(self.ptr, self.dofs, self.blocks, d * nl, npl, n_u,
+                                                         *self.op[8:10])
+        schur_size = self.blocks * nl * nl + d * nl * npl * (2 - self.d_read) + npl * npl
         self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.blocks > 0, schur_size,
                                                               sizes**2))]).astype(np.int64)
         self.width = int(sizes.max())
@@ -319,8 +326,9 @@ class FactoredVankaSmoother:
         self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
         self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
         schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
-        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.blocks, nl, d,
-                              4 * numba_threads(), self.width, schur_tol, n_v, n_u, *self.op)
+        _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.blocks,
+                              self.d_read, nl, d, 4 * numba_threads(), self.width, schur_tol, n_v, n_u,
+                              *self.op)
 
     def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
         """``patches`` (m,) int64 in colours: two patches of one colour never touch an unknown the
@@ -360,7 +368,8 @@ class FactoredVankaSmoother:
     def _patches(self) -> tuple:
         """The kernels' patch arguments (:func:`~fbmflow.solvers._kernels.vanka_sweep_groups`)."""
         nl, d, width, n_v, n_u = self.shape
-        return self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.blocks, nl, d, width, n_v, n_u
+        return (self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.blocks, self.d_read, nl, d,
+                width, n_v, n_u)
 
     def _interface_patches(self, system: SaddlePointSystem) -> np.ndarray:
         """Patches (cells and agglomerated ones) holding a constrained velocity (fixed or
