@@ -38,13 +38,15 @@ def test_the_gram_prefilter_decides_as_the_svd():
 def test_removing_the_modes_keeps_the_divergence_pattern_where_it_can(cells):
     """``B^T - C B^T`` for a projector ``C`` onto one mode: on ``B^T``'s own index arrays when the
     mode lives on one cell (its rows change within their pattern), a new matrix when it spans two
-    cells that share no velocity (cells 0 and 2); the values equal the dense product either way."""
+    cells that share no velocity (cells 0 and 2); the values equal the dense product either way,
+    and the other rows keep their entries, an explicit zero (a wall's zeroed column) included."""
     import scipy.sparse as sp
     rng = np.random.default_rng(3)
     npl, width, n_cells = 3, 6, 3
     cols = np.repeat(3 * np.arange(n_cells)[:, None] + np.arange(width), npl, axis=0)  # cells overlap
     BT = sp.csr_matrix((rng.normal(size=cols.size), cols.ravel(), np.arange(0, cols.size + 1, width)),
                        shape=(n_cells * npl, 3 * n_cells + 3))
+    BT.data[npl * width + 4] = 0.0  # cell 1's first row
     q = np.zeros(BT.shape[0])
     for c in cells:
         q[c * npl:(c + 1) * npl] = rng.normal(size=npl)
@@ -53,6 +55,9 @@ def test_removing_the_modes_keeps_the_divergence_pattern_where_it_can(cells):
     out = _without_modes(BT, C)
     assert np.allclose(out.toarray(), BT.toarray() - C.toarray() @ BT.toarray(), rtol=0, atol=1e-14)
     assert np.shares_memory(out.indices, BT.indices) == (len(cells) == 1)
+    other = np.setdiff1d(np.arange(n_cells), cells)
+    rows = (npl * other[:, None] + np.arange(npl)).ravel()
+    assert np.array_equal(np.diff(out.indptr)[rows], np.diff(BT.indptr)[rows])
     assert not np.shares_memory(out.data, BT.data)
 
 

@@ -35,6 +35,34 @@ def zero_columns(BT: sp.csr_matrix, columns: np.ndarray | None) -> sp.csr_matrix
     return sp.csr_matrix((np.where(mask[BT.indices], 0.0, BT.data), BT.indices, BT.indptr), shape=BT.shape)
 
 
+def splice_rows(M: sp.csr_matrix, rows: np.ndarray, R: sp.csr_matrix) -> sp.csr_matrix:
+    """``M`` (CSR, sorted indices) with its rows ``rows`` (k,) int64, ascending, replaced by those
+    of ``R`` (k, n): on a copy of ``M``'s values and ``M``'s own index arrays where ``R``'s
+    entries lie in ``M``'s pattern, else a new matrix. Either way every other row keeps its
+    entries, explicit zeros included (a SciPy sum drops them), so that the divergence's rows
+    stay in its cell-local pattern. Sorted indices."""
+    R = sp.csr_matrix(R)
+    R.sum_duplicates()
+    R.sort_indices()
+    data = M.data.copy()
+    if M.has_sorted_indices and _kernels.replace_rows(M.indptr, M.indices, data, rows, R.indptr, R.indices,
+                                                      R.data):
+        return sp.csr_matrix((data, M.indices, M.indptr), shape=M.shape)
+    counts = np.diff(M.indptr)
+    keep = np.ones(M.shape[0], dtype=bool)
+    keep[rows] = False
+    old = np.repeat(keep, counts)
+    counts[rows] = np.diff(R.indptr)
+    indptr = np.zeros(M.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    new = np.repeat(keep, counts)
+    indices = np.empty(indptr[-1], dtype=M.indices.dtype)
+    values = np.empty(indptr[-1])
+    indices[new], values[new] = M.indices[old], M.data[old]
+    indices[~new], values[~new] = R.indices, R.data
+    return sp.csr_matrix((values, indices, indptr), shape=M.shape)
+
+
 @dataclass(frozen=True)
 class RowConstraints:
     """Linear constraints ``(C u)_k = g_k``, one per constrained velocity DOF.
@@ -133,12 +161,13 @@ class PressureExtension:
         return out
 
     def transfer_matrix(self, BT: sp.csr_matrix) -> sp.csr_matrix:
-        """The same on the rows of ``B^T`` (n_p, n_u): a new CSR matrix, sorted indices."""
-        keep = np.ones(BT.shape[0])
-        keep[self.dofs] = 0.0
-        out = (sp.diags(keep) @ (BT + self.matrix.T @ BT)).tocsr()
-        out.sort_indices()
-        return out
+        """The same on the rows of ``B^T`` (n_p, n_u, sorted indices): a new CSR matrix whose
+        unchanged rows are ``BT``'s (:func:`splice_rows`), sorted indices."""
+        ET = self.matrix.T.tocsr()
+        rows = np.union1d(self.dofs, np.flatnonzero(np.diff(ET.indptr)))
+        keep = np.ones(rows.size)
+        keep[np.isin(rows, self.dofs)] = 0.0
+        return splice_rows(BT, rows, sp.diags(keep) @ (BT[rows] + ET[rows] @ BT))
 
     def residual(self, p: np.ndarray) -> np.ndarray:
         """``s (p - E p)`` on ``dofs``, (k,)."""

@@ -22,8 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
-from ..fem._kernels import replace_rows
-from ..fem.constraints import zero_columns
+from ..fem.constraints import splice_rows, zero_columns
 from ..fem.velocity_block import VelocityBlock
 from .sparse import cell_transposed_matvec, matvec
 
@@ -203,22 +202,13 @@ class SaddlePointSystem:
 
 
 def _without_modes(BT: sp.csr_matrix, orphans: sp.csr_matrix) -> sp.csr_matrix:
-    """``B^T - C B^T`` (``C`` the orphans' projector, (n_p, n_p)): a copy of ``BT``'s values on
-    ``BT``'s own index arrays where the changed rows (those of the modes' pressures) fit its
-    pattern, as they do for modes within cells or clusters of cells that share their velocities'
-    columns; else a new matrix. Every other row keeps its entries, explicit zeros included (a
-    wall's zeroed columns), so that a cell's rows stay in the divergence's cell-local pattern:
-    the factored Vanka smoother then reads its ``D`` from them instead of storing it
+    """``B^T - C B^T`` (``C`` the orphans' projector, (n_p, n_p)) with only the modes' rows
+    changed (:func:`~fbmflow.fem.constraints.splice_rows`): every other row keeps its entries,
+    explicit zeros included (a wall's zeroed columns), so that a cell's rows stay in the
+    divergence's cell-local pattern, where the factored Vanka smoother reads its ``D``
     (:func:`~fbmflow.solvers._kernels.continuity_in_patch_order`)."""
-    touched = np.flatnonzero(np.diff(orphans.indptr))
-    if BT.has_sorted_indices:
-        change = (BT[touched] - orphans[touched] @ BT).tocsr()
-        change.sum_duplicates()
-        change.sort_indices()
-        data = BT.data.copy()
-        if replace_rows(BT.indptr, BT.indices, data, touched, change.indptr, change.indices, change.data):
-            return sp.csr_matrix((data, BT.indices, BT.indptr), shape=BT.shape)
-    return (BT - orphans @ BT).tocsr()
+    rows = np.flatnonzero(np.diff(orphans.indptr))
+    return splice_rows(BT, rows, BT[rows] - orphans[rows] @ BT)
 
 
 def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
