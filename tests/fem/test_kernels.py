@@ -192,6 +192,24 @@ def space(request):
     return FlowSpace(deformed_mesh(request.param, seed=10 + request.param))
 
 
+# -- the scalar pattern ---------------------------------------------------------------------------
+def test_the_scalar_pattern_is_numpys(case):
+    """``scalar_pattern`` and ``pattern_offsets`` against a sort of every cell's node pairs (the
+    NumPy construction they replaced), on every mesh, the periodic ones included, and with more
+    chunks than nodes."""
+    space, _ = case
+    cd, n = space.V.cell_dofs, space.n_v
+    keys = (cd[:, :, None] * n + cd[:, None, :]).ravel()
+    unique = np.unique(keys)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(unique // n, minlength=n))])
+    offsets = np.searchsorted(unique, keys).reshape(cd.shape + cd.shape[1:]) - indptr[cd][:, :, None]
+    for chunks in (1, 3, n + 5):
+        got_ptr, got_idx = _kernels.scalar_pattern(cd, n, chunks)
+        assert np.array_equal(got_ptr, indptr) and np.array_equal(got_idx, unique % n)
+    assert np.array_equal(space.offsets, offsets)
+    assert space.offsets.dtype == np.uint8 and space.indices.dtype == np.int32
+
+
 # -- the mesh used here is really deformed ------------------------------------------------------
 @pytest.mark.parametrize("dim", [2, 3])
 def test_deformed_mesh_is_general(dim):

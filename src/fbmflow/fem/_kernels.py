@@ -140,6 +140,90 @@ def mass_laplace_coefficients(detJw, Jinv, alpha, beta):
     return out
 
 
+@njit
+def node_cells(cell_dofs, n):
+    """The cells of every node: ``(ptr (n + 1,) int64, cells (n_cells nl,) int32)``, node ``a``'s
+    cells ``cells[ptr[a]:ptr[a + 1]]`` ascending; ``cell_dofs (n_cells, nl)``, ``n`` nodes."""
+    n_cells, nl = cell_dofs.shape
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for c in range(n_cells):
+        for a in range(nl):
+            ptr[cell_dofs[c, a] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:-1].copy()
+    cells = np.empty(ptr[n], dtype=np.int32)
+    for c in range(n_cells):
+        for a in range(nl):
+            node = cell_dofs[c, a]
+            cells[fill[node]] = c
+            fill[node] += 1
+    return ptr, cells
+
+
+@njit
+def _row_columns(node, cell_dofs, ptr, cells, work):
+    """The nodes that share a cell with ``node``, ascending, into ``work``; returns their count."""
+    nl = cell_dofs.shape[1]
+    m = 0
+    for j in range(ptr[node], ptr[node + 1]):
+        for b in range(nl):
+            work[m] = cell_dofs[cells[j], b]
+            m += 1
+    row = work[:m]
+    row.sort()
+    k = 0
+    for j in range(m):
+        if j == 0 or row[j] != row[k - 1]:
+            row[k] = row[j]
+            k += 1
+    return k
+
+
+@njit(parallel=True)
+def scalar_pattern(cell_dofs, n, n_chunks):
+    """CSR pattern ``(indptr (n + 1,) int64, indices int32)`` of a scalar operator on ``n``
+    nodes coupling every two nodes of a cell, columns ascending in each row; nodes in
+    ``n_chunks`` parallel chunks. Nothing larger than the pattern itself is allocated (a sort of
+    every cell's node pairs needed 4 arrays of ``n_cells nl^2`` int64)."""
+    ptr, cells = node_cells(cell_dofs, n)
+    nl = cell_dofs.shape[1]
+    most = 0
+    for i in range(n):
+        most = max(most, ptr[i + 1] - ptr[i])
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for t in prange(n_chunks):
+        work = np.empty(most * nl, dtype=cell_dofs.dtype)
+        for i in range(t * n // n_chunks, (t + 1) * n // n_chunks):
+            indptr[i + 1] = _row_columns(i, cell_dofs, ptr, cells, work)
+    for i in range(n):
+        indptr[i + 1] += indptr[i]
+    indices = np.empty(indptr[n], dtype=np.int32)
+    for t in prange(n_chunks):
+        work = np.empty(most * nl, dtype=cell_dofs.dtype)
+        for i in range(t * n // n_chunks, (t + 1) * n // n_chunks):
+            k = _row_columns(i, cell_dofs, ptr, cells, work)
+            for j in range(k):
+                indices[indptr[i] + j] = work[j]
+    return indptr, indices
+
+
+@njit(parallel=True)
+def pattern_offsets(cell_dofs, indptr, indices):
+    """Where the pair ``(a, b)`` of cell ``c`` sits within the row of its node ``a``:
+    ``indices[indptr[cell_dofs[c, a]] + out[c, a, b]] == cell_dofs[c, b]``, (n_cells, nl, nl)
+    uint8 (rows of at most 256 entries)."""
+    n_cells, nl = cell_dofs.shape
+    out = np.empty((n_cells, nl, nl), dtype=np.uint8)
+    for c in prange(n_cells):
+        for a in range(nl):
+            r = cell_dofs[c, a]
+            row = indices[indptr[r]:indptr[r + 1]]
+            for b in range(nl):
+                out[c, a, b] = np.searchsorted(row, cell_dofs[c, b])
+    return out
+
+
 @njit(parallel=True)
 def scatter_scalar(cells, local, offsets, cell_dofs, indptr, out):
     """``out[indptr[cell_dofs[c, a]] + offsets[c, a, b]] += local[e, a * nl + b]`` for a batch

@@ -87,22 +87,13 @@ class FlowSpace:
     # -- sparsity -----------------------------------------------------------------------------
     def _build_pattern(self):
         cd = self.V.cell_dofs
-        n = self.n_v
-        nl = cd.shape[1]
-        keys = (cd[:, :, None] * n + cd[:, None, :]).ravel()
-        unique = np.sort(keys)  # sort + mask: numpy's hash-based np.unique is 5x slower here
-        unique = unique[np.concatenate([[True], unique[1:] != unique[:-1]])]
-        rows = unique // n
-        self.indices = (unique % n).astype(np.int32)
-        self.indptr = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(np.bincount(rows, minlength=n), out=self.indptr[1:])
+        self.indptr, self.indices = _kernels.scalar_pattern(cd, self.n_v, 4 * numba_threads())
         self.nnz = int(self.indptr[-1])
         if np.diff(self.indptr).max() > 256:
             raise ValueError("FlowSpace: a pattern row longer than 256 entries")
         #: (n_cells, nl, nl) uint8: where the pair (a, b) of cell c sits within the scalar
         #: pattern's row of its node a (entry ``indptr[cell_dofs[c, a]] + offsets[c, a, b]``)
-        self.offsets = (np.searchsorted(unique, keys).reshape(-1, nl, nl)
-                        - self.indptr[cd][:, :, None]).astype(np.uint8)
+        self.offsets = _kernels.pattern_offsets(cd, self.indptr, self.indices)
 
     @cached_property
     def coupled_pattern(self) -> tuple[np.ndarray, np.ndarray]:
