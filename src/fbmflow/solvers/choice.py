@@ -170,7 +170,7 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 1
 #: 1 / 2 (278 739 / 2 012 403 unknowns, one step): 0.68 / 3.08 GB (``python -m fbmbench
 #: memory_model``, benchmarks/results/memory_model.md, a94f062; level 0, 0.38 GB at an earlier
 #: commit, gets 26 %); level 3 (15.8 M unknowns) then estimates 30.2 GB where the steady model
-#: says 103 GB
+#: says 103 GB, against a measured 21.7 GB (71c70e3; level 2 then 2.93 GB)
 TRANSIENT_MODEL = {(3, "multigrid"): (1_600, 2_000_000, 0.08)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
