@@ -1,7 +1,7 @@
 """Memory and time of a scene's first steps where the memory guard would refuse it.
 
 Question: what does a ten Cate level-3 step (15.8 M unknowns) really need, on a machine where
-the guard's estimate (30.2 GB) refuses it?
+the guard's estimate (30.2 GB at the time, 25.0 GB since) refuses it?
 Answer: on the 24 GB machine, 2 threads: the build 132 s with a peak of 17.6 GB (the scalar
 pattern's sort, since replaced by Numba kernels), the steps 435 s and 423 s (9 and 10 cycles),
 the process's peak 21.7 GB, 1 373 bytes per unknown; 5.2 times a level-2 step.

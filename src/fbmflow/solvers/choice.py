@@ -166,12 +166,12 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 1
                 (3, "superlu"): (30_000, 33_000, 0.5), (3, "multigrid"): (6_500, 280_000, 0.0)}
 #: the same for the time steps of particle scenes where they need less (multigrid's Picard
 #: hierarchy: the scalar velocity operator stored once, :class:`~fbmflow.fem.velocity_block.VelocityBlock`,
-#: instead of the coupled Newton block); fitted, with a margin of 15-18 %, to ten-cate levels
-#: 1 / 2 (278 739 / 2 012 403 unknowns, one step): 0.68 / 3.08 GB (``python -m fbmbench
-#: memory_model``, benchmarks/results/memory_model.md, a94f062; level 0, 0.38 GB at an earlier
-#: commit, gets 26 %); level 3 (15.8 M unknowns) then estimates 30.2 GB where the steady model
-#: says 103 GB, against a measured 21.7 GB (71c70e3; level 2 then 2.93 GB)
-TRANSIENT_MODEL = {(3, "multigrid"): (1_600, 2_000_000, 0.08)}
+#: instead of the coupled Newton block); fitted, with a margin of 13-16 %, to ten-cate levels
+#: 1 / 2 / 3 (278 739 / 2 012 403 / 15 789 027 unknowns): 0.67 / 2.93 / 21.7 GB (one step of
+#: levels 1 and 2, ``python -m fbmbench memory_model``, benchmarks/results/memory_model.md;
+#: two steps of level 3, ``python -m fbmbench unguarded_steps``; 71c70e3). Level 0 (0.32 GB)
+#: gets 52 %; level 3 is estimated at 25.0 GB, where the steady model says 103 GB
+TRANSIENT_MODEL = {(3, "multigrid"): (1_450, 2_000_000, 0.035)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
 #: peak memory per unknown of each response the implicit coupling keeps [bytes]: about ten float64
