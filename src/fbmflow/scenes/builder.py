@@ -167,14 +167,15 @@ class ParticleScene(SimulationScene):
 
 
 def check_mesh_size(shape, periodic, dim: int, cause: str) -> None:
-    """Refuse, before the mesh is made, a mesh of ``shape`` cells whose flow would not fit the
-    machine even on multigrid (the solver that needs least, :func:`~fbmflow.solvers.choice.check_memory`):
-    ParamError with the figure, naming ``cause`` (the parameter that made it that large)."""
+    """Refuse, before the mesh is made, a mesh of ``shape`` cells whose particle time steps would
+    not fit the machine even on multigrid (the solver that needs least; the time-step model,
+    :func:`~fbmflow.solvers.choice.check_memory` with ``transient``): ParamError with the
+    figure, naming ``cause`` (the parameter that made it that large)."""
     from ..solvers.choice import InsufficientMemory
 
     n = FlowSpace.count_dofs(shape, periodic)
     try:
-        check_memory(n, dim, "multigrid")
+        check_memory(n, dim, "multigrid", transient=True)
     except InsufficientMemory as err:
         cells = " x ".join(str(int(s)) for s in shape)
         raise ParamError(f"{cause} asks for a mesh of {cells} cells: {err}") from None
