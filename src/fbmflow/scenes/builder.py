@@ -175,7 +175,7 @@ def check_mesh_size(shape, periodic, dim: int, cause: str) -> None:
 
     n = FlowSpace.count_dofs(shape, periodic)
     try:
-        check_memory(n, dim, "multigrid", transient=True)
+        check_memory(n, dim, "multigrid", transient=True, warn=False)  # the run's own check warns
     except InsufficientMemory as err:
         cells = " x ".join(str(int(s)) for s in shape)
         raise ParamError(f"{cause} asks for a mesh of {cells} cells: {err}") from None

@@ -273,11 +273,12 @@ def cgroup_left(root="/sys/fs/cgroup") -> float | None:
 
 
 def check_memory(n_unknowns: int, dim: int, solver: LinearSolver | str, responses: int = 0,
-                 transient: bool = False) -> float:
+                 transient: bool = False, warn: bool = True) -> float:
     """Refuse (:class:`InsufficientMemory`) a run whose :func:`estimate_memory` (``transient``:
     a particle scene's time steps) plus the
     ``responses`` flow fields an implicit coupling keeps (:data:`RESPONSE_BYTES` per unknown
-    each) exceeds the available memory, warn when it exceeds half of it; returns the estimate
+    each) exceeds the available memory, warn (unless not ``warn``: an early check that the run's
+    own check repeats) when it exceeds half of it; returns the estimate
     [bytes]. Called before the first solve, so that a run too large for the machine stops with
     the figure and a remedy instead of a MemoryError, or the kernel's out-of-memory killer, in the
     factorisation or the responses."""
@@ -301,6 +302,6 @@ def check_memory(n_unknowns: int, dim: int, solver: LinearSolver | str, response
             mg, _ = estimate_memory(n_unknowns, dim, "multigrid", transient)
             remedy += f" or solver.linear = multigrid (about {mg / 1e9:.1f} GB)"
         raise InsufficientMemory(f"{figure}, more than the {have / 1e9:.1f} GB available; use {remedy}")
-    if need > 0.5 * have:
+    if warn and need > 0.5 * have:
         log.warning("%s, more than half of the %.1f GB available", figure, have / 1e9)
     return need
