@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 from ..fem.constraints import zero_columns
 from . import _kernels
-from .system import SaddlePointSystem
+from .system import SaddlePointSystem, without_orphaned_modes
 from .transfer import BlockTransfer
 
 
@@ -118,7 +118,7 @@ def galerkin_coarse_system(fine: SaddlePointSystem, coarse: SaddlePointSystem, P
     system = SaddlePointSystem(A, BT, coarse.mean_weights, fixed, space, fixed_always=coarse.fixed_always,
                                gradient_BT=gradient_BT, transient=coarse.transient)
     if system.orphans is not None:  # the orphaned modes' continuity equations drop out
-        system.BT = (system.BT - system.orphans @ system.BT).tocsr()
+        system.BT = without_orphaned_modes(system.BT, system.orphans)
     return system, zone
 
 

@@ -104,7 +104,7 @@ class SaddlePointSystem:
         if self.rows is not None and self.orphans is not None:
             # the orphaned modes' continuity equations drop out (as in the residual): they see the
             # row-constrained columns only, and would otherwise tie those to the modes' g
-            self.BT = _without_modes(self.BT, self.orphans)
+            self.BT = without_orphaned_modes(self.BT, self.orphans)
 
     @property
     def gradient(self) -> sp.csr_matrix:
@@ -201,7 +201,7 @@ class SaddlePointSystem:
         return K
 
 
-def _without_modes(BT: sp.csr_matrix, orphans: sp.csr_matrix) -> sp.csr_matrix:
+def without_orphaned_modes(BT: sp.csr_matrix, orphans: sp.csr_matrix) -> sp.csr_matrix:
     """``B^T - C B^T`` (``C`` the orphans' projector, (n_p, n_p)) with only the modes' rows
     changed (:func:`~fbmflow.fem.constraints.splice_rows`): every other row keeps its entries,
     explicit zeros included (a wall's zeroed columns), so that a cell's rows stay in the
