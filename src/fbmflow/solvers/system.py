@@ -206,7 +206,7 @@ def without_orphaned_modes(BT: sp.csr_matrix, orphans: sp.csr_matrix) -> sp.csr_
     changed (:func:`~fbmflow.fem.constraints.splice_rows`): every other row keeps its entries,
     explicit zeros included (a wall's zeroed columns), so that a cell's rows stay in the
     divergence's cell-local pattern, where the factored Vanka smoother reads its ``D``
-    (:func:`~fbmflow.solvers._kernels.continuity_in_patch_order`)."""
+    (``fbmflow.solvers._kernels.continuity_in_patch_order``)."""
     rows = np.flatnonzero(np.diff(orphans.indptr))
     return splice_rows(BT, rows, BT[rows] - orphans[rows] @ BT)
 
