@@ -517,12 +517,14 @@ def apply_cell_operator(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, g
     """Add ``(alpha M + beta L + gamma N(c)) w_i`` to ``out[i]`` for every component, by quadrature
     cell by cell, without a matrix: ``alpha int phi_a w_i + beta int grad phi_a . grad w_i + gamma
     int phi_a (c . grad) w_i``, the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
-    ``|det J| w_q c_k`` (:func:`velocity_coefficients`; not read where ``gamma`` is 0). ``w``,
+    ``|det J| w_q c_k`` (:func:`velocity_coefficients`; not read where ``gamma`` is 0), or ``w``
+    itself where ``conv`` is empty (``N(w) w``, from the point values: no coefficient array). ``w``,
     ``out`` (d, n_v) float64; cells (n_groups, length) int64 in parallel groups of DOF-disjoint
     cells (-1 = padding), each group in order."""
     n_groups, length = cells.shape
     nq, nl = phi.shape
     d = w.shape[0]
+    own = conv.shape[0] == 0
     for g in prange(n_groups):
         wl = np.empty((d, nl))
         wq = np.empty((nq, d))
@@ -540,8 +542,12 @@ def apply_cell_operator(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, g
                     s = alpha * weight * wq[q, i]
                     if gamma != 0.0:
                         t = 0.0
-                        for k in range(d):
-                            t += conv[c, q, k] * gq[q, i, k]
+                        if own:
+                            for k in range(d):
+                                t += weight * wq[q, k] * gq[q, i, k]
+                        else:
+                            for k in range(d):
+                                t += conv[c, q, k] * gq[q, i, k]
                         s += gamma * t
                     value[q, i] = s
                     if beta != 0.0:  # beta |det J| w_q grad w_i, to the reference axes

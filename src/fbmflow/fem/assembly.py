@@ -188,9 +188,8 @@ def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndar
 def _apply_cells(space: FlowSpace, alpha: float, beta: float, gamma: float, u: np.ndarray, out: np.ndarray,
                  conv: np.ndarray | None = None, groups: list[np.ndarray] | None = None) -> None:
     """Add ``(alpha M + beta L + gamma N(c)) u`` to ``out`` (dim * n_v,) in place
-    (:func:`~fbmflow.fem._kernels.apply_cell_operator`; ``c`` from ``conv``, default ``u``)."""
-    if gamma != 0.0 and conv is None:
-        conv = velocity_coefficients(space, u)
+    (:func:`~fbmflow.fem._kernels.apply_cell_operator`; ``c`` from ``conv``, default ``u``, whose
+    point values the kernel has: no coefficient array, 21 bytes per unknown in 3D)."""
     if conv is None:
         conv = np.zeros((0, 0, 0))
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))

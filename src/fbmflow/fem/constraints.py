@@ -133,6 +133,21 @@ class ContinuityRows:
         new[self.cells] = self.data
         return sp.csr_matrix((new.ravel(), BT.indices, BT.indptr), shape=BT.shape)
 
+    def product(self, BT: sp.csr_matrix, U) -> np.ndarray:
+        """``apply(BT) @ U`` without the copy of ``BT``: ``BT @ U``, then the replaced rows
+        from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or sparse."""
+        npl, width = self.data.shape[1:]
+        out = BT @ U
+        out = out.toarray() if sp.issparse(out) else np.asarray(out)
+        if self.cells.size:
+            rows = (self.cells[:, None] * npl + np.arange(npl)).ravel()
+            columns = BT.indices.reshape(-1, npl, width)[self.cells].ravel()
+            R = sp.csr_matrix((self.data.ravel(), columns, np.arange(rows.size + 1) * width),
+                              shape=(rows.size, BT.shape[1]))
+            replaced = R @ U
+            out[rows] = replaced.toarray() if sp.issparse(replaced) else replaced
+        return out
+
 
 @dataclass(frozen=True)
 class PressureExtension:

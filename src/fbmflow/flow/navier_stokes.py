@@ -211,10 +211,11 @@ class NavierStokesProblem:
         are non-zero on a particle's nodes only) with the orphaned modes dropped and, in a closed
         box, the volume defect of the prescribed velocities taken out as the linear solvers do
         (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense."""
-        BT = self.BT if con.continuity is None else con.continuity.apply(self.BT)
-        Fp = BT @ U
-        if sp.issparse(Fp):
-            Fp = Fp.toarray()
+        if con.continuity is None:
+            Fp = self.BT @ U
+            Fp = Fp.toarray() if sp.issparse(Fp) else Fp
+        else:  # without a copy of B^T, which would raise the Newton iteration's peak
+            Fp = con.continuity.product(self.BT, U)
         if con.extension is not None:
             Fp = con.extension.transfer(Fp)
         if orphans is not None:
