@@ -200,3 +200,25 @@ def test_a_particle_leaving_a_graded_mesh_s_fine_zone_is_warned_of_once(tmp_path
                  "particle.density=0.5", "--set", "time.t_end=0.3", "--out", str(tmp_path)])
     warned = [r.getMessage() for r in caplog.records if "fine zone" in r.getMessage()]
     assert code == 0 and len(warned) == 1 and "domain.mesh = uniform" in warned[0], warned
+
+
+@pytest.mark.parametrize("size, rank", [("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"),
+                                        ("PMI_SIZE", "PMI_RANK")])
+def test_several_mpi_processes_stop_before_any_work_with_one_line(size, rank, tmp_path, monkeypatch, capsys):
+    """Started by mpiexec as 2 processes (the launcher's variables), ``run`` and ``resume`` exit
+    2 on both, the first with one line that says why and what to do, the other silent; nothing
+    is written. One process (size 1) runs as usual."""
+    out = tmp_path / "out"
+    for r, lines in (("0", 1), ("1", 0)):
+        monkeypatch.setenv(size, "2")
+        monkeypatch.setenv(rank, r)
+        for argv in (["run", "cavity-2d", "--level", "0", "--out", str(out), "--quiet"],
+                     ["resume", str(out)]):
+            assert main(argv) == 2
+            err = capsys.readouterr().err
+            assert err.count("\n") == lines and (not lines or "2 MPI processes" in err and "without" in err)
+    assert not out.exists()
+    monkeypatch.setenv(size, "1")
+    monkeypatch.setenv(rank, "0")
+    assert main(["run", "cavity-2d", "--level", "0", "--out", str(out), "--quiet", "--no-plot",
+                 "--set", "fluid.re=10"]) == 0

@@ -7,6 +7,9 @@
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
+``run`` and ``resume`` started as several MPI processes (``mpiexec -n P``) stop on every process
+with status 2 and one line from the first: fbmflow does not divide a run among processes yet.
+
 User errors (and unusable checkpoints) exit with status 2 and one line on stderr; a run that fails
 to converge, or leaves the physically possible, exits with status 1 and a message naming a remedy;
 a run stopped by a signal exits with ``128 + signal`` (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP) after
@@ -28,6 +31,25 @@ log = logging.getLogger("fbmflow")
 #: the remedy of a failed solve that names none (a steady scene's Newton iteration)
 STEADY_REMEDY = ("refine the mesh (--level) or lower the Reynolds number (a steady flow may not exist, "
                  "or Newton may not reach it from the Stokes start, above a few hundred at coarse levels)")
+
+
+#: the environment variables of the world size and rank that MPI launchers set in every process
+#: (Open MPI's mpiexec; MPICH's and Intel MPI's Hydra, and Slurm's srun with PMI-2)
+LAUNCHER_VARIABLES = (("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"), ("PMI_SIZE", "PMI_RANK"))
+
+
+def launched_processes() -> tuple[int, int]:
+    """``(rank, size)`` of this process among those an MPI launcher started, ``(0, 1)`` when none
+    did (read from the launcher's environment variables, :data:`LAUNCHER_VARIABLES`; no MPI
+    library is imported)."""
+    import os
+
+    for size, rank in LAUNCHER_VARIABLES:
+        if os.environ.get(size, "").isdigit():
+            n = int(os.environ[size])
+            r = os.environ.get(rank, "0")
+            return (int(r) if r.isdigit() else 0), max(n, 1)
+    return 0, 1
 
 
 class _Parser(argparse.ArgumentParser):
@@ -91,6 +113,13 @@ def _command(args, progress) -> int:
     from .io import CheckpointError
     from .run import OutputError, RunInterrupted, output_folder
 
+    rank, size = launched_processes()
+    if size > 1 and args.command in ("run", "resume"):  # each would run the whole job into the same files
+        if rank == 0:
+            sys.stderr.write(f"fbmflow: error: started as {size} MPI processes, but fbmflow runs a job in "
+                             "one process (each would run all of it and write the same files); run it "
+                             "without mpiexec: Numba's threads use the machine's cores (NUMBA_NUM_THREADS)\n")
+        return 2
     try:
         from .scenes import SCENES, get_scene, load_scene, resume, run_scene
         from .scenes.registry import check_estimate
