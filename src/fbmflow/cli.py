@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -42,8 +43,6 @@ def launched_processes() -> tuple[int, int]:
     """``(rank, size)`` of this process among those an MPI launcher started, ``(0, 1)`` when none
     did (read from the launcher's environment variables, :data:`LAUNCHER_VARIABLES`; no MPI
     library is imported)."""
-    import os
-
     for size, rank in LAUNCHER_VARIABLES:
         if os.environ.get(size, "").isdigit():
             n = int(os.environ[size])

@@ -86,7 +86,7 @@ class NewtonBlock:
         drift = u - self.u0
         size = np.abs(drift).reshape(s.dim, s.n_v).max(axis=0)
         largest = float(size.max()) if size.size else 0.0
-        # the previous coefficients go before the new ones are made: the step's peak comes here
+        # the previous coefficients go before the new ones are made (not both held at once)
         self.react = self.drift = self.drift_groups = self.drift_cells = None
         if self.newton_base:
             self.react = reaction_coefficients(s, drift) if largest > 0.0 else None
