@@ -4,6 +4,7 @@ import pytest
 import scipy.sparse as sp
 
 from fbmflow.fem.constraints import ContinuityRows
+from fbmflow.fem.continuity_block import ContinuityBlock
 
 
 @pytest.mark.parametrize("sparse", [False, True])
@@ -22,7 +23,7 @@ def test_the_replaced_rows_product_equals_the_copied_matrix(sparse):
         U[rng.random(U.shape) < 0.5] = 0.0
         U = sp.csr_matrix(U)
     out = rows.product(BT, U)
-    ref = rows.apply(BT) @ U
+    ref = rows.apply(ContinuityBlock(BT)) @ U
     ref = ref.toarray() if sp.issparse(ref) else ref
     assert isinstance(out, np.ndarray) and out.shape == (n_cells * npl, 2)
     assert np.allclose(out, ref, rtol=0, atol=1e-14)

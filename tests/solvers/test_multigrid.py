@@ -14,6 +14,7 @@ from fbmflow.mesh import StructuredMesh
 from fbmflow.scenes.cavity import recirculating_state
 from fbmflow.solvers import DirectSolver, MultigridSettings, MultigridSolver
 from fbmflow.solvers.direct import factorize
+from fbmflow.solvers.system import as_csr
 from fbmflow.solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 
 #: float32 storage's rounding (6e-8 relative per value), summed over a cell's terms
@@ -116,7 +117,7 @@ def test_saddle_point_csr_matches_scipy():
     ptr, idx, val = saddle_point_csr(system, np.float64)
     n = system.n_u + system.n_p
     K = sp.csr_matrix((val, idx, ptr), shape=(n, n))
-    ref = sp.bmat([[system.A, system.gradient], [system.BT, system.pressure_block]], format="csr")
+    ref = sp.bmat([[system.A, system.gradient], [as_csr(system.BT), system.pressure_block]], format="csr")
     assert abs(K - ref).max() == 0.0
 
 

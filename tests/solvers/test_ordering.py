@@ -7,6 +7,7 @@ import scipy.sparse as sp
 from fbmflow.mesh import StructuredMesh
 from fbmflow.solvers import ordering, vanka
 from fbmflow.solvers.sparse import PARALLEL_NNZ, matvec, rmatvec
+from fbmflow.solvers.system import as_csr
 
 
 def _groups(phases):
@@ -164,7 +165,7 @@ def test_unknown_reach_matches_numpy():
     periods = np.array([2 * mesh.shape[0], 0])
     expected = np.zeros(len(points), dtype=np.int64)
     n_u = system.n_u
-    for M, r, c in ((system.A, 0, 0), (system.gradient, 0, n_u), (system.BT, n_u, 0),
+    for M, r, c in ((system.A, 0, 0), (system.gradient, 0, n_u), (as_csr(system.BT), n_u, 0),
                     (system.pressure_block, n_u, n_u)):
         if M is None:
             continue

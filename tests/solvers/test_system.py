@@ -100,3 +100,75 @@ def test_a_newton_solve_finds_the_orphaned_modes_once(sharp, monkeypatch):
     assert system.orphans is not None and system.orphans.nnz > 0
     own = dataclasses.replace(system, orphans=None)  # the system's own search
     assert len(calls) == 2 and abs(own.orphans - system.orphans).max() == 0.0
+
+
+def _sharp_disk_problem(mesh, centre, radius):
+    """A backward-Euler problem (dt 0.01, no-slip walls) with a sharp-boundary disk of ``radius``
+    at ``centre`` moving down at 1, and its constraints."""
+    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
+    from fbmflow.flow import NavierStokesProblem, NoSlip
+    from fbmflow.particles import Ball
+    centre, shapes = np.array([centre]), [Ball(radius, 2)]
+    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
+
+    def ball(V, t):
+        owner = node_owner(V, centre, shapes)
+        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
+        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
+
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
+    return prob, prob.constraints()
+
+
+def _assembled_continuity(BT, con, orphans):
+    """The system's continuity rows made on an assembled copy of the divergence ``BT``: the cut
+    cells' rows written in, the extension's transfer, the fixed columns zeroed, the orphaned
+    modes' rows removed (the changes the continuity block makes, as CSR operations)."""
+    import scipy.sparse as sp
+
+    from fbmflow.fem.continuity_block import splice_rows, zero_columns
+    npl = con.continuity.data.shape[1]
+    values = BT.data.copy().reshape(-1, npl, con.continuity.data.shape[2])
+    values[con.continuity.cells] = con.continuity.data
+    M = sp.csr_matrix((values.ravel(), BT.indices, BT.indptr), shape=BT.shape)
+    E = con.extension
+    ET = E.matrix.T.tocsr()
+    rows = np.union1d(E.dofs, np.flatnonzero(np.diff(ET.indptr)))
+    keep = np.ones(rows.size)
+    keep[np.isin(rows, E.dofs)] = 0.0
+    M = zero_columns(splice_rows(M, rows, sp.diags(keep) @ (M[rows] + ET[rows] @ M)), con.fixed)
+    return M if orphans is None else without_orphaned_modes(M, orphans)
+
+
+def test_the_continuity_block_is_the_assembled_one():
+    """A sharp-boundary disk system: its continuity block (the level's divergence and the rows
+    that differ, ContinuityBlock) is entry for entry the CSR matrix the same changes make on a
+    copy, holds only the rows a change touches, and the level's divergence is untouched."""
+    from fbmflow.fem.continuity_block import ContinuityBlock
+    from fbmflow.mesh import StructuredMesh
+    prob, con = _sharp_disk_problem(StructuredMesh.box((16, 16)), [0.513, 0.47], 0.17)
+    assert con.continuity is not None and con.extension is not None and con.fixed.size
+    before = prob.BT.data.copy()
+    system = prob.linear_system(prob.zero_state(), 100.0, 1.0, con)
+    system = system.preconditioner or system
+    D = system.BT
+    assert isinstance(D, ContinuityBlock) and D.base is prob.BT
+    ref = _assembled_continuity(prob.BT, con, system.orphans)
+    M = D.tocsr()
+    for a, b in ((M.indptr, ref.indptr), (M.indices, ref.indices), (M.data, ref.data)):
+        assert np.array_equal(a, b)
+    # the changed rows are exactly those a change touches: the fixed columns' rows (the walls,
+    # the disk's inner nodes), the cut cells', the extension's, the orphaned modes'
+    npl = 3
+    fixed = np.zeros(system.n_u, dtype=bool)
+    fixed[con.fixed] = True
+    touched = fixed[prob.BT.indices].reshape(D.shape[0], -1).any(axis=1)
+    touched[(con.continuity.cells[:, None] * npl + np.arange(npl)).ravel()] = True
+    touched[con.extension.dofs] = True
+    touched[np.diff(con.extension.matrix.T.tocsr().indptr) > 0] = True
+    if system.orphans is not None:
+        touched[np.diff(system.orphans.indptr) > 0] = True
+    assert np.array_equal(D.dofs, np.flatnonzero(touched)) and D.dofs.size < D.shape[0]
+    assert np.array_equal(prob.BT.data, before)
+    u = np.random.default_rng(0).normal(size=system.n_u)
+    assert np.array_equal(D @ u, ref @ u)

@@ -630,6 +630,31 @@ block_apply = njit(parallel=True)(_block_apply)
 block_apply_serial = njit(_block_apply)
 
 
+@njit(parallel=True)
+def uniform_rows_apply(indices, values, width, x, out):
+    """``out = M x`` for a CSR matrix ``M`` with ``width`` entries in every row (its indices and
+    values, row after row); rows in parallel, each row's sum in storage order (the result equals
+    SciPy's and does not depend on the number of threads)."""
+    for r in prange(out.shape[0]):
+        s = 0.0
+        for j in range(r * width, (r + 1) * width):
+            s += values[j] * x[indices[j]]
+        out[r] = s
+
+
+@njit(parallel=True)
+def rows_touching(indices, n_rows, width, mask):
+    """For every row of a CSR pattern of ``n_rows`` rows with ``width`` entries each (its
+    indices, row after row) whether one of its columns is set in ``mask``: (n_rows,) bool."""
+    out = np.zeros(n_rows, dtype=np.bool_)
+    for r in prange(n_rows):
+        for j in range(r * width, (r + 1) * width):
+            if mask[indices[j]]:
+                out[r] = True
+                break
+    return out
+
+
 @njit
 def override_rows(dofs, o_ptr, o_idx, o_val, x, out):
     """``out[dofs[j]] = O[j] . x`` for the CSR rows ``O`` (n_o rows, columns into ``x``)."""

@@ -23,44 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _kernels
-
-
-def zero_columns(BT: sp.csr_matrix, columns: np.ndarray | None) -> sp.csr_matrix:
-    """Copy of the CSR matrix ``BT`` with the given columns zeroed (its pattern kept); ``BT``
-    itself when there are none."""
-    if columns is None or len(columns) == 0:
-        return BT
-    mask = np.zeros(BT.shape[1], dtype=bool)
-    mask[columns] = True
-    return sp.csr_matrix((np.where(mask[BT.indices], 0.0, BT.data), BT.indices, BT.indptr), shape=BT.shape)
-
-
-def splice_rows(M: sp.csr_matrix, rows: np.ndarray, R: sp.csr_matrix) -> sp.csr_matrix:
-    """``M`` (CSR, sorted indices) with its rows ``rows`` (k,) int64, ascending, replaced by those
-    of ``R`` (k, n): on a copy of ``M``'s values and ``M``'s own index arrays where ``R``'s
-    entries lie in ``M``'s pattern, else a new matrix. Either way every other row keeps its
-    entries, explicit zeros included (a SciPy sum drops them), so that the divergence's rows
-    stay in its cell-local pattern. Sorted indices."""
-    R = sp.csr_matrix(R)
-    R.sum_duplicates()
-    R.sort_indices()
-    data = M.data.copy()
-    if M.has_sorted_indices and _kernels.replace_rows(M.indptr, M.indices, data, rows, R.indptr, R.indices,
-                                                      R.data):
-        return sp.csr_matrix((data, M.indices, M.indptr), shape=M.shape)
-    counts = np.diff(M.indptr)
-    keep = np.ones(M.shape[0], dtype=bool)
-    keep[rows] = False
-    old = np.repeat(keep, counts)
-    counts[rows] = np.diff(R.indptr)
-    indptr = np.zeros(M.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=indptr[1:])
-    new = np.repeat(keep, counts)
-    indices = np.empty(indptr[-1], dtype=M.indices.dtype)
-    values = np.empty(indptr[-1])
-    indices[new], values[new] = M.indices[old], M.data[old]
-    indices[~new], values[~new] = R.indices, R.data
-    return sp.csr_matrix((values, indices, indptr), shape=M.shape)
+from .continuity_block import ContinuityBlock
 
 
 @dataclass(frozen=True)
@@ -126,16 +89,20 @@ class ContinuityRows:
     cells: np.ndarray
     data: np.ndarray
 
-    def apply(self, BT: sp.csr_matrix) -> sp.csr_matrix:
-        """``BT`` (n_p, n_u) with the rows of ``cells`` replaced (a copy)."""
-        npl = self.data.shape[1]
-        new = BT.data.copy().reshape(-1, npl, self.data.shape[2])
-        new[self.cells] = self.data
-        return sp.csr_matrix((new.ravel(), BT.indices, BT.indptr), shape=BT.shape)
+    def apply(self, D: ContinuityBlock) -> ContinuityBlock:
+        """The continuity block ``D`` with the rows of ``cells`` replaced (in their pattern)."""
+        npl, width = self.data.shape[1:]
+        rows = (self.cells[:, None] * npl + np.arange(npl)).ravel()
+        current = D[rows]
+        if not np.array_equal(np.diff(current.indptr), np.full(rows.size, width)):
+            raise ValueError("ContinuityRows.apply: the rows of the cells are no longer the divergence's")
+        R = sp.csr_matrix((self.data.ravel(), current.indices, current.indptr), shape=current.shape)
+        return D.splice(rows, R)
 
     def product(self, BT: sp.csr_matrix, U) -> np.ndarray:
-        """``apply(BT) @ U`` without the copy of ``BT``: ``BT @ U``, then the replaced rows
-        from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or sparse."""
+        """``apply(ContinuityBlock(BT)) @ U`` for the level's divergence ``BT`` (CSR): ``BT @ U``,
+        then the replaced rows from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or
+        sparse."""
         npl, width = self.data.shape[1:]
         out = BT @ U
         out = out.toarray() if sp.issparse(out) else np.asarray(out)
@@ -175,14 +142,15 @@ class PressureExtension:
         out[self.dofs] = 0.0
         return out
 
-    def transfer_matrix(self, BT: sp.csr_matrix) -> sp.csr_matrix:
-        """The same on the rows of ``B^T`` (n_p, n_u, sorted indices): a new CSR matrix whose
-        unchanged rows are ``BT``'s (:func:`splice_rows`), sorted indices."""
+    def transfer_matrix(self, D: ContinuityBlock) -> ContinuityBlock:
+        """The same on the rows of the continuity block ``D`` (n_p, n_u): the rows of ``dofs``
+        and of the continuing cells replaced
+        (:meth:`~fbmflow.fem.continuity_block.ContinuityBlock.splice`)."""
         ET = self.matrix.T.tocsr()
         rows = np.union1d(self.dofs, np.flatnonzero(np.diff(ET.indptr)))
         keep = np.ones(rows.size)
         keep[np.isin(rows, self.dofs)] = 0.0
-        return splice_rows(BT, rows, sp.diags(keep) @ (BT[rows] + ET[rows] @ BT))
+        return D.splice(rows, sp.diags(keep) @ (D[rows] + ET[rows] @ D))
 
     def residual(self, p: np.ndarray) -> np.ndarray:
         """``s (p - E p)`` on ``dofs``, (k,)."""
@@ -275,17 +243,17 @@ class DirichletConstraints:
         """Turn the constrained rows of square CSR ``matrix`` into unit rows, in place."""
         _kernels.set_identity_rows(matrix.indptr, matrix.indices, self.dofs, matrix.data)
 
-    def constrain_divergence(self, BT: sp.csr_matrix, fixed_only: bool = False) -> sp.csr_matrix:
-        """Copy of ``B^T`` (n_p, n_u) with the constrained velocity columns zeroed (only the
-        fixed ones with ``fixed_only``: the DOFs of ``rows`` remain unknowns of the continuity
-        equations)."""
-        return zero_columns(BT, self.fixed if fixed_only else self.dofs)
+    def constrain_divergence(self, D: ContinuityBlock, fixed_only: bool = False) -> ContinuityBlock:
+        """The continuity block ``D`` (n_p, n_u) with the constrained velocity columns zeroed
+        (only the fixed ones with ``fixed_only``: the DOFs of ``rows`` remain unknowns of the
+        continuity equations)."""
+        return D.zero_columns(self.fixed if fixed_only else self.dofs)
 
-    def continuity_matrix(self, BT: sp.csr_matrix) -> sp.csr_matrix:
-        """The continuity block: ``B^T`` with the replaced rows and the extension's transfer
-        (``BT`` itself without either)."""
+    def continuity_matrix(self, D: ContinuityBlock) -> ContinuityBlock:
+        """The continuity block ``D`` with the replaced rows and the extension's transfer
+        (``D`` itself without either)."""
         if self.continuity is not None:
-            BT = self.continuity.apply(BT)
+            D = self.continuity.apply(D)
         if self.extension is not None:
-            BT = self.extension.transfer_matrix(BT)
-        return BT
+            D = self.extension.transfer_matrix(D)
+        return D

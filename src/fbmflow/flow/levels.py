@@ -24,6 +24,7 @@ from ..fem import (
     velocity_coefficients,
 )
 from ..fem.constraints import DirichletConstraints
+from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
@@ -227,11 +228,12 @@ class FlowLevel:
                     # a new matrix: the buffer would only hold memory (ten Cate level 1: 116 MB, the
                     # step's peak 1 326 -> 1 210 MB)
                     self._jacobian_data = None
+        D = ContinuityBlock(self.BT)  # the level's divergence and the rows that differ: no copy
         if not con.sharp:
-            return SaddlePointSystem(A, con.constrain_divergence(self.BT), self.mean_weights, con.dofs, s,
+            return SaddlePointSystem(A, con.constrain_divergence(D), self.mean_weights, con.dofs, s,
                                      fixed_always=self.boundary_constraints.dofs, transient=m != 0.0,
                                      orphans=orphans)
-        return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(self.BT), fixed_only=True),
+        return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(D), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=self.BT,
                                  extension=con.extension, transient=m != 0.0, orphans=orphans)

@@ -22,6 +22,7 @@ import scipy.sparse as sp
 
 from ..fem import FlowSpace, apply_mass_laplace, assemble_load
 from ..fem.constraints import DirichletConstraints
+from ..fem.continuity_block import ContinuityBlock
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
 from ..solvers.base import Factorization, LinearSolver
@@ -232,8 +233,8 @@ class NavierStokesProblem:
             return None
         if self._orphans is not None and self._orphans[0] is con:
             return self._orphans[1]
-        P = orphan_pressure_modes(con.constrain_divergence(self.BT), self.space.dim + 1,
-                                  closed=self.mean_weights is not None)
+        seen = con.constrain_divergence(ContinuityBlock(self.BT)).tocsr()
+        P = orphan_pressure_modes(seen, self.space.dim + 1, closed=self.mean_weights is not None)
         if con.extension is not None:
             P = con.extension.exclude(P)
         self._orphans = (con, P)

@@ -348,7 +348,10 @@ def crossing_rows(ptr, idx, val, rows, n_v):
 #   (nc_ptr, nc_cell, nc_rank, gt): node a lies in the cells nc_cell[nc_ptr[a]:nc_ptr[a + 1]], at
 #   position nc_rank among each one's nodes in ascending order, and ``B[(i, a), c (d + 1) + m] =
 #   gt[c, m, i nl + nc_rank]`` (gt (n_cells, d + 1, d nl): the divergence's values, a view);
-#   (d_ptr, d_idx, d_val): the continuity rows (the system's B^T, velocity columns);
+#   the continuity rows (the system's B^T, velocity columns): row r is row d_pos[r] of the CSR
+#   (d_ptr, d_idx, d_val) where d_pos[r] >= 0 (a row that differs from the divergence: a wall's
+#   zeroed columns, a cut cell, a continued pressure), else the divergence's, the values
+#   gt[c, m, :] and the columns b_idx[r w:(r + 1) w] of row r = c (d + 1) + m (w = d nl);
 #   (k_ptr, k_idx, k_val): every other row of K (the velocity rows of the other nodes, A and G,
 #   and the pressure block's rows), global columns. Velocity row (i, a) is i n_v + a.
 @njit
@@ -366,8 +369,24 @@ def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
 
 
 @njit
+def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
+    """``(B^T x)[row]``, the continuity row as the operator holds it (see above)."""
+    s = 0.0
+    o = d_pos[row]
+    if o >= 0:
+        for j in range(d_ptr[o], d_ptr[o + 1]):
+            s += d_val[j] * x[d_idx[j]]
+        return s
+    npl, w = gt.shape[1], gt.shape[2]
+    c, m = row // npl, row % npl
+    for j in range(w):
+        s += gt[c, m, j] * x[b_idx[row * w + j]]
+    return s
+
+
+@njit
 def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                 d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
+                 d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """``(K x)[q]``."""
     s = 0.0
     if q < n_u and regular[q % n_v]:
@@ -379,14 +398,13 @@ def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, 
         for j in range(k_ptr[q], k_ptr[q + 1]):
             s += k_val[j] * x[k_idx[j]]
         if q >= n_u:
-            for j in range(d_ptr[q - n_u], d_ptr[q - n_u + 1]):
-                s += d_val[j] * x[d_idx[j]]
+            s += _continuity_dot(q - n_u, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx)
     return s
 
 
 @njit
 def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                  d_ptr, d_idx, d_val, k_ptr, k_idx, k_val):
+                  d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
     n = S.shape[0]
     npl, w = gt.shape[1], gt.shape[2]
@@ -413,10 +431,18 @@ def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_
                 if col >= 0:
                     K[a, col] += k_val[j]
             if q >= n_u:
-                for j in range(d_ptr[q - n_u], d_ptr[q - n_u + 1]):
-                    col = loc[d_idx[j]]
-                    if col >= 0:
-                        K[a, col] += d_val[j]
+                row = q - n_u
+                o = d_pos[row]
+                if o >= 0:
+                    for j in range(d_ptr[o], d_ptr[o + 1]):
+                        col = loc[d_idx[j]]
+                        if col >= 0:
+                            K[a, col] += d_val[j]
+                else:
+                    for j in range(w):
+                        col = loc[b_idx[row * w + j]]
+                        if col >= 0:
+                            K[a, col] += gt[row // npl, row % npl, j]
 
 
 @njit
@@ -437,8 +463,8 @@ def _inverse(K, piv, inv, rel):
 
 @njit(parallel=True)
 def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks, width, schur_tol, n_v,
-                 n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr,
-                 k_idx, k_val):
+                 n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                 b_idx, k_ptr, k_idx, k_val):
     """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
     (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
     ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
@@ -476,7 +502,7 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks,
                 loc[S[a]] = a
             K = work[:nk, :nk]
             _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                          d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
+                          d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
             for a in range(nk):
                 loc[S[a]] = -1
             base = lu_ptr[k]
@@ -527,12 +553,13 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks,
 
 
 @njit
-def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_ptr, d_idx):
+def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_pos, d_ptr, d_idx, b_idx):
     """Whether each Schur patch's (``blocks[k] > 0``) continuity rows, those of its pressures
-    ``dofs[ptr[k] + nu:]`` in the CSR ``(d_ptr, d_idx)``, hold exactly its velocities
-    ``dofs[ptr[k]:ptr[k] + nu]``, in that order (a cell's rows of the divergence in its
-    cell-local pattern, the patch's nodes in ascending order): its ``D`` is then those rows'
-    values. (n_patches,) bool."""
+    ``dofs[ptr[k] + nu:]`` (the operator's, see above: rows of the CSR ``(d_ptr, d_idx)`` where
+    ``d_pos`` says so, else the divergence's with the columns ``b_idx``), hold exactly its
+    velocities ``dofs[ptr[k]:ptr[k] + nu]``, in that order (a cell's rows of the divergence in
+    its cell-local pattern, the patch's nodes in ascending order): its ``D`` is then those
+    rows' values. (n_patches,) bool."""
     m = ptr.shape[0] - 1
     out = np.zeros(m, dtype=np.bool_)
     for k in range(m):
@@ -541,13 +568,23 @@ def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_ptr, d_idx):
         ok = True
         for mm in range(npl):
             row = dofs[ptr[k] + nu + mm] - n_u
-            if d_ptr[row + 1] - d_ptr[row] != nu or (mm > 0 and row != dofs[ptr[k] + nu] - n_u + mm):
+            if mm > 0 and row != dofs[ptr[k] + nu] - n_u + mm:
                 ok = False
                 break
-            for j in range(nu):
-                if d_idx[d_ptr[row] + j] != dofs[ptr[k] + j]:
+            o = d_pos[row]
+            if o >= 0:
+                if d_ptr[o + 1] - d_ptr[o] != nu:
                     ok = False
                     break
+                for j in range(nu):
+                    if d_idx[d_ptr[o] + j] != dofs[ptr[k] + j]:
+                        ok = False
+                        break
+            else:
+                for j in range(nu):
+                    if b_idx[row * nu + j] != dofs[ptr[k] + j]:
+                        ok = False
+                        break
             if not ok:
                 break
         out[k] = ok
@@ -584,12 +621,13 @@ def _lu_solve_stored(LU, piv, r, w, out):
 
 
 @njit(fastmath=True)
-def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, d_ptr, d_val):
+def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_val):
     """The correction of a Schur patch with ``nb`` stored component inverses (see
     :func:`vanka_factor`) from its residual ``r`` (d nl + d + 1,) float64 into ``out``; ``w``
     float64 work, (d nl + d + 1,). Accumulated in float64 whatever the storage: the continuity
-    rows ``r_p - D z`` cancel. ``p_row``: the first of the patch's continuity rows in ``(d_ptr,
-    d_val)`` where ``D`` is read from them (in the patch's order), -1 where it is stored."""
+    rows ``r_p - D z`` cancel. ``p_row``: the first of the patch's continuity rows (the
+    operator's, ``gt, d_pos, d_ptr, d_val``, see above) where ``D`` is read from them (in the
+    patch's order), -1 where it is stored."""
     npl = d + 1
     nu = d * nl
     y0 = base + nb * nl * nl
@@ -609,9 +647,15 @@ def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, d_ptr, d_val):
             for j in range(nu):
                 s += store[d0 + mm * nu + j] * w[j]
         else:
-            first = d_ptr[p_row + mm]
-            for j in range(nu):
-                s += d_val[first + j] * w[j]
+            row = p_row + mm
+            o = d_pos[row]
+            if o >= 0:
+                first = d_ptr[o]
+                for j in range(nu):
+                    s += d_val[first + j] * w[j]
+            else:
+                for j in range(nu):
+                    s += gt[row // npl, mm, j] * w[j]
         w[nu + mm] = r[nu + mm] - s
     for mm in range(npl):  # p = (C - D Y)^-1 t
         s = 0.0
@@ -627,8 +671,8 @@ def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, d_ptr, d_val):
 
 @njit
 def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
-                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
-                     d_idx, d_val, k_ptr, k_idx, k_val):
+                     width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
+                     d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
     ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
     residual is taken."""
@@ -650,8 +694,8 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                     for i in range(d):
                         q = S[i * nl + a]
                         r[i * nl + a] = b[q] - _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val,
-                                                            nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx, d_val,
-                                                            k_ptr, k_idx, k_val)
+                                                            nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx,
+                                                            d_val, b_idx, k_ptr, k_idx, k_val)
                     continue
                 for i in range(d):
                     r[i * nl + a] = 0.0
@@ -671,13 +715,15 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
                     r[i * nl + a] = b[i * n_v + node] - r[i * nl + a]
             for a in range(nu, nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                              nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
-            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, d_ptr,
-                         d_val)
+                                              nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+                                              k_idx, k_val)
+            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, gt,
+                         d_pos, d_ptr, d_val)
         else:
             for a in range(nk):
                 r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                              nc_cell, nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
+                                              nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+                                              k_idx, k_val)
             _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]],
                              r, w, out)
         for a in range(nk):
@@ -686,8 +732,8 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
 
 @njit(parallel=True)
 def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
-                       width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr,
-                       d_idx, d_val, k_ptr, k_idx, k_val):
+                       width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
+                       d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """Groups of patches ``order[gptr[g]:gptr[g + 1]]`` in parallel, each group in order
     (:func:`_update_in_order`). The groups must not touch a DOF that another group reads or
     writes (:func:`fbmflow.solvers.ordering.slab_phases`); then the result does not depend on
@@ -695,17 +741,17 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
     for g in prange(gptr.shape[0] - 1):
         _update_in_order(order, gptr[g], gptr[g + 1], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks,
                          d_read, nl, d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell,
-                         nc_rank, gt, d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
+                         nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
 
 
 @njit
 def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, width,
-                           n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_ptr, d_idx,
-                           d_val, k_ptr, k_idx, k_val):
+                           n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr,
+                           d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over ``patches (m,)`` in order (patches may share DOFs)."""
     _update_in_order(patches, 0, patches.shape[0], b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read,
                      nl, d, width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                     d_ptr, d_idx, d_val, k_ptr, k_idx, k_val)
+                     d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
 
 
 @njit(parallel=True)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..fem.constraints import zero_columns
+from ..fem.continuity_block import ContinuityBlock, zero_columns
 from . import _kernels
 from .system import SaddlePointSystem, without_orphaned_modes
 from .transfer import BlockTransfer
@@ -149,7 +149,8 @@ def _standard_pattern(GT: sp.csr_matrix, coarse: SaddlePointSystem) -> sp.csr_ma
     """``GT`` (n_p, n_u) written into the cell-local pattern of the discrete divergence (what
     :func:`~fbmflow.solvers.system.orphan_pressure_modes` reads); the Galerkin rows of nested
     meshes stay within a coarse cell."""
-    ref = (coarse.gradient_BT if coarse.gradient_BT is not None else coarse.BT).copy()
+    ref = coarse.gradient_BT if coarse.gradient_BT is not None else coarse.BT
+    ref = (ref.base if isinstance(ref, ContinuityBlock) else ref).copy()
     ref.sort_indices()
     GT.sort_indices()
     data = np.empty(ref.nnz)

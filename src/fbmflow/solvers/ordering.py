@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
 from . import _kernels
 
@@ -124,11 +125,20 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
     out = np.zeros(len(points), dtype=np.int64)
     A = system.A.parts() if isinstance(system.A, VelocityBlock) else [(system.A, 0)]
     G = system.gradient if gradient is None else gradient
-    for M, r, c in ([(M, r, r) for M, r in A] + [(G, 0, n_u), (system.BT, n_u, 0),
+    D = system.BT
+    block = isinstance(D, ContinuityBlock)
+    for M, r, c in ([(M, r, r) for M, r in A] + [(G, 0, n_u), (None if block else D, n_u, 0),
                                                    (system.pressure_block, n_u, n_u)]):
         if M is not None:
             M = sp.csr_matrix(M)
             _kernels.row_reach(M.indptr, M.indices, points, periods, r, c, out)
+    if block:  # the level's rows, then the changed rows in place of theirs
+        reach = np.zeros_like(out)
+        _kernels.row_reach(D.base.indptr, D.base.indices, points, periods, n_u, 0, reach)
+        reach[n_u + D.dofs] = 0
+        changed = D.changed_rows()
+        _kernels.row_reach(changed.indptr, changed.indices, points, periods, n_u, 0, reach)
+        np.maximum(out, reach, out=out)
     return out
 
 

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
-from ..fem.constraints import splice_rows, zero_columns
+from ..fem.continuity_block import ContinuityBlock, splice_rows, zero_columns
 from ..fem.velocity_block import VelocityBlock
 from .sparse import cell_transposed_matvec, matvec
 
@@ -39,7 +39,8 @@ class SaddlePointSystem:
     ----------
     A : (n_u, n_u) CSR or :class:`~fbmflow.fem.velocity_block.VelocityBlock`, constrained rows already
         unit rows (or the row constraints' rows)
-    BT : (n_p, n_u) CSR, constrained columns zeroed; ``B = BT.T``
+    BT : (n_p, n_u) CSR or :class:`~fbmflow.fem.continuity_block.ContinuityBlock` (the level's
+        divergence and the rows that differ), constrained columns zeroed; ``B = BT.T``
     mean_weights : (n_p,) float64 or None, border row fixing ``int p = 0``
     fixed : (n_c,) int64 or None, the constrained velocity DOFs (unit rows of ``A``); solvers
         may eliminate them (their solution is the right-hand side there)
@@ -94,8 +95,9 @@ class SaddlePointSystem:
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
-            seen = self.BT if self.gradient_BT is None else self.gradient_BT
-            self.orphans = orphan_pressure_modes(zero_columns(seen, self._gradient_zero), self.space.dim + 1,
+            seen = zero_columns(as_csr(self.BT if self.gradient_BT is None else self.gradient_BT),
+                                self._gradient_zero)
+            self.orphans = orphan_pressure_modes(seen, self.space.dim + 1,
                                                  closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
@@ -117,7 +119,7 @@ class SaddlePointSystem:
         if self._gradient is not None:
             return self._gradient
         source = self.BT if self.gradient_BT is None else self.gradient_BT
-        B = zero_columns(source, self._gradient_zero).T.tocsr()
+        B = zero_columns(as_csr(source), self._gradient_zero).T.tocsr()
         if self.gradient_BT is None:
             self._gradient = B
         return B
@@ -161,7 +163,7 @@ class SaddlePointSystem:
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``K x`` for ``x = [u, p]`` (n_u + n_p,), without the border row."""
         u, p = x[:self.n_u], x[self.n_u:]
-        q = matvec(self.BT, u)
+        q = self.BT @ u if isinstance(self.BT, ContinuityBlock) else matvec(self.BT, u)
         if self.pressure_block is not None:
             q += self.pressure_block @ p
         return np.concatenate([matvec(self.A, u) + self.apply_gradient(p), q])
@@ -192,23 +194,31 @@ class SaddlePointSystem:
         A = self.A.tocsr() if isinstance(self.A, VelocityBlock) else self.A
         if bordered and self.mean_weights is not None:
             w = sp.csr_matrix(self.mean_weights[None, :])
-            blocks = [[A, self.gradient, None], [self.BT, C, w.T], [None, w, None]]
+            blocks = [[A, self.gradient, None], [as_csr(self.BT), C, w.T], [None, w, None]]
             return sp.bmat(blocks, format="csc")
         C = sp.csr_matrix((self.n_p, self.n_p)) if C is None else sp.csr_matrix(C)
         top = sp.hstack([sp.csr_matrix(A), self.gradient], format="csr")
-        K = sp.vstack([top, sp.hstack([sp.csr_matrix(self.BT), C], format="csr")], format="csr")
+        K = sp.vstack([top, sp.hstack([as_csr(self.BT), C], format="csr")], format="csr")
         K.sort_indices()
         return K
 
 
-def without_orphaned_modes(BT: sp.csr_matrix, orphans: sp.csr_matrix) -> sp.csr_matrix:
-    """``B^T - C B^T`` (``C`` the orphans' projector, (n_p, n_p)) with only the modes' rows
-    changed (:func:`~fbmflow.fem.constraints.splice_rows`): every other row keeps its entries,
-    explicit zeros included (a wall's zeroed columns), so that a cell's rows stay in the
-    divergence's cell-local pattern, where the factored Vanka smoother reads its ``D``
-    (``fbmflow.solvers._kernels.continuity_in_patch_order``)."""
+def as_csr(M) -> sp.csr_matrix:
+    """A continuity block assembled (:meth:`~fbmflow.fem.continuity_block.ContinuityBlock.tocsr`),
+    any other sparse matrix as CSR."""
+    return M.tocsr() if isinstance(M, ContinuityBlock) else sp.csr_matrix(M)
+
+
+def without_orphaned_modes(BT, orphans: sp.csr_matrix):
+    """``B^T - C B^T`` (``C`` the orphans' projector, (n_p, n_p); ``BT`` CSR or a
+    :class:`~fbmflow.fem.continuity_block.ContinuityBlock`, the result the same) with only the
+    modes' rows changed (:func:`~fbmflow.fem.continuity_block.splice_rows`): every other row
+    keeps its entries, explicit zeros included (a wall's zeroed columns), so that a cell's rows
+    stay in the divergence's cell-local pattern, where the factored Vanka smoother reads its
+    ``D`` (``fbmflow.solvers._kernels.continuity_in_patch_order``)."""
     rows = np.flatnonzero(np.diff(orphans.indptr))
-    return splice_rows(BT, rows, BT[rows] - orphans[rows] @ BT)
+    R = BT[rows] - orphans[rows] @ BT
+    return BT.splice(rows, R) if isinstance(BT, ContinuityBlock) else splice_rows(BT, rows, R)
 
 
 def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,

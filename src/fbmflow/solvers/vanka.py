@@ -20,9 +20,10 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
 from .._jit import numba_threads
+from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
 from . import _kernels, ordering
-from .system import SaddlePointSystem, cell_blocks
+from .system import SaddlePointSystem, as_csr, cell_blocks
 
 
 class VankaSmoother:
@@ -45,18 +46,19 @@ class VankaSmoother:
         self.system = system
         space = system.space
         self.space = space
-        B = system.BT.T.tocsr()
+        BT = as_csr(system.BT)
+        B = BT.T.tocsr()
         self._b = (B.indptr.astype(np.int64), B.indices.astype(np.int64), B.data)
         A = system.A.tocsr() if isinstance(system.A, VelocityBlock) else system.A  # on the space's pattern
         nb = A.data.size // (space.dim * space.nnz)  # blocks per row: dim or 1
         npl = space.dim + 1
         pblock = cell_blocks(system.orphans, space.mesh.n_cells, npl)  # cluster modes: cell parts only
         self._common = (space.dim, nb, space.n_v, space.indptr, space.indices, A.data,
-                        *self._b, system.BT.data, space.local_rank, space.V.cell_dofs, pblock)
+                        *self._b, BT.data, space.local_rank, space.V.cell_dofs, pblock)
         if variant == "vanka-diagonal":
             diag = A.diagonal()
             diag_inv = np.where(diag != 0.0, 1.0 / np.where(diag != 0.0, diag, 1.0), 0.0)
-            S = _kernels.schur_diagonal(system.BT.data, space.local_rank, space.V.cell_dofs,
+            S = _kernels.schur_diagonal(BT.data, space.local_rank, space.V.cell_dofs,
                                         diag_inv, space.dim, space.n_v)
             self._extra = (diag_inv, np.linalg.pinv(S + pblock, rcond=1e-12, hermitian=True))
         else:
@@ -106,7 +108,7 @@ def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None
     G = system.gradient if gradient is None else gradient
     for M, shape in ((A, (n_u, n_u)), (G, (n_u, n_p)), (system.BT if continuity else None, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
-        M = sp.csr_matrix(shape) if M is None else sp.csr_matrix(M)
+        M = sp.csr_matrix(shape) if M is None else as_csr(M)
         blocks += [M.indptr, M.indices, M.data]
     lengths = np.diff(blocks[0]) + np.diff(blocks[3])
     nnz = int(lengths[keep_u].sum()) + blocks[8].size + blocks[11].size
@@ -139,6 +141,29 @@ def _clusters(system: SaddlePointSystem, npl: int) -> list[np.ndarray]:
     return [np.flatnonzero(label == part) for part in np.flatnonzero(size > 1)]
 
 
+def _divergence(system: SaddlePointSystem) -> sp.csr_matrix:
+    """The divergence whose transpose gives the system's ``B`` (``gradient_BT``, else the level's
+    divergence under a :class:`~fbmflow.fem.continuity_block.ContinuityBlock`, else ``BT``)."""
+    if system.gradient_BT is not None:
+        return system.gradient_BT
+    return system.BT.base if isinstance(system.BT, ContinuityBlock) else system.BT
+
+
+def _continuity_rows(system: SaddlePointSystem) -> tuple:
+    """The continuity rows as the factored kernels read them (the operator's layout in
+    :mod:`fbmflow.solvers._kernels`): ``(d_pos (n_p,) int32, d_ptr int64, d_idx int32, d_val
+    float64, b_idx int32)``, the rows that differ from :func:`_divergence` in the CSR and the
+    others read from it (every row in the CSR where the system's ``B^T`` is no block over it)."""
+    D = system.BT
+    if isinstance(D, ContinuityBlock) and D.base is _divergence(system):
+        R = D.rows
+        return (D.position, R.indptr.astype(np.int64), R.indices.astype(np.int32, copy=False), R.data,
+                D.base.indices.astype(np.int32, copy=False))
+    D = as_csr(D)
+    return (np.arange(D.shape[0], dtype=np.int32), D.indptr.astype(np.int64),
+            D.indices.astype(np.int32, copy=False), D.data, np.zeros(0, dtype=np.int32))
+
+
 def _cell_gradient(system: SaddlePointSystem) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The gradient rows of the free velocity DOFs as the kernels read them from the divergence
     in its cell-local pattern (``gradient_BT``, else ``BT``; see the operator's layout in
@@ -150,7 +175,7 @@ def _cell_gradient(system: SaddlePointSystem) -> tuple[np.ndarray, np.ndarray, n
     n_cells, nl = cd.shape
     d, n_v = space.dim, space.n_v
     npl, width = d + 1, d * nl
-    source = system.gradient_BT if system.gradient_BT is not None else system.BT
+    source = _divergence(system)
     flat = cd.ravel()
     order = np.argsort(flat, kind="stable")
     nc_cell = (order // nl).astype(np.int32)
@@ -270,9 +295,7 @@ class FactoredVankaSmoother:
                 held[dofs % n_v] = False
         held_u = np.tile(held, d)
         G = system.gradient  # once: a system may build it anew on each access
-        BT = system.BT
-        self.op = (held, *scalar_rows, *_cell_gradient(system),
-                   BT.indptr.astype(np.int64, copy=False), BT.indices, BT.data,
+        self.op = (held, *scalar_rows, *_cell_gradient(system), *_continuity_rows(system),
                    *saddle_point_csr(system, dtype, ~held_u, G, continuity=False))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
@@ -290,7 +313,7 @@ class FactoredVankaSmoother:
         #: continuity rows (a cell whose rows are the divergence's in its own pattern; ten Cate
         #: level 2: 46 bytes per unknown)
         self.d_read = _kernels.continuity_in_patch_order(self.ptr, self.dofs, self.blocks, d * nl, npl, n_u,
-                                                         *self.op[8:10])
+                                                         *self.op[8:11], self.op[12])
         schur_size = self.blocks * nl * nl + d * nl * npl * (2 - self.d_read) + npl * npl
         self.lu_ptr = np.concatenate([[0], np.cumsum(np.where(self.blocks > 0, schur_size,
                                                               sizes**2))]).astype(np.int64)
