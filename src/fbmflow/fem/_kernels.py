@@ -655,10 +655,11 @@ def rows_touching(indices, n_rows, width, mask):
     return out
 
 
-@njit
+@njit(parallel=True)
 def override_rows(dofs, o_ptr, o_idx, o_val, x, out):
-    """``out[dofs[j]] = O[j] . x`` for the CSR rows ``O`` (n_o rows, columns into ``x``)."""
-    for j in range(dofs.shape[0]):
+    """``out[dofs[j]] = O[j] . x`` for the CSR rows ``O`` (n_o rows, columns into ``x``; the
+    ``dofs`` distinct); rows in parallel, each row's sum in storage order."""
+    for j in prange(dofs.shape[0]):
         s = 0.0
         for k in range(o_ptr[j], o_ptr[j + 1]):
             s += o_val[k] * x[o_idx[k]]
