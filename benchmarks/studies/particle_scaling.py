@@ -131,7 +131,7 @@ def measure(count: int, coupling: str, level: int, diameter: float, steps: int) 
             "unknowns": int(sim.x.size), "setup_s": setup, "steps": rows,
             "profile": {"named": named, "top": top[:25], "own": own[:12],
                         "calls": int(sum(v[1] for v in stats.stats.values()))},
-            "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+            "max_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
             "checksum": {"mean_velocity": float(p.velocity[:, -1].mean()),
                          "position_sum": float(np.sum(p.position))}}
 

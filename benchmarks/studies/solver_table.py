@@ -133,7 +133,7 @@ def run_case(case: str, solver: str) -> dict:
                 matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s / len(reports),
                 total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
                 first_step_s=step_times[0] if step_times else None,
-                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+                peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9,
                 threads=numba.get_num_threads())
 
 

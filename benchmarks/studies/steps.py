@@ -97,7 +97,7 @@ def run(run_dir: Path, *, steps: int = 3, set: list[str] = ()) -> None:
           f"{result.newton_iterations} (whole run), factorisations {len(factorisations)} "
           f"({analyses} with a new PARDISO analysis), "
           f"PARDISO triangular solves {len(lu_solves)}, overrides {overrides}, "
-          f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.1f} GB")
+          f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9:.1f} GB")
     last = {k: (v[-1] if isinstance(v, list) else v) for k, v in result.quantities.items()
             if isinstance(v, (int, float)) or (isinstance(v, list) and v and isinstance(v[-1], (int, float)))}
     print("quantities (time series: the last value):", {k: float(v) for k, v in last.items()})

@@ -52,7 +52,7 @@ def measure(level: int, solver: str, steps: int) -> dict:
     u = sim.flow.split(sim.x)[0]
     return dict(level=level, solver=sim.flow.linear_solver_description, unknowns=sim.flow.n_dofs, steps=rows,
                 u_max=float(np.abs(u).max()), settling_velocity=float(-sim.particles.velocity[0, 2]),
-                peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+                peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9)
 
 
 def run(*, level: list[int] = (0, 1), steps: int = 2, one: list[str] = ()) -> None:

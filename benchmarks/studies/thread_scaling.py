@@ -69,7 +69,7 @@ print(json.dumps(dict(threads=numba.get_num_threads(), build_s=build,
                       s_per_step=sum(s["wall"] for s in steps) / n,
                       linear_s_per_step=sum(s["linear"] for s in steps) / n,
                       cycles_per_step=sum(s["cycles"] for s in steps) / n,
-                      peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)))
+                      peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9)))
 """
 
 

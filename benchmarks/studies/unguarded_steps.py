@@ -4,8 +4,11 @@ Question: what does a ten Cate level-3 step (15.8 M unknowns) really need, on a 
 the guard's estimate (30.2 GB at the time, 25.0 GB since) refuses it?
 Answer: on the 24 GB machine, 2 threads: the build 132 s with a peak of 17.6 GB (the scalar
 pattern's sort, since replaced by Numba kernels), the steps 435 s and 423 s (9 and 10 cycles),
-the process's peak 21.7 GB, 1 373 bytes per unknown; 5.2 times a level-2 step.
-Measured: 2026-11-29, commit 71c70e3; quoted in
+the process's peak 21.7 GB, 1 373 bytes per unknown; 5.2 times a level-2 step. After the
+continuity block (28462f9, ``--steps 1``): the build 62.4 s with a peak of 8.49 GB, the step
+630 s on a slower day (9 cycles), the process's peak 19.43 GB, 1 230 bytes per unknown; the
+guard's refitted estimate, 22.5 GB, lets level 3 run on this machine.
+Measured: 2026-11-29, commits 71c70e3 and 28462f9; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench unguarded_steps --scene ten-cate --level 3 --steps 2
 
@@ -25,7 +28,7 @@ import time
 
 
 def _peak_gb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
 
 
 def run(*, scene: str = "ten-cate", level: int = 3, steps: int = 2, set: list[str] = ()) -> None:

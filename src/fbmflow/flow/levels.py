@@ -228,11 +228,13 @@ class FlowLevel:
                     # a new matrix: the buffer would only hold memory (ten Cate level 1: 116 MB, the
                     # step's peak 1 326 -> 1 210 MB)
                     self._jacobian_data = None
-        D = ContinuityBlock(self.BT)  # the level's divergence and the rows that differ: no copy
+        # the level's divergence and the rows that differ, and B from the level's divergence: no
+        # copy of either (B's rows of the constrained DOFs are zero)
+        D = ContinuityBlock(self.BT)
         if not con.sharp:
             return SaddlePointSystem(A, con.constrain_divergence(D), self.mean_weights, con.dofs, s,
-                                     fixed_always=self.boundary_constraints.dofs, transient=m != 0.0,
-                                     orphans=orphans)
+                                     fixed_always=self.boundary_constraints.dofs, gradient_BT=self.BT,
+                                     transient=m != 0.0, orphans=orphans)
         return SaddlePointSystem(A, con.constrain_divergence(con.continuity_matrix(D), fixed_only=True),
                                  self.mean_weights, con.fixed, s, fixed_always=self.boundary_constraints.dofs,
                                  rows=rows, gradient_BT=self.BT,
@@ -247,8 +249,6 @@ class FlowLevel:
         ``assembled`` is its preconditioner)."""
         constrained = np.concatenate([d for d in (assembled.fixed, assembled.rows) if d is not None] or
                                      [np.zeros(0, dtype=np.int64)])
-        if assembled.gradient_BT is None:  # a kept gradient: built once here, so that the copy
-            assembled.gradient  # shares it (ten Cate level 1: 37 MB, 132 bytes per unknown each)
         system = copy.copy(assembled)  # shares the blocks and the derived ones already computed
         system.A = NewtonBlock(assembled.A, self.space, u, a * rho, constrained, newton_base)
         system.preconditioner, system.coarser, system.prolongation = assembled, None, None

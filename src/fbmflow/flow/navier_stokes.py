@@ -22,7 +22,6 @@ import scipy.sparse as sp
 
 from ..fem import FlowSpace, apply_mass_laplace, assemble_load
 from ..fem.constraints import DirichletConstraints
-from ..fem.continuity_block import ContinuityBlock
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
 from ..solvers.base import Factorization, LinearSolver
@@ -233,8 +232,10 @@ class NavierStokesProblem:
             return None
         if self._orphans is not None and self._orphans[0] is con:
             return self._orphans[1]
-        seen = con.constrain_divergence(ContinuityBlock(self.BT)).tocsr()
-        P = orphan_pressure_modes(seen, self.space.dim + 1, closed=self.mean_weights is not None)
+        zero = np.zeros(self.space.n_u, dtype=bool)
+        zero[con.dofs] = True
+        P = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None,
+                                  zero=zero)
         if con.extension is not None:
             P = con.extension.exclude(P)
         self._orphans = (con, P)

@@ -65,10 +65,11 @@ class SaddlePointSystem:
         (:class:`~fbmflow.fem.constraints.RowConstraints`, the sharp fictitious boundary): they
         are unknowns of the continuity equations (their columns of ``B^T`` stay), but their rows
         carry no pressure gradient, and no pressure mode counts as seen through them.
-    gradient_BT : (n_p, n_u) CSR or None, the divergence whose transpose is ``B`` where it differs
-        from ``BT`` (the sharp boundary: ``BT`` holds the continuity rows), in the divergence's
-        cell-local pattern, its constrained columns *not* zeroed (the level's own matrix, shared):
-        ``B``'s rows of ``fixed`` and ``rows`` are zero. None: ``B`` is ``BT`` transposed.
+    gradient_BT : (n_p, n_u) CSR or None, the divergence whose transpose is ``B`` (the level's
+        own matrix, shared: a rediscretised level's systems, whose ``B`` would otherwise be a
+        copy, and the sharp boundary's, whose ``BT`` holds other continuity rows), in the
+        divergence's cell-local pattern, its constrained columns *not* zeroed: ``B``'s rows of
+        ``fixed`` and ``rows`` are zero. None: ``B`` is ``BT`` transposed.
     extension : the sharp boundary's :class:`~fbmflow.fem.constraints.PressureExtension` or None
     preconditioner : SaddlePointSystem or None, an approximation of this system with its own
         ``coarser`` chain (the Picard linearisation of a Newton system) that an iterative solver
@@ -95,10 +96,13 @@ class SaddlePointSystem:
 
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
-            seen = zero_columns(as_csr(self.BT if self.gradient_BT is None else self.gradient_BT),
-                                self._gradient_zero)
+            seen = as_csr(self.BT if self.gradient_BT is None else self.gradient_BT)
+            zero = None
+            if self._gradient_zero is not None:
+                zero = np.zeros(self.n_u, dtype=bool)
+                zero[self._gradient_zero] = True
             self.orphans = orphan_pressure_modes(seen, self.space.dim + 1,
-                                                 closed=self.mean_weights is not None)
+                                                 closed=self.mean_weights is not None, zero=zero)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
         elif self.orphans is not None and self.orphans.nnz == 0:  # the caller found none
@@ -222,8 +226,9 @@ def without_orphaned_modes(BT, orphans: sp.csr_matrix):
 
 
 def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
-                          closed: bool = False) -> sp.csr_matrix | None:
-    """Projector onto the pressure modes that ``B^T`` (constrained columns zeroed) no longer
+                          closed: bool = False, zero: np.ndarray | None = None) -> sp.csr_matrix | None:
+    """Projector onto the pressure modes that ``B^T`` (constrained columns zeroed, or the
+    columns where ``zero`` (n_u,) bool is set taken as zero: no copy of ``B^T``) no longer
     couples to any velocity: (n_p, n_p) CSR, or None when there are none. ``closed``: the
     pressure is fixed by its mean (velocities prescribed on the whole boundary), so the constant
     pressure is not one of them even when it lies in their span (``_without_constant``).
@@ -245,8 +250,10 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
     Bc = BT.data.reshape(n_cells, npl, width)
     cols = BT.indices.reshape(n_cells, npl, width)[:, 0, :]
     live = ~(Bc == 0.0).all(axis=1)                      # (n_cells, width) columns that see the cell
+    if zero is not None:
+        live &= ~zero[cols]
     active = np.flatnonzero((~live).any(axis=1))
-    scale = np.abs(Bc).max()
+    scale = max(Bc.max(initial=0.0), -Bc.min(initial=0.0))  # max |B| without a copy
     while active.size:
         count = np.bincount(cols[active][live[active]], minlength=n_u)
         private = live[active] & (count[cols[active]] == 1)
@@ -272,7 +279,10 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
             continue
         dofs = (cells[:, None] * npl + np.arange(npl)).ravel()
         M = BT[dofs].T.tocsr()
-        M = M[np.flatnonzero(abs(M).max(axis=1).toarray().ravel())].toarray()  # (velocity rows, modes)
+        seen = abs(M).max(axis=1).toarray().ravel() != 0.0
+        if zero is not None:
+            seen &= ~zero
+        M = M[np.flatnonzero(seen)].toarray()  # (velocity rows, modes)
         if M.shape[0] < M.shape[1]:
             M = np.vstack([M, np.zeros((M.shape[1] - M.shape[0], M.shape[1]))])
         _, sv, Vt = np.linalg.svd(M, full_matrices=False)
@@ -283,7 +293,7 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
             colidx.append(np.tile(dofs, dofs.size))
             vals.append(block.ravel())
     if single.size:  # cells alone: batched SVD of their blocks, null left vectors
-        U, sv, _ = np.linalg.svd(Bc[single], full_matrices=False)
+        U, sv, _ = np.linalg.svd(Bc[single] * live[single][:, None, :], full_matrices=False)
         blocks = np.einsum("cmk,ck,cnk->cmn", U, (sv <= tol * scale).astype(float), U)
         dofs = single[:, None] * npl + np.arange(npl)
         rows.append(np.repeat(dofs, npl, axis=1).ravel())
