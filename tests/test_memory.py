@@ -22,13 +22,13 @@ MEASURED = [(17_106, 2, "superlu", 0.33), (52_818, 2, "pardiso", 0.55), (164_946
             (2_012_403, 3, "multigrid", 8.9), (164_946, 2, "superlu", 1.52)]
 #: the same for a particle scene's time steps with multigrid, the largest peaks measured since
 #: the model's last fit (ten-cate level 0, one step, python -m fbmbench memory_model, commit
-#: a1bb209; levels 1-3 and sedimentation-3d with 1 000 spheres at level 2 at 28462f9, 2026-11-29:
-#: level 1 the largest of one step, memory_model, and of three, thread_scaling; level 2 one step,
-#: memory_model; level 3 one step and the spheres two, unguarded_steps, the guard's refusal
-#: logged only: docs/validation/multigrid-with-fictitious-boundaries.md, "Memory")
-TRANSIENT = [(64_547, 3, "multigrid", 0.38), (278_739, 3, "multigrid", 0.71),
-             (2_012_403, 3, "multigrid", 2.67), (10_024_003, 3, "multigrid", 12.38),
-             (15_789_027, 3, "multigrid", 19.43)]
+#: a1bb209; levels 1 and 2 at 28462f9, 2026-11-29: level 1 the largest of one step, memory_model,
+#: and of three, thread_scaling; level 2 one step, memory_model; level 3 one step and the spheres
+#: two at 114f0e2, unguarded_steps, the guard's refusal logged only:
+#: docs/validation/multigrid-with-fictitious-boundaries.md, "Memory")
+TRANSIENT = [(64_547, 3, "multigrid", 0.38), (278_739, 3, "multigrid", 0.73),
+             (2_012_403, 3, "multigrid", 2.67), (10_024_003, 3, "multigrid", 10.97),
+             (15_789_027, 3, "multigrid", 19.60)]
 
 
 @pytest.mark.parametrize("n, dim, engine, measured", MEASURED)
@@ -102,7 +102,7 @@ def test_a_run_above_half_the_available_memory_warns(monkeypatch, caplog):
 
 def test_a_particle_scene_s_mesh_is_checked_with_the_time_step_model(monkeypatch, caplog):
     """sedimentation-3d with 1 000 spheres at level 2 (10.0 M unknowns): its time steps need
-    12.4 GB (docs/validation/many-particles.md); the steady model's 65.6 GB refused it on a 24 GB
+    11.0 GB (docs/validation/many-particles.md); the steady model's 65.6 GB refused it on a 24 GB
     machine before the mesh was made."""
     from fbmflow.fem import FlowSpace
     from fbmflow.scenes.builder import check_mesh_size

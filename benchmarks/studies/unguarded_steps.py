@@ -4,11 +4,12 @@ Question: what does a ten Cate level-3 step (15.8 M unknowns) really need, on a 
 the guard's estimate (30.2 GB at the time, 25.0 GB since) refuses it?
 Answer: on the 24 GB machine, 2 threads: the build 132 s with a peak of 17.6 GB (the scalar
 pattern's sort, since replaced by Numba kernels), the steps 435 s and 423 s (9 and 10 cycles),
-the process's peak 21.7 GB, 1 373 bytes per unknown; 5.2 times a level-2 step. After the
-continuity block (28462f9, ``--steps 1``): the build 62.4 s with a peak of 8.49 GB, the step
-630 s on a slower day (9 cycles), the process's peak 19.43 GB, 1 230 bytes per unknown; the
-guard's refitted estimate, 22.5 GB, lets level 3 run on this machine.
-Measured: 2026-11-29, commits 71c70e3 and 28462f9; quoted in
+the process's peak 21.7 GB, 1 373 bytes per unknown (in the study's units then, KiB / 1e6;
+22.2 GB); 5.2 times a level-2 step. After the continuity block and the copies around it
+(114f0e2, ``--steps 1``): the build 62.2 s with a peak of 8.49 GB, the step 619 s on a slower
+day (9 cycles), the process's peak 19.60 GB, 1 241 bytes per unknown; the guard's refitted
+estimate, 22.8 GB, lets level 3 run on this machine.
+Measured: 2026-11-29, commit 114f0e2 (the first answer at 71c70e3); quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench unguarded_steps --scene ten-cate --level 3 --steps 2
 

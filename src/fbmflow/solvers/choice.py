@@ -168,15 +168,14 @@ MEMORY_MODEL = {(2, "pardiso"): (6_500, 165_000, 0.1), (2, "superlu"): (7_600, 1
 #: hierarchy: the scalar velocity operator stored once,
 #: :class:`~fbmflow.fem.velocity_block.VelocityBlock`, instead of the coupled Newton block; the
 #: continuity rows as the level's divergence and the rows that differ,
-#: :class:`~fbmflow.fem.continuity_block.ContinuityBlock`); fitted, with a margin of 13-16 % (4 %
-#: over level 1's largest peak, of three steps), to ten-cate levels 1 / 2 / 3 (278 739 /
-#: 2 012 403 / 15 789 027 unknowns): 0.65-0.71 / 2.67 / 19.43 GB, and sedimentation-3d with
-#: 1 000 spheres at level 2 (10 024 003): 12.38 GB (one step of levels 1 and 2, ``python -m
-#: fbmbench memory_model``, benchmarks/results/memory_model.md, and three of level 1,
-#: ``thread_scaling``; one step of level 3 and two of the spheres, ``python -m fbmbench
-#: unguarded_steps``; 28462f9). Level 3 is estimated at 22.5 GB (25.0 before the continuity
-#: block), where the steady model says 103 GB
-TRANSIENT_MODEL = {(3, "multigrid"): (1_300, 2_000_000, 0.035)}
+#: :class:`~fbmflow.fem.continuity_block.ContinuityBlock`); fitted to ten-cate levels 1 / 2 / 3
+#: (278 739 / 2 012 403 / 15 789 027 unknowns): 0.65-0.73 / 2.67 / 19.60 GB (one step of levels
+#: 1 and 2, ``python -m fbmbench memory_model``, benchmarks/results/memory_model.md, and three of
+#: level 1, ``thread_scaling``; one step of level 3, ``python -m fbmbench unguarded_steps``;
+#: 28462f9 and 114f0e2), 1.02-1.14 times those of levels 1 and 2 and 1.16 times level 3's, which
+#: it estimates at 22.8 GB (25.0 before the continuity block); sedimentation-3d with 1 000
+#: spheres at level 2 (10 024 003 unknowns, 10.97 GB) gets 1.31 times
+TRANSIENT_MODEL = {(3, "multigrid"): (1_320, 2_000_000, 0.035)}
 #: what the interpreter, NumPy, SciPy and the compiled kernels take before any mesh [bytes]
 MEMORY_BASE = 400e6
 #: peak memory per unknown of each response the implicit coupling keeps [bytes]: about ten float64
