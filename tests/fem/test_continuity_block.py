@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fbmflow.fem import _kernels
 from fbmflow.fem.continuity_block import ContinuityBlock, splice_rows, zero_columns
 
 
@@ -92,18 +91,3 @@ def test_splice_needs_ascending_rows_of_the_right_shape():
     ragged = sp.csr_matrix((np.ones(3), np.array([0, 1, 2]), np.array([0, 1, 3])), shape=(2, 4))
     with pytest.raises(ValueError, match="same number of entries"):
         ContinuityBlock(ragged)
-
-
-def test_kernels_match_numpy():
-    """uniform_rows_apply and rows_touching against NumPy on a random pattern."""
-    rng = np.random.default_rng(5)
-    BT = _divergence(rng, n_cells=40)
-    x = rng.normal(size=BT.shape[1])
-    out = np.empty(BT.shape[0])
-    _kernels.uniform_rows_apply(BT.indices, BT.data, 5, x, out)
-    assert np.allclose(out, (BT.data.reshape(-1, 5) * x[BT.indices.reshape(-1, 5)]).sum(axis=1), rtol=0,
-                       atol=1e-13)
-    mask = rng.random(BT.shape[1]) < 0.1
-    touched = _kernels.rows_touching(BT.indices, BT.shape[0], 5, mask)
-    assert np.array_equal(touched, mask[BT.indices.reshape(-1, 5)].any(axis=1))
-    assert 0 < touched.sum() < BT.shape[0]

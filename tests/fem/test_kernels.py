@@ -675,3 +675,20 @@ def test_free_node_components_equal_scipy_on_the_masked_cell_graph(dim):
     pairs = np.unique(np.column_stack([ours, reference[free]]), axis=0)
     assert len(pairs) == np.unique(ours).size
     assert np.all(labels[free] <= np.flatnonzero(free))  # the component's smallest node
+
+
+def test_uniform_rows_apply_and_rows_touching(space):
+    """The divergence's rows (the same number of entries in each, the continuity block's base):
+    the parallel product and the rows that touch a column mask, against NumPy."""
+    BT = assemble_divergence(space)
+    width = BT.indptr[1] - BT.indptr[0]
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=BT.shape[1])
+    out = np.empty(BT.shape[0])
+    _kernels.uniform_rows_apply(BT.indices, BT.data, width, x, out)
+    assert_rel(out, (BT.data.reshape(-1, width) * x[BT.indices.reshape(-1, width)]).sum(axis=1))
+    mask = np.zeros(BT.shape[1], dtype=bool)
+    mask[0] = True  # the first node's first component: the rows of the cells at that corner
+    touched = _kernels.rows_touching(BT.indices, BT.shape[0], width, mask)
+    assert np.array_equal(touched, mask[BT.indices.reshape(-1, width)].any(axis=1))
+    assert 0 < touched.sum() < BT.shape[0]
