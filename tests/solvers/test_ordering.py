@@ -3,6 +3,7 @@ import numba
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from sharp_disk import sharp_disk_problem
 
 from fbmflow.mesh import StructuredMesh
 from fbmflow.solvers import ordering, vanka
@@ -137,20 +138,8 @@ def test_transposed_matvec_matches_scipy_and_not_the_threads(n):
 def _sharp_ball_system(mesh, centre, radius):
     """The Picard system of a backward-Euler step (dt 0.01) in ``mesh`` (no-slip walls) with a
     sharp-boundary disk of ``radius`` at ``centre`` moving down at 1."""
-    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
-    from fbmflow.flow import NavierStokesProblem, NoSlip
-    from fbmflow.particles import Ball
-    centre, shapes = np.array([centre]), [Ball(radius, 2)]
-    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
-
-    def ball(V, t):
-        owner = node_owner(V, centre, shapes)
-        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
-        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
-
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
-    x, con = prob.zero_state(), prob.constraints()
-    system = prob.linear_system(x, 100.0, 1.0, con)
+    prob, con = sharp_disk_problem(mesh, centre, radius)
+    system = prob.linear_system(prob.zero_state(), 100.0, 1.0, con)
     return system.preconditioner or system
 
 

@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from sharp_disk import sharp_disk_problem
 
 from fbmflow.solvers import DirectSolver
 from fbmflow.solvers import system as system_module
@@ -102,24 +103,6 @@ def test_a_newton_solve_finds_the_orphaned_modes_once(sharp, monkeypatch):
     assert len(calls) == 2 and abs(own.orphans - system.orphans).max() == 0.0
 
 
-def _sharp_disk_problem(mesh, centre, radius):
-    """A backward-Euler problem (dt 0.01, no-slip walls) with a sharp-boundary disk of ``radius``
-    at ``centre`` moving down at 1, and its constraints."""
-    from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
-    from fbmflow.flow import NavierStokesProblem, NoSlip
-    from fbmflow.particles import Ball
-    centre, shapes = np.array([centre]), [Ball(radius, 2)]
-    vel, ang = np.array([[0.0, -1.0]]), np.zeros(1)
-
-    def ball(V, t):
-        owner = node_owner(V, centre, shapes)
-        rigid = rigid_body_constraints(V, owner, centre, vel, ang)
-        return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
-
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
-    return prob, prob.constraints()
-
-
 def _assembled_continuity(BT, con, orphans):
     """The system's continuity rows made on an assembled copy of the divergence ``BT``: the cut
     cells' rows written in, the extension's transfer, the fixed columns zeroed, the orphaned
@@ -146,7 +129,7 @@ def test_the_continuity_block_is_the_assembled_one():
     copy, holds only the rows a change touches, and the level's divergence is untouched."""
     from fbmflow.fem.continuity_block import ContinuityBlock
     from fbmflow.mesh import StructuredMesh
-    prob, con = _sharp_disk_problem(StructuredMesh.box((16, 16)), [0.513, 0.47], 0.17)
+    prob, con = sharp_disk_problem(StructuredMesh.box((16, 16)), [0.513, 0.47], 0.17)
     assert con.continuity is not None and con.extension is not None and con.fixed.size
     before = prob.BT.data.copy()
     system = prob.linear_system(prob.zero_state(), 100.0, 1.0, con)
@@ -181,7 +164,7 @@ def test_orphaned_modes_from_a_column_mask_equal_those_of_the_zeroed_copy(closed
     cut cells) and the walls."""
     from fbmflow.fem.continuity_block import zero_columns
     from fbmflow.mesh import StructuredMesh
-    prob, con = _sharp_disk_problem(StructuredMesh.box((16, 16)), [0.513, 0.47], 0.17)
+    prob, con = sharp_disk_problem(StructuredMesh.box((16, 16)), [0.513, 0.47], 0.17)
     zero = np.zeros(prob.space.n_u, dtype=bool)
     zero[con.dofs] = True
     ref = system_module.orphan_pressure_modes(zero_columns(prob.BT, con.dofs), 3, closed=closed)
