@@ -35,13 +35,17 @@ def test_the_site_names_every_public_name_once():
 @pytest.mark.slow
 def test_the_docs_site_builds_strictly_and_links_the_api(tmp_path):
     """``sphinx-build -W``: every page, every docstring and every cross-reference in them resolve
-    (``nitpicky``); the API pages link what the docstrings name."""
+    (``nitpicky``); the API pages link what the docstrings name. Built with Sphinx's own ``basic``
+    theme on all cores: the references and links are the theme's, and furo's navigation tree,
+    computed again for each of the 191 pages, took 59 of the build's 90 s (43 s with ``basic``,
+    34 s with ``-j auto`` on 2 cores)."""
     import subprocess
     import sys
 
     out = tmp_path / "html"
-    build = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", "-d",
-                            str(tmp_path / "doctrees"), str(DOCS), str(out)], capture_output=True, text=True)
+    build = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-j", "auto",
+                            "-D", "html_theme=basic", "-b", "html", "-d", str(tmp_path / "doctrees"),
+                            str(DOCS), str(out)], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-3000:]
     page = (out / "api" / "generated" / "fbmflow.simulation.html").read_text()
     # a docstring's :class:`~fbmflow.coupling.system.CoupledSystem` is a link to its entry

@@ -61,25 +61,17 @@ def test_estimate_error_runs_the_coarser_levels_and_writes_the_estimates(tmp_pat
     assert (tmp_path / "error_estimate.png").stat().st_size > 0
 
 
-def test_dfg_2d1_default_level_meets_its_targets_and_estimates_its_error(tmp_path):
-    """dfg-2d-1 at its default level 5 (32 cells per diameter, the sharp boundary on the mesh that
-    centres the cylinder) with ``--estimate-error`` (levels 3-5, about a minute): C_D -0.09 % and C_L
-    -3.5 % measured, within the targets of 0.3 % and 5 %; the estimates of C_D's and Δp's errors
-    1.00x and 1.10x the actual errors, within the factor 2 asserted. The lift's estimate is 0.43x
-    its error (docs/validation/converged-answers.md, "Error estimates"): not asserted. On the
-    uniform mesh before, C_D's levels changed direction and no estimate came out."""
+def test_dfg_2d1_lift_has_its_sign_from_16_cells_per_diameter(tmp_path):
+    """dfg-2d-1 at level 4 (16 cells per diameter, the sharp boundary on the mesh that centres the
+    cylinder): C_L +0.0088 (-17 %) and C_D -0.32 % measured; the lift's wrong sign (-0.0533 at this
+    level on the old mesh and boundary) fails here. The default level 5 with ``--estimate-error``
+    (about a minute) is checked in benchmarks/test_dfg.py."""
     from fbmflow.scenes.dfg import REFERENCE
-    assert main(["run", "dfg-2d-1", "--estimate-error", "--out", str(tmp_path), "--quiet"]) == 0
-    summary = json.loads((tmp_path / "summary.json").read_text())
-    q = summary["quantities"]
-    assert summary["level"] == 5 and q["cells_per_diameter"] == pytest.approx(32.0)
-    assert q["drag_coefficient_error"] < 0.003, q
-    assert q["lift_coefficient"] > 0.0, q
-    assert abs(q["lift_coefficient"] / REFERENCE["lift_coefficient"] - 1) < 0.05, q
-    for name in ("drag_coefficient", "pressure_difference"):
-        e = summary["error_estimate"]["quantities"][name]
-        actual = REFERENCE[name] - q[name]
-        assert e["asymptotic"] is True and 0.5 < e["error"] / actual < 2.0, (name, e, actual)
+    assert main(["run", "dfg-2d-1", "--level", "4", "--out", str(tmp_path), "--quiet"]) == 0
+    q = json.loads((tmp_path / "summary.json").read_text())["quantities"]
+    lift = REFERENCE["lift_coefficient"]
+    assert 0.5 * lift < q["lift_coefficient"] < 1.5 * lift, q
+    assert q["drag_coefficient_error"] < 0.005, q
 
 
 def test_estimate_error_at_level_zero_is_refused_before_any_run(tmp_path, capsys):
