@@ -64,7 +64,7 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     from fbmflow.scenes.cavity import recirculating_state
     from fbmflow.solvers.vanka import FactoredVankaSmoother
     monkeypatch.setattr(ordering, "BLOCK_CELLS", 16)
-    monkeypatch.setattr(vanka, "SERIAL_CELLS", 0)  # the phases in parallel on this small mesh
+    monkeypatch.setattr(vanka, "SERIAL_CELLS_PER_THREAD", 0)  # the phases in parallel on this small mesh
     monkeypatch.setattr(ordering, "MIN_SLAB_LAYERS", 2)
     monkeypatch.setattr(ordering, "MIN_BLOCK_LAYERS", 2)
     mesh = StructuredMesh.box((24, 16))  # slabs along x, blocks along y
@@ -94,8 +94,9 @@ def test_a_sweep_does_not_depend_on_the_number_of_threads(monkeypatch):
     for _ in range(2):
         smoother.update(sequential, b, x)
     assert np.array_equal(out[0], x)
-    # a level below SERIAL_CELLS sweeps its phases on one thread: the same bits
-    smoother.serial = True
+    # a level below SERIAL_CELLS_PER_THREAD cells per thread sweeps its phases on one thread: the
+    # same bits
+    monkeypatch.setattr(vanka, "SERIAL_CELLS_PER_THREAD", 10**9)
     x = np.zeros_like(b)
     smoother.smooth(b, x, 2)
     assert np.array_equal(out[0], x)

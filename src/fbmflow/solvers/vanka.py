@@ -85,10 +85,14 @@ class VankaSmoother:
 
 
 PRECISIONS = {"single": np.float32, "double": np.float64}
-#: levels with fewer cells are swept on one thread, phase after phase without a parallel region:
-#: their phases have one or two groups of short work, and each region's barrier waits for the
-#: slowest thread (beside another busy process, for a whole scheduler tick)
-SERIAL_CELLS = 4096
+#: a level with fewer cells than this many per Numba thread is swept on one thread, phase after
+#: phase without a parallel region: its phases have a few groups of short work for the threads,
+#: and each region's barrier waits for the slowest one. 256: ten Cate level 1's coarse level (1 152
+#: cells) is swept in parallel on 2 threads (its serial sweeps took 1.9 s of a 17.9 s step; the
+#: step on 2 threads 12.98-13.00 s against 14.40-15.11 s with 4 096 cells for every thread count,
+#: benchmarks/results/thread_scaling.md, tag coarse-parallel) and on one thread from 5 threads
+#: (4 096 cells on 16, as before)
+SERIAL_CELLS_PER_THREAD = 256
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.7}  # name -> default damping
 
 
@@ -321,8 +325,7 @@ class FactoredVankaSmoother:
         self.shape = (nl, d, self.width, n_v, n_u)
         self.omega = omega
         mesh = space.mesh
-        #: whether the phases are swept on one thread (:data:`SERIAL_CELLS`)
-        self.serial = mesh.n_cells < SERIAL_CELLS
+        self.n_cells = mesh.n_cells
         index = mesh.cell_indices()
         reach = np.maximum.reduceat(ordering.unknown_reach(system, G)[self.dofs], self.ptr[:-1])  # per patch
         near = ordering.near_patches(reach[:cells.size])
@@ -433,11 +436,12 @@ class FactoredVankaSmoother:
 
     def sweep_phases(self, phases: list, b: np.ndarray, x: np.ndarray) -> None:
         """The patches of ``phases`` (:func:`~fbmflow.solvers.ordering.slab_phases`), each phase's
-        slabs in parallel, or, on a level of fewer than :data:`SERIAL_CELLS` cells
-        (:attr:`serial`), one after the other in the same order (the same result: a phase's
-        slabs touch nothing of each other)."""
+        slabs in parallel, or, on a level of fewer than :data:`SERIAL_CELLS_PER_THREAD` cells per
+        Numba thread, one after the other in the same order (the same result: a phase's slabs touch
+        nothing of each other)."""
+        serial = self.n_cells < SERIAL_CELLS_PER_THREAD * numba_threads()
         for gptr, order in phases:
-            if self.serial:
+            if serial:
                 _kernels.vanka_sweep_sequential(order[gptr[0]:gptr[-1]], b, x, self.omega, *self._patches,
                                                 *self.op)
             else:
