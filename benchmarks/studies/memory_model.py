@@ -11,9 +11,11 @@ glowinski-free-fall at levels 2 / 3 / 4 (SuperLU): 0.28 / 0.53 / 1.49 GB. After 
 level-1 step NumPy and SciPy hold 0.400 GB (1 433 bytes per unknown; 1.02 GB at 1775983): the
 smoother's factors 76 MB, the scalar velocity operator 39 MB, the divergence and its constrained
 copy about 72 MB, the space's geometry and patterns about 42 MB. With the continuity block
-(28462f9, no constrained copy): levels 1 / 2 at 0.65 / 2.67 GB, 2 337 / 1 328 bytes per unknown.
-Measured: 2026-11-28, commit a94f062 (ten-cate levels 1 and 2, the breakdown; level 0 at
-a1bb209, the glowinski rows at c34e364); levels 1 and 2 again on 2026-11-29 at 28462f9; quoted in
+(28462f9, no constrained copy): levels 1 / 2 at 0.65 / 2.67 GB, 2 337 / 1 328 bytes per unknown;
+at ded330a level 1 at 0.62 GB, NumPy and SciPy holding 0.345 GB (1 236 bytes per unknown) after
+the step, the block's changed rows 43 of them.
+Measured: 2026-11-29, commit ded330a (ten-cate level 1 and the breakdown; level 2 at 28462f9,
+level 0 at a1bb209, the glowinski rows at c34e364); quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Memory"
 Run: python -m fbmbench memory_model
 
