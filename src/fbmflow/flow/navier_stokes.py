@@ -232,10 +232,8 @@ class NavierStokesProblem:
             return None
         if self._orphans is not None and self._orphans[0] is con:
             return self._orphans[1]
-        zero = np.zeros(self.space.n_u, dtype=bool)
-        zero[con.dofs] = True
         P = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None,
-                                  zero=zero)
+                                  zero=con.dofs)
         if con.extension is not None:
             P = con.extension.exclude(P)
         self._orphans = (con, P)

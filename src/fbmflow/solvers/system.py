@@ -97,12 +97,8 @@ class SaddlePointSystem:
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
             seen = as_csr(self.BT if self.gradient_BT is None else self.gradient_BT)
-            zero = None
-            if self._gradient_zero is not None:
-                zero = np.zeros(self.n_u, dtype=bool)
-                zero[self._gradient_zero] = True
-            self.orphans = orphan_pressure_modes(seen, self.space.dim + 1,
-                                                 closed=self.mean_weights is not None, zero=zero)
+            self.orphans = orphan_pressure_modes(seen, self.space.dim + 1, zero=self._gradient_zero,
+                                                 closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
         elif self.orphans is not None and self.orphans.nnz == 0:  # the caller found none
@@ -228,7 +224,8 @@ def without_orphaned_modes(BT, orphans: sp.csr_matrix):
 def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
                           closed: bool = False, zero: np.ndarray | None = None) -> sp.csr_matrix | None:
     """Projector onto the pressure modes that ``B^T`` (constrained columns zeroed, or the
-    columns where ``zero`` (n_u,) bool is set taken as zero: no copy of ``B^T``) no longer
+    columns ``zero`` (k,) int taken as zero, as :func:`~fbmflow.fem.continuity_block.zero_columns`
+    would make them: no copy of ``B^T``) no longer
     couples to any velocity: (n_p, n_p) CSR, or None when there are none. ``closed``: the
     pressure is fixed by its mean (velocities prescribed on the whole boundary), so the constant
     pressure is not one of them even when it lies in their span (``_without_constant``).
@@ -250,8 +247,11 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
     Bc = BT.data.reshape(n_cells, npl, width)
     cols = BT.indices.reshape(n_cells, npl, width)[:, 0, :]
     live = ~(Bc == 0.0).all(axis=1)                      # (n_cells, width) columns that see the cell
+    zeroed = None
     if zero is not None:
-        live &= ~zero[cols]
+        zeroed = np.zeros(n_u, dtype=bool)
+        zeroed[zero] = True
+        live &= ~zeroed[cols]
     active = np.flatnonzero((~live).any(axis=1))
     scale = max(Bc.max(initial=0.0), -Bc.min(initial=0.0))  # max |B| without a copy
     while active.size:
@@ -280,8 +280,8 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
         dofs = (cells[:, None] * npl + np.arange(npl)).ravel()
         M = BT[dofs].T.tocsr()
         seen = abs(M).max(axis=1).toarray().ravel() != 0.0
-        if zero is not None:
-            seen &= ~zero
+        if zeroed is not None:
+            seen &= ~zeroed
         M = M[np.flatnonzero(seen)].toarray()  # (velocity rows, modes)
         if M.shape[0] < M.shape[1]:
             M = np.vstack([M, np.zeros((M.shape[1] - M.shape[0], M.shape[1]))])
