@@ -649,6 +649,39 @@ def test_apply_convection_by_another_velocity_is_n_of_c_times_w(case):
     assert_rel(out, (ref.convection(c) @ local.reshape(d, n).T).T.ravel())
 
 
+def test_cell_groups_hold_the_kept_cells_once_in_dof_disjoint_rows(case):
+    """The groups of a particle's neighbourhood: every kept cell once, no other cell, the rows
+    of a batch sharing no DOF; the convection applied through them equals the sequential one."""
+    from fbmflow.fem import apply_convection, velocity_coefficients
+    space, _ = case
+    keep = np.zeros(space.mesh.n_cells, dtype=bool)
+    keep[space.mesh.n_cells // 3: space.mesh.n_cells // 3 + 5] = True
+    groups = space.cell_groups(keep)
+    held = np.concatenate([g[g >= 0] for g in groups])
+    assert np.array_equal(np.sort(held), np.flatnonzero(keep))
+    for g in groups:
+        rows = [set(space.V.cell_dofs[r[r >= 0]].ravel()) for r in g]
+        assert all(not (a & b) for i, a in enumerate(rows) for b in rows[i + 1:])
+    rng = np.random.default_rng(46)
+    conv, w = velocity_coefficients(space, rng.normal(size=space.n_u)), rng.normal(size=space.n_u)
+    grouped, sequential = np.zeros(space.n_u), np.zeros(space.n_u)
+    apply_convection(space, w, 0.7, grouped, conv=conv, groups=groups)
+    apply_convection(space, w, 0.7, sequential, conv=conv, cells=np.flatnonzero(keep))
+    assert_rel(grouped, sequential)
+
+
+def test_balanced_pieces_share_the_cells_not_the_slabs():
+    """Slabs of 1, 1, 1, 10, 10, 1 cells between two threads: 13 and 11 cells (cutting by slab
+    count, as before, gave 3 and 21), the runs consecutive; never an empty run."""
+    from fbmflow.fem.space import _balanced_pieces
+    slabs = [np.arange(n) for n in (1, 1, 1, 10, 10, 1)]
+    pieces = _balanced_pieces(slabs, 2)
+    assert [sum(s.size for s in p) for p in pieces] == [13, 11]
+    assert [s for p in pieces for s in p] == slabs
+    assert [len(p) for p in _balanced_pieces(slabs[:1], 4)] == [1]
+    assert [len(p) for p in _balanced_pieces([np.arange(4)] * 32, 2)] == [16, 16]
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_free_node_components_equal_scipy_on_the_masked_cell_graph(dim):
     """The union-find kernel against scipy.sparse.csgraph on the graph of free nodes that share a

@@ -10,7 +10,6 @@ from .assembly import (
                        assemble_mass,
                        assemble_mass_laplace,
                        expand_to_coupled,
-                       masked_groups,
                        pressure_mean_weights,
                        reaction_coefficients,
                        velocity_coefficients,
@@ -24,4 +23,4 @@ __all__ = ["FlowSpace", "DofMap", "PressureDofMap", "ElementQ1", "ElementQ2", "E
            "gauss_tensor", "assemble_mass", "assemble_laplace", "assemble_convection",
            "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights",
            "apply_convection", "apply_reaction", "apply_mass_laplace", "assemble_mass_laplace",
-           "reaction_coefficients", "velocity_coefficients", "masked_groups"]
+           "reaction_coefficients", "velocity_coefficients"]

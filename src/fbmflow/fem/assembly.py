@@ -177,8 +177,8 @@ def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndar
         velocity ``c``; default ``u`` itself (``N(u) u``)
     cells : (m,) int64, optional: only these cells' contributions (sequentially)
     groups : list of (n_groups, length) int64, optional: only these cells, in parallel groups of
-        DOF-disjoint cells (-1 = padding), e.g. ``space.colour_groups`` with cells masked out
-        (:func:`masked_groups`); default all cells in ``space.colour_groups``
+        DOF-disjoint cells (-1 = padding), e.g. :meth:`~fbmflow.fem.space.FlowSpace.cell_groups`;
+        default all cells in ``space.colour_groups``
     """
     if cells is not None:
         groups = [np.asarray(cells, dtype=np.int64)[None, :]]
@@ -197,12 +197,6 @@ def _apply_cells(space: FlowSpace, alpha: float, beta: float, gamma: float, u: n
     for batch in space.colour_groups if groups is None else groups:
         _kernels.apply_cell_operator(batch, space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi,
                                      alpha, beta, gamma, conv, uu, target)
-
-
-def masked_groups(space: FlowSpace, keep: np.ndarray) -> list[np.ndarray]:
-    """``space.colour_groups`` with the cells not in ``keep`` (n_cells,) bool set to -1 (padding):
-    parallel groups of only the kept cells, for :func:`apply_convection`."""
-    return [np.where((g >= 0) & keep[np.maximum(g, 0)], g, -1) for g in space.colour_groups]
 
 
 def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:

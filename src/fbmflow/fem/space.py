@@ -146,12 +146,22 @@ class FlowSpace:
         colour."""
         return self._colour_batches(None)
 
-    def _colour_batches(self, length: int | None) -> list[np.ndarray]:
+    def cell_groups(self, keep: np.ndarray) -> list[np.ndarray]:
+        """The cells in ``keep`` (n_cells,) bool as :attr:`colour_groups`: one batch per colour
+        that has any, its slabs' kept cells split between the groups by their number (a particle's
+        neighbourhood, a few slabs, is shared by every thread, not left to the one whose slabs
+        hold it)."""
+        return self._colour_batches(None, keep)
+
+    def _colour_batches(self, length: int | None, keep: np.ndarray | None = None) -> list[np.ndarray]:
         n_groups = max(1, numba_threads())
         out = []
         for slabs in self.mesh.cell_colours():
-            parts = np.array_split(np.arange(len(slabs)), min(n_groups, len(slabs)))
-            seqs = [np.concatenate([slabs[i] for i in part]) for part in parts]
+            if keep is not None:
+                slabs = [s[keep[s]] for s in slabs if keep[s].any()]
+                if not slabs:
+                    continue
+            seqs = [np.concatenate(part) for part in _balanced_pieces(slabs, n_groups)]
             longest = max(len(q) for q in seqs)
             step = longest if length is None else length
             for start in range(0, longest, step):
@@ -231,6 +241,15 @@ class FlowSpace:
     def __repr__(self) -> str:
         return (f"FlowSpace(dim={self.dim}, cells={self.mesh.n_cells}, n_v={self.n_v}, "
                 f"n_p={self.n_p}, n_dofs={self.n_dofs})")
+
+
+def _balanced_pieces(slabs: list[np.ndarray], n: int) -> list[list[np.ndarray]]:
+    """``slabs`` cut into at most ``n`` non-empty runs of consecutive slabs with about equal
+    numbers of cells (a run ends at the first slab where the running count reaches its share)."""
+    counts = np.cumsum([s.size for s in slabs])
+    ends = np.searchsorted(counts, counts[-1] * np.arange(1, n) / n) + 1
+    bounds = np.unique(np.concatenate([[0], np.minimum(ends, len(slabs)), [len(slabs)]]))
+    return [slabs[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def _uniform_along(a: np.ndarray, axis: int, rtol: float = 1e-13) -> np.ndarray:

@@ -18,7 +18,6 @@ from ..fem import (
     assemble_mass,
     assemble_mass_laplace,
     expand_to_coupled,
-    masked_groups,
     pressure_mean_weights,
     reaction_coefficients,
     velocity_coefficients,
@@ -96,7 +95,7 @@ class NewtonBlock:
         if largest > 0.0:
             self.drift_cells = (size > DRIFT_CUTOFF * largest)[s.V.cell_dofs].any(axis=1)
             self.drift = velocity_coefficients(s, drift)
-            self.drift_groups = masked_groups(s, self.drift_cells)
+            self.drift_groups = s.cell_groups(self.drift_cells)
 
     def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
         """What the Newton block adds to ``A v``, with the constrained rows zero, (n_u,)."""
