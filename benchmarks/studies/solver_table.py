@@ -50,6 +50,9 @@ CASES = {
     "ten-cate-2": ("ten-cate", 2, [], 2),
 }
 SOLVERS = ("superlu", "pardiso", "multigrid")
+#: every solver a row may name: the default ones and multigrid on Numba's thread count as set
+#: (``solver.multigrid.threads = "fixed"``; "multigrid" takes the cores other processes leave)
+KNOWN = SOLVERS + ("multigrid-fixed",)
 #: combinations not run, with the reason (measured or estimated on this 24 GB machine)
 _SUPERLU_3D = ("SuperLU in 3D: 16 s per factorisation at 64 547 unknowns in nested-dissection order, "
                "growing as n^2.45 (about 7 min at 250 000)")
@@ -73,7 +76,8 @@ def run_case(case: str, solver: str) -> dict:
     from fbmflow.scenes.registry import load_scene
 
     scene_name, level, overrides, steps = CASES[case]
-    if solver != "multigrid":
+    multigrid = solver.startswith("multigrid")
+    if not multigrid:
         backend = solver
         direct.auto_backend = lambda dim, n: backend  # the direct backend of this row
     reports, newton, problems = [], [], []
@@ -99,7 +103,8 @@ def run_case(case: str, solver: str) -> dict:
     ns.NavierStokesProblem.__init__ = hooked_init
     ns.solve_newton = counted_newton
     scene, params, level = load_scene(scene_name, level,
-                                      [f"solver.linear={'multigrid' if solver == 'multigrid' else 'direct'}"]
+                                      [f"solver.linear={'multigrid' if multigrid else 'direct'}"]
+                                      + (["solver.multigrid.threads=fixed"] * (solver == "multigrid-fixed"))
                                       + overrides)
     t0 = time.perf_counter()
     step_times = []
@@ -127,9 +132,10 @@ def run_case(case: str, solver: str) -> dict:
     per_step = step_times[1:] or step_times
     cycles = sum(r.iterations for r in reports)
     return dict(case=case, scene=scene_name, level=level, overrides=overrides, solver=solver,
-                description=problem.linear_solver_description, unknowns=problem.n_dofs,
+                description=problem.linear_solver_description
+                + (", threads fixed" if solver == "multigrid-fixed" else ""), unknowns=problem.n_dofs,
                 newton=sum(newton), solves=len(reports),
-                cycles_per_solve=cycles / len(reports) if solver == "multigrid" else None,
+                cycles_per_solve=cycles / len(reports) if multigrid else None,
                 matvec_per_solve=linear_s / len(reports) / matvec, s_per_solve=linear_s / len(reports),
                 total_s=total, steps=steps, s_per_step=float(np.mean(per_step)) if per_step else None,
                 first_step_s=step_times[0] if step_times else None,
@@ -174,12 +180,12 @@ def run(*, cases: list[str] = tuple(CASES), solvers: list[str] = SOLVERS, busy: 
     ----------
     cases : cases to run (cavity-re400, cavity-re1000, channel-3d-4, dfg-3d-1z-3, ten-cate-1,
         ten-cate-2)
-    solvers : solvers to run (superlu, pardiso, multigrid)
+    solvers : solvers to run (superlu, pardiso, multigrid, multigrid-fixed)
     busy : run each case beside this many busy processes (a pure-Python loop each; they share the
         2 cores)
     one : internal: run one configuration (CASE SOLVER) in this process
     """
-    for option, given, known in (("cases", cases, list(CASES)), ("solvers", solvers, list(SOLVERS))):
+    for option, given, known in (("cases", cases, list(CASES)), ("solvers", solvers, list(KNOWN))):
         unknown = [g for g in given if g not in known]
         if unknown:
             raise SystemExit(f"--{option}: unknown {unknown}; choose from {known}")
@@ -214,6 +220,6 @@ def run(*, cases: list[str] = tuple(CASES), solvers: list[str] = SOLVERS, busy: 
                 rows[key] = dict(json.loads(proc.stdout.strip().splitlines()[-1]), busy=busy)
             print(rows[key], flush=True)
     ordered = [rows[k] for k in sorted(rows, key=lambda k: (list(CASES).index(k[0]), k[2],
-                                                           SOLVERS.index(k[1])))]
+                                                           KNOWN.index(k[1])))]
     path.write_text(json.dumps(ordered, indent=1))
     (RESULTS / "solver_table.md").write_text(table(ordered))

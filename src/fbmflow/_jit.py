@@ -17,4 +17,15 @@ def numba_threads() -> int:
     return numba.get_num_threads()
 
 
-__all__ = ["njit", "prange", "numba_threads"]
+def max_threads() -> int:
+    """The most threads Numba's parallel loops may use in this process (``NUMBA_NUM_THREADS``
+    when it started)."""
+    return numba.config.NUMBA_NUM_THREADS
+
+
+def set_threads(n: int) -> None:
+    """Let Numba's parallel loops use ``n`` threads (1 to :func:`max_threads`) from now on."""
+    numba.set_num_threads(n)
+
+
+__all__ = ["njit", "prange", "numba_threads", "max_threads", "set_threads"]

@@ -433,6 +433,30 @@ def test_the_scalar_velocity_blocks_solve_as_the_assembled_ones(dim, n):
         assert np.allclose(got, want, rtol=0.0, atol=1e-12 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("dim, n", [(2, 32), (3, 8)])
+def test_a_solve_gives_the_same_bits_on_one_thread_and_on_two(dim, n, monkeypatch):
+    """The set-up and the solve of a sharp-boundary ball's hierarchy on 1 and on 2 Numba threads:
+    the same cycles and the same bits, so that ``multigrid.threads = "free"``
+    (:mod:`fbmflow.cores`) may change the count between solves."""
+    import numba
+
+    from fbmflow.solvers import vanka
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two Numba threads")
+    monkeypatch.setattr(vanka, "SERIAL_CELLS_PER_THREAD", 0)  # the phases in parallel on this small mesh
+    _, system, b = _ball_system("sharp", n=n, dim=dim)
+    mg = MultigridSolver(MultigridSettings(smoother="vanka-factored", threads="fixed"))
+    out, before = [], numba.get_num_threads()
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            out.append(mg.solve(system, b[:system.n_u], b[system.n_u:]))
+    finally:
+        numba.set_num_threads(before)
+    assert out[0][2].iterations == out[1][2].iterations
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_the_gradient_applied_cell_by_cell_is_the_assembled_one(dim):
     """Where the system has the divergence in its cell pattern (the sharp boundary's fine level)

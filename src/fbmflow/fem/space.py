@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .._jit import numba_threads
+from .._jit import max_threads, numba_threads
 from ..mesh import StructuredMesh
 from . import _kernels
 from .dofmap import DofMap, PressureDofMap
@@ -132,12 +132,13 @@ class FlowSpace:
     def batches(self) -> list[np.ndarray]:
         """Cell batches for assembly, each (n_groups, length) int64, padded with -1.
 
-        The slabs of one colour are split into ``n_groups`` (= Numba threads) contiguous groups;
-        row ``g`` of a batch is the next piece of group ``g``'s cell sequence. Rows never share a
-        DOF, so kernels run the rows in parallel and each row sequentially, in lexicographic
-        order, which keeps the matrix rows being written in cache.
+        The slabs of one colour are split into ``n_groups`` contiguous groups, the most Numba
+        threads (``fbmflow._jit.max_threads``: the groups do not change with the threads in
+        use); row ``g`` of a batch is the next piece of group ``g``'s cell sequence. Rows never
+        share a DOF, so kernels run the rows in parallel and each row sequentially, in
+        lexicographic order, which keeps the matrix rows being written in cache.
         """
-        return self._colour_batches(max(1, self.batch_size // max(1, numba_threads())))
+        return self._colour_batches(max(1, self.batch_size // max_threads()))
 
     @cached_property
     def colour_groups(self) -> list[np.ndarray]:
@@ -154,7 +155,7 @@ class FlowSpace:
         return self._colour_batches(None, keep)
 
     def _colour_batches(self, length: int | None, keep: np.ndarray | None = None) -> list[np.ndarray]:
-        n_groups = max(1, numba_threads())
+        n_groups = max_threads()
         out = []
         for slabs in self.mesh.cell_colours():
             if keep is not None:

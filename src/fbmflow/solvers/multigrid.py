@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import ParamError, Section, param
+from ..cores import FREE_CORES
 from .base import Factorization, Hierarchy, LinearSolver
 from .direct import factorize
 from .galerkin import truncated_prolongation
@@ -48,6 +49,8 @@ SWEEPS = ("auto", "forward", "symmetric")
 #: the linearisation the hierarchy is built from (the flow problem reads it): the system's own
 #: (Newton), the Picard one (FGMRES applies the Newton matrix), or "auto": Picard in time steps
 LINEARISATIONS = ("auto", "newton", "picard")
+#: how many threads the set-ups and solves use (:mod:`fbmflow.cores`)
+THREADS = ("free", "fixed")
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,9 @@ class MultigridSettings(Section):
     sweeps: str = param("auto", "order of the smoothing sweeps: forward, symmetric (forward and backward "
                         "in turn) or auto (forward in time steps, symmetric in steady solves)",
                         choices=SWEEPS)
+    threads: str = param("free", "Numba threads of the set-ups and solves: free (the cores other processes "
+                         "leave free, looked at before each; the same results) or fixed (Numba's count as "
+                         "set, NUMBA_NUM_THREADS)", choices=THREADS)
 
     def validate(self):
         if self.coarse_obstacle == "galerkin" and self.smoother not in ("auto", "vanka-factored"):
@@ -224,6 +230,8 @@ class MultigridHierarchy(Factorization):
         """Cycles (inside FGMRES, or stand-alone) until the residual drops ``rtol`` times (None:
         the solver's target); the report counts cycles and smoothing sweeps on all levels."""
         system, s = self.system, self.settings
+        if s.threads == "free":
+            FREE_CORES.adapt()
         t0 = time.perf_counter()
         setup = self._charge_setup()
         rtol = self.rtol if rtol is None else rtol
@@ -318,6 +326,8 @@ class MultigridSolver(LinearSolver):
             raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
                              f"boundary), not {s.smoother!r}; set solver.multigrid.smoother = "
                              "\"auto\" or \"vanka-factored\", or use the direct solver")
+        if s.threads == "free":
+            FREE_CORES.adapt()
         t0 = time.perf_counter()
         base = system if system.preconditioner is None else system.preconditioner
         chain = [base]
