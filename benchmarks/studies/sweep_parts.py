@@ -2,15 +2,16 @@
 
 Question: which parts of the factored Vanka smoother's sweeps keep a time step from running twice
 as fast on two threads as on one, and does dynamic scheduling of a phase's groups help?
-Answer: ten Cate level 1 (278 739 unknowns, 12 x 12 x 64 cells), this 2-core machine, one step
-after one: the fine level's slab phases take 11.80 s on 1 thread and 7.84 s on 2 (1.50x), the
-coarse level's 1.41 / 0.95 s (1.48x); the agglomerated patches at the sphere (70 colours of about
-two patches per sweep) 0.94 / 0.78 s and the others 0.46 / 0.38 s; the interface and far patches
-under 0.1 s. The groups of a fine phase hold 98-144 patches each, 16 groups per phase, and
-scheduling them one at a time (chunk 1) gave 7.54 and 7.97 s against 7.68 and 8.31 s in turn:
-the same. A compute-bound Numba loop runs 1.91x faster on 2 threads on this machine; the sweeps,
-which read each patch's factors and matrix rows once, are limited by the memory system.
-Measured: 2026-11-29, commit adcfc3f; quoted in
+Answer: ten Cate level 1 (278 739 unknowns, 12 x 12 x 64 cells), this 2-core machine, the second
+step: the step took 25.24 s on 1 thread and 14.48 s on 2 (1.74x). The fine level's slab phases
+(16 groups of 98-144 patches each) 14.26 / 7.58 s (1.88x), the coarse level's 1.71 / 0.93 s
+(1.84x); the agglomerated patches at the sphere (3 920 phases of about two patches each, 70
+colours per sweep) 1.17 / 0.75 s (1.56x), the other agglomerated ones 0.58 / 0.36 s (1.60x); the
+interface and far patches under 0.06 s each. Handing a phase's groups out one at a time (chunk 1)
+gave 8.10 s on 2 threads against 7.58 s: no help. An earlier run of the same code an hour before,
+by hand, gave the fine phases 11.80 / 7.84 s (1.50x): this machine's two cores scale the sweeps by
+1.5-1.9x from one hour to the next, a compute-bound loop by 1.91x.
+Measured: 2026-11-29, commit 8e498bb; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
 Run: python -m fbmbench sweep_parts --threads 2 1 --chunks 0 1
 
