@@ -11,8 +11,10 @@ in one run, and 138.4 / 99.4 against 173.4 / 96.9 ms in another: on 2 cores the 
 within the machine's noise. On the 16-core machine the slab order's sweep stopped at 63 ms from
 4 threads on (1 thread: 135 ms; memory bandwidth 13 / 91 GB/s on 1 / 16 threads); the blocked
 order there is not measured yet. The 86 agglomerated patches take 35 colours: 8.1 / 4.5 ms on
-1 / 2 threads, against 7.1 / 6.7 ms one by one.
-Measured: 2026-11-28, commit 3fd90f7 (and d59c63a); quoted in
+1 / 2 threads, against 7.1 / 6.7 ms one by one. One V-cycle of the hierarchy (8e498bb, two runs
+minutes apart, tags cycle-8e498bb and cycle-8e498bb-b): 988 / 789 ms and 1 446 / 761 ms on
+1 / 2 threads, 1.25x and 1.90x: the 2-thread time holds, the 1-thread time scatters by half.
+Measured: 2026-11-28, commit 3fd90f7 (and d59c63a); the cycle 2026-11-29, 8e498bb; quoted in
 docs/validation/multigrid-with-fictitious-boundaries.md, "Threads"
 Run: python -m fbmbench smoother_threads --threads 1 2 --repeats 5
 
@@ -23,7 +25,8 @@ furthest-reaching row (the order before blocks). For each thread count (one proc
 ``numba.set_num_threads``) each part of a sweep is timed, best of ``repeats``: the parallel phases,
 the far patches' sequential updates, the interface patches' extra sweep, the agglomerated
 patches' updates one by one (as before) and in colours (as now), and one product with the system
-(:meth:`SaddlePointSystem.apply`).
+(:meth:`SaddlePointSystem.apply`); in today's order, one V-cycle of the system's multigrid hierarchy
+as well (the sweeps, residuals, transfers and the coarsest solve).
 
 writes benchmarks/results/smoother_threads.{json,md}: the rows of this run with the machine;
 ``--tag`` names the run (rows with other tags are kept).
@@ -80,8 +83,8 @@ def table(rows: list[dict]) -> str:
              "same order's fewest threads in the same run.", "",
              "| tag | machine | scene | level | unknowns | order | groups | far | threads | phases | "
              "far updates | interface | agglomerated one by one | in colours (colours) | apply | "
-             "speed-up of the phases |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "speed-up of the phases | V-cycle | speed-up of the cycle |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     fewest = {}
     for r in rows:
         key = (r["tag"], r["order"])
@@ -90,10 +93,13 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         speedup = fewest[(r["tag"], r["order"])]["phases_ms"] / r["phases_ms"]
         coloured = f"{r['merged_colours_ms']:.1f} ({r['colours']})" if "colours" in r else ""
+        first = fewest[(r["tag"], r["order"])]
+        cycle = (f"{r['cycle_ms']:.1f} | {first['cycle_ms'] / r['cycle_ms']:.2f}" if "cycle_ms" in r
+                 and "cycle_ms" in first else " | ")
         lines.append(f"| {r['tag']} | {r['machine']} | {r['scene']} | {r['level']} | {r['unknowns']} | "
                      f"{r['order']} | {r['groups']} | {r['far']} | {r['threads']} | {r['phases_ms']:.1f} | "
                      f"{r['far_ms']:.1f} | {r['interface_ms']:.1f} | {r['merged_ms']:.1f} | {coloured} | "
-                     f"{r['apply_ms']:.1f} | {speedup:.2f} |")
+                     f"{r['apply_ms']:.1f} | {speedup:.2f} | {cycle} |")
     return "\n".join(lines) + "\n"
 
 
@@ -112,10 +118,11 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     import numba
     import numpy as np
 
-    from fbmflow.solvers import ordering
+    from fbmflow.solvers import MultigridSettings, MultigridSolver, ordering
     from fbmflow.solvers.vanka import FactoredVankaSmoother
 
     system = last_system(scene, level)
+    hierarchy = MultigridSolver(MultigridSettings(threads="fixed")).factor(system)
     smoothers = {"blocks, far set aside": FactoredVankaSmoother(system)}
     block_cells, far_share = ordering.BLOCK_CELLS, ordering.FAR_SHARE
     ordering.BLOCK_CELLS, ordering.FAR_SHARE = 10**18, 0.0  # the slab order: one axis, the widest gap
@@ -144,6 +151,9 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
                                                      repeats),
                        colours=len(sm.merged_phases),
                        apply_ms=1e3 * _best(lambda: system.apply(x), repeats))
+            if order == "blocks, far set aside":  # today's order: the hierarchy's smoothers
+                hierarchy.cycle(b, np.zeros_like(b))
+                row["cycle_ms"] = 1e3 * _best(lambda: hierarchy.cycle(b, np.zeros_like(b)), repeats)
             rows.append(row)
             print(f"{order}, {k} threads: phases {row['phases_ms']:.1f} ms (groups {row['groups']}), far "
                   f"{row['far_ms']:.1f} ms ({row['far']}), agglomerated {row['merged_ms']:.1f} ms, apply "
