@@ -41,6 +41,12 @@ import json, resource, sys, time
 args = json.loads(sys.argv[1])
 import numba
 from fbmflow.scenes.registry import load_scene
+if not args["free_cores"]:
+    try:  # the count asked for, whatever other processes do (trees before fbmflow.cores lack it)
+        from fbmflow.cores import FREE_CORES
+        FREE_CORES.adapt = numba.get_num_threads
+    except ImportError:
+        pass
 scene, params, level = load_scene(args["scene"], args["level"], args["overrides"])
 t0 = time.perf_counter()
 setup = scene.build(params, level)
@@ -100,12 +106,14 @@ def commit() -> str:
 
 
 def one(tree: Path, threads: int, scene: str, level: int, overrides: list[str], warm: int, steps: int,
-        profile: bool = False) -> dict:
+        profile: bool = False, free_cores: bool = False) -> dict:
     """One process: the package from ``tree`` at ``threads`` Numba threads (``profile``: its last
-    step's functions by own time printed)."""
+    step's functions by own time printed; ``free_cores``: multigrid may take fewer threads where
+    other processes are busy, :mod:`fbmflow.cores`)."""
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
-    args = dict(scene=scene, level=level, overrides=overrides, warm=warm, steps=steps, profile=profile)
+    args = dict(scene=scene, level=level, overrides=overrides, warm=warm, steps=steps, profile=profile,
+                free_cores=free_cores)
     out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(args)], env=env, capture_output=True,
                          text=True, check=False)
     if out.returncode != 0:
@@ -160,7 +168,7 @@ def _median_rows(runs: dict, **fields) -> list[dict]:
 def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1, overrides: list[str] = (),
         warm: int = 1, steps: int = 2, repeats: int = 1, baseline: Path | None = None,
         baseline_name: str = "baseline", baseline_threads: list[int] = (), profile: bool = False,
-        name: str = "", tag: str = "dev") -> None:
+        free_cores: bool = False, name: str = "", tag: str = "dev") -> None:
     """Time ``steps`` steps after ``warm`` ones at every thread count, for this tree and the
     baseline.
 
@@ -182,6 +190,9 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
     name : this tree's name in the table (none: its git commit, "this tree" without git)
     profile : print the last timed step's profile (functions by own time) of every row (the
         profiler's overhead is in that step's time)
+    free_cores : let multigrid take the cores other processes leave free (the package's default,
+        :mod:`fbmflow.cores`; the reported threads are the last count); off, every step runs on
+        the count asked for
     tag : this run's name in the results (rows with other tags are kept)
     """
     RESULTS.mkdir(exist_ok=True)
@@ -197,11 +208,12 @@ def run(*, threads: list[int] = (1, 2), scene: str = "ten-cate", level: int = 1,
             for tree, label, counts, is_baseline in trees:
                 if k not in counts:
                     continue
-                r = one(tree, k, scene, level, list(overrides), warm, steps, profile)
+                r = one(tree, k, scene, level, list(overrides), warm, steps, profile, free_cores)
                 print(f"{label}, {k} threads: {r['s_per_step']:.2f} s per step "
                       f"({r['linear_s_per_step']:.2f} s linear, {r['cycles_per_step']:.1f} cycles), "
                       f"peak {r['peak_gb']:.2f} GB", flush=True)
                 runs.setdefault((label, k, is_baseline), []).append(r)
-                rows = _median_rows(runs, tag=tag, machine=where, scene=scene, level=level)
+                rows = _median_rows(runs, tag=tag, machine=where, scene=scene, level=level,
+                                    free_cores=free_cores)
                 path.write_text(json.dumps(kept + rows, indent=1))
                 (RESULTS / "thread_scaling.md").write_text(table(kept + rows))
