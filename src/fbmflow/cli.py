@@ -20,35 +20,18 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 from pathlib import Path
 
 from . import __version__, interrupt
 from .config import ParamError
+from .parallel.comm import launched_processes
 from .solvers import ConvergenceError
 
 log = logging.getLogger("fbmflow")
 #: the remedy of a failed solve that names none (a steady scene's Newton iteration)
 STEADY_REMEDY = ("refine the mesh (--level) or lower the Reynolds number (a steady flow may not exist, "
                  "or Newton may not reach it from the Stokes start, above a few hundred at coarse levels)")
-
-
-#: the environment variables of the world size and rank that MPI launchers set in every process
-#: (Open MPI's mpiexec; MPICH's and Intel MPI's Hydra, and Slurm's srun with PMI-2)
-LAUNCHER_VARIABLES = (("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"), ("PMI_SIZE", "PMI_RANK"))
-
-
-def launched_processes() -> tuple[int, int]:
-    """``(rank, size)`` of this process among those an MPI launcher started, ``(0, 1)`` when none
-    did (read from the launcher's environment variables, :data:`LAUNCHER_VARIABLES`; no MPI
-    library is imported)."""
-    for size, rank in LAUNCHER_VARIABLES:
-        if os.environ.get(size, "").isdigit():
-            n = int(os.environ[size])
-            r = os.environ.get(rank, "0")
-            return (int(r) if r.isdigit() else 0), max(n, 1)
-    return 0, 1
 
 
 class _Parser(argparse.ArgumentParser):

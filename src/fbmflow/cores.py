@@ -11,7 +11,7 @@ at least one, at most the count in use when it first looked (or set by the user 
 do not depend on the count: every parallel kernel splits its work into the same groups whatever
 the threads (:attr:`fbmflow.fem.space.FlowSpace.colour_groups`, :mod:`fbmflow.solvers.ordering`;
 a test solves on one thread and on two). :class:`~fbmflow.solvers.multigrid.MultigridSolver`
-calls :meth:`FreeCores.adapt` before every set-up and solve (``solver.multigrid.threads =
+calls :meth:`~fbmflow.cores.FreeCores.adapt` before every set-up and solve (``solver.multigrid.threads =
 "free"``, the default; ``"fixed"`` leaves the count alone).
 """
 from __future__ import annotations
@@ -53,10 +53,11 @@ def free_threads(others: float, n_cpus: int, limit: int) -> int:
 
 
 class FreeCores:
-    """Numba's thread count set, at every :meth:`adapt`, to the cores other processes left free
-    since the previous call (the first call looks for :data:`MIN_WINDOW_S`), at most the count
-    found at the first call or set by anyone else since (``numba.set_num_threads`` keeps its
-    meaning: the most threads). Without ``/proc/stat`` it leaves the count alone."""
+    """Numba's thread count set, at every :meth:`~fbmflow.cores.FreeCores.adapt`, to the cores
+    other processes left free since the previous call (the first call looks for
+    :data:`MIN_WINDOW_S`), at most the count found at the first call or set by anyone else since
+    (``numba.set_num_threads`` keeps its meaning: the most threads). Without ``/proc/stat`` it
+    leaves the count alone."""
 
     def __init__(self):
         self.n_cpus = os.cpu_count() or 1

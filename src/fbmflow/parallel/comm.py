@@ -1,0 +1,49 @@
+"""The processes of a run: MPI's world communicator where a launcher (``mpiexec -n P``) started
+several, a stand-in with the same calls for one process otherwise, so that the serial path
+imports no MPI library."""
+from __future__ import annotations
+
+import os
+
+#: the environment variables of the world size and rank that MPI launchers set in every process
+#: (Open MPI's mpiexec; MPICH's and Intel MPI's Hydra, and Slurm's srun with PMI-2)
+LAUNCHER_VARIABLES = (("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"), ("PMI_SIZE", "PMI_RANK"))
+
+
+def launched_processes() -> tuple[int, int]:
+    """``(rank, size)`` of this process among those an MPI launcher started, ``(0, 1)`` when none
+    did (read from the launcher's environment variables, :data:`LAUNCHER_VARIABLES`; no MPI
+    library is imported)."""
+    for size, rank in LAUNCHER_VARIABLES:
+        if os.environ.get(size, "").isdigit():
+            n = int(os.environ[size])
+            r = os.environ.get(rank, "0")
+            return (int(r) if r.isdigit() else 0), max(n, 1)
+    return 0, 1
+
+
+class SerialComm:
+    """One process: mpi4py's communicator calls that the slabs use, each the identity."""
+
+    rank = 0
+    size = 1
+
+    def allreduce(self, value, op=None):
+        return value
+
+    def bcast(self, value, root: int = 0):
+        return value
+
+
+def world():
+    """MPI's ``COMM_WORLD`` where a launcher started several processes, else a
+    :class:`~fbmflow.parallel.comm.SerialComm`; RuntimeError naming the remedy where mpi4py is
+    missing then."""
+    if launched_processes()[1] == 1:
+        return SerialComm()
+    try:
+        from mpi4py import MPI
+    except ImportError as err:
+        raise RuntimeError("several processes need mpi4py: pip install -e \".[mpi]\" (mpi4py and the "
+                           "MPICH wheel, whose mpiexec then starts the run)") from err
+    return MPI.COMM_WORLD
