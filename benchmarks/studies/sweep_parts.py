@@ -47,7 +47,7 @@ from fbmflow.scenes.registry import load_scene
 from fbmflow.cores import FREE_CORES
 from fbmflow.solvers import vanka
 args = json.loads(sys.argv[1])
-FREE_CORES.adapt = numba.get_num_threads  # the count asked for, whatever other processes do
+FREE_CORES.threads = lambda limit: limit  # the count asked for, whatever other processes do
 scene, params, level = load_scene(args["scene"], args["level"], args["overrides"])
 setup = scene.build(params, level)
 for _ in range(args["warm"]):

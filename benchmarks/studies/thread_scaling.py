@@ -44,7 +44,7 @@ from fbmflow.scenes.registry import load_scene
 if not args["free_cores"]:
     try:  # the count asked for, whatever other processes do (trees before fbmflow.cores lack it)
         from fbmflow.cores import FREE_CORES
-        FREE_CORES.adapt = numba.get_num_threads
+        FREE_CORES.threads = lambda limit: limit
     except ImportError:
         pass
 scene, params, level = load_scene(args["scene"], args["level"], args["overrides"])

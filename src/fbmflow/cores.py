@@ -6,42 +6,58 @@ cycle (thousands per time step) waits for it: measured on 2 cores, a multigrid r
 beside one busy process while a single-threaded direct solve did not slow at all
 (docs/validation/multigrid-with-fictitious-boundaries.md, "Under load"). :class:`FreeCores`
 reads how much CPU time the other processes took since its last look (``/proc/stat``'s busy
-time of all CPUs less this process's own) and sets Numba's thread count to the cores they left,
-at least one, at most the count in use when it first looked (or set by the user since). Results
-do not depend on the count: every parallel kernel splits its work into the same groups whatever
-the threads (:attr:`fbmflow.fem.space.FlowSpace.colour_groups`, :mod:`fbmflow.solvers.ordering`;
-a test solves on one thread and on two). :class:`~fbmflow.solvers.multigrid.MultigridSolver`
-calls :meth:`~fbmflow.cores.FreeCores.adapt` before every set-up and solve (``solver.multigrid.threads =
-"free"``, the default; ``"fixed"`` leaves the count alone).
+time of the CPUs this process may run on, less its own) and runs a set-up or solve on the cores
+they left, at least one, at most the count in use when it starts; the count in use is restored
+after it. Results do not depend on the count: every parallel kernel splits its work into the same
+groups whatever the threads (:attr:`fbmflow.fem.space.FlowSpace.colour_groups`,
+:mod:`fbmflow.solvers.ordering`; a test solves on one thread and on two).
+:class:`~fbmflow.solvers.multigrid.MultigridSolver` runs every set-up and solve in
+:meth:`~fbmflow.cores.FreeCores.free` (``solver.multigrid.threads = "free"``, the default;
+``"fixed"`` leaves the count alone).
 """
 from __future__ import annotations
 
 import os
 import time
+from contextlib import contextmanager
 
 from ._jit import numba_threads, set_threads
 
-#: seconds between two looks below which the last decision stands (too short a window to tell)
-MIN_WINDOW_S = 0.05
+#: seconds between two looks below which the last decision stands (``/proc/stat`` counts in ticks
+#: of 10 ms per CPU: a shorter window would misread a fifth of a core)
+MIN_WINDOW_S = 0.25
 #: a core counts as taken when other processes used at least this share of one
 TAKEN_SHARE = 0.5
 
 
-def busy_cpu_seconds(stat: str | None = None) -> float | None:
-    """Seconds all CPUs spent busy since boot, from the ``cpu`` line of ``/proc/stat`` (``stat``:
-    its text, default read now): user, nice, system, irq, softirq and steal (time the hypervisor
-    gave another machine); None where there is no such file (not Linux)."""
+def usable_cpus() -> list[int]:
+    """The CPUs this process may run on (its affinity: taskset, Slurm, a container's cpuset),
+    sorted; all of ``os.cpu_count()`` where the platform does not say."""
+    try:
+        return sorted(os.sched_getaffinity(0))
+    except AttributeError:
+        return list(range(os.cpu_count() or 1))
+
+
+def busy_cpu_seconds(cpus: list[int], stat: str | None = None) -> float | None:
+    """Seconds the CPUs ``cpus`` spent busy since boot, from their ``cpuN`` lines of
+    ``/proc/stat`` (``stat``: its text, default read now): user, nice, system, irq, softirq and
+    steal (time the hypervisor gave another machine); None where there is no such file (not
+    Linux) or it lacks one of them."""
     if stat is None:
         try:
             with open("/proc/stat") as f:
-                stat = f.readline()
+                stat = f.read()
         except OSError:
             return None
-    fields = stat.split()
-    if not fields or fields[0] != "cpu" or len(fields) < 9:
-        return None
-    user, nice, system, _idle, _iowait, irq, softirq, steal = (int(v) for v in fields[1:9])
-    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+    wanted, total, found = {f"cpu{c}" for c in cpus}, 0, 0
+    for line in stat.splitlines():
+        fields = line.split()
+        if fields and fields[0] in wanted and len(fields) >= 9:
+            user, nice, system, _idle, _iowait, irq, softirq, steal = (int(v) for v in fields[1:9])
+            total += user + nice + system + irq + softirq + steal
+            found += 1
+    return total / os.sysconf("SC_CLK_TCK") if found == len(wanted) else None
 
 
 def free_threads(others: float, n_cpus: int, limit: int) -> int:
@@ -53,49 +69,54 @@ def free_threads(others: float, n_cpus: int, limit: int) -> int:
 
 
 class FreeCores:
-    """Numba's thread count set, at every :meth:`~fbmflow.cores.FreeCores.adapt`, to the cores
-    other processes left free since the previous call (the first call looks for
-    :data:`MIN_WINDOW_S`), at most the count found at the first call or set by anyone else since
-    (``numba.set_num_threads`` keeps its meaning: the most threads). Without ``/proc/stat`` it
-    leaves the count alone."""
+    """Looks at what other processes take of this process's CPUs, and runs work on the rest
+    (:meth:`~fbmflow.cores.FreeCores.free`). The decision follows the load since the previous
+    look, at least :data:`MIN_WINDOW_S` back (the first look waits that long); without
+    ``/proc/stat`` the count stays as it is."""
 
     def __init__(self):
-        self.n_cpus = os.cpu_count() or 1
-        self.limit = None
-        self._set = None
+        self.cpus = usable_cpus()
         self._last = None
+        self._others = 0.0
 
-    @staticmethod
-    def _look() -> tuple[float, float, float] | None:
-        busy = busy_cpu_seconds()
+    def _look(self) -> tuple[float, float, float] | None:
+        busy = busy_cpu_seconds(self.cpus)
         return None if busy is None else (time.monotonic(), busy, time.process_time())
 
     @staticmethod
     def others(before: tuple[float, float, float], now: tuple[float, float, float]) -> float:
         """Cores the other processes used on average between two looks ``(wall, busy, own)``
-        (seconds since any fixed instant: monotonic wall time, all CPUs' busy time, this
+        (seconds since any fixed instant: monotonic wall time, the CPUs' busy time, this
         process's CPU time)."""
         return max(0.0, (now[1] - before[1]) - (now[2] - before[2])) / (now[0] - before[0])
 
-    def adapt(self) -> int:
-        """Set Numba's thread count to the cores left free since the last call; returns it."""
-        current = numba_threads()
-        if self.limit is None or current != self._set:
-            self.limit = self._set = current
+    def threads(self, limit: int) -> int:
+        """The threads to use now, at most ``limit``: the cores the other processes left since
+        the last look (the last decision where that was less than :data:`MIN_WINDOW_S` ago)."""
         if self._last is None:
             self._last = self._look()
             if self._last is None:
-                return current
+                return limit
             time.sleep(MIN_WINDOW_S)
         now = self._look()
-        if now is None or now[0] - self._last[0] < MIN_WINDOW_S:
-            return current
-        threads = free_threads(self.others(self._last, now), self.n_cpus, self.limit)
-        self._last = now
-        if threads != current:
+        if now is not None and now[0] - self._last[0] >= MIN_WINDOW_S:
+            self._others = self.others(self._last, now)
+            self._last = now
+        return free_threads(self._others, len(self.cpus), limit)
+
+    @contextmanager
+    def free(self):
+        """Run the ``with`` block on the free cores (:meth:`~fbmflow.cores.FreeCores.threads`,
+        at most Numba's count in use), then restore that count."""
+        before = numba_threads()
+        threads = self.threads(before)
+        if threads != before:
             set_threads(threads)
-        self._set = threads
-        return threads
+        try:
+            yield threads
+        finally:
+            if threads != before:
+                set_threads(before)
 
 
 #: the process's one instance (its looks are the process's own)

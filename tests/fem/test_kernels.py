@@ -656,6 +656,8 @@ def test_cell_groups_hold_the_kept_cells_once_in_dof_disjoint_rows(case):
     space, _ = case
     keep = np.zeros(space.mesh.n_cells, dtype=bool)
     keep[space.mesh.n_cells // 3: space.mesh.n_cells // 3 + 5] = True
+    everything = space.cell_groups(np.ones(space.mesh.n_cells, dtype=bool))
+    assert all(np.array_equal(a, b) for a, b in zip(everything, space.colour_groups, strict=True))
     groups = space.cell_groups(keep)
     held = np.concatenate([g[g >= 0] for g in groups])
     assert np.array_equal(np.sort(held), np.flatnonzero(keep))

@@ -9,7 +9,7 @@ import pytest
 
 from fbmflow.fem import FlowSpace, apply_mass_laplace
 from fbmflow.mesh import StructuredMesh
-from fbmflow.parallel import SerialComm, SlabPartition
+from fbmflow.parallel import LAUNCHER_VARIABLES, SerialComm, SlabPartition
 
 
 class _Loopback:
@@ -27,7 +27,7 @@ class _Loopback:
         return value
 
 
-@pytest.mark.parametrize("dim, size", [(2, 1), (2, 3), (3, 2), (3, 4)])
+@pytest.mark.parametrize("dim, size", [(2, 1), (2, 3), (3, 2), (3, 4), (3, 9)])
 def test_slab_products_summed_at_shared_planes_are_the_whole_meshs(dim, size):
     """The operator applied on every slab's own mesh, the shared planes summed: the whole mesh's
     product at every slab node, the same bits on both copies of a shared node; the slabs' nodes
@@ -81,3 +81,23 @@ def test_under_mpiexec_the_slabs_give_the_whole_meshs_product(dim, size):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count(f" of {size}: layers") == size
+
+
+def test_world_is_one_process_without_a_launcher_and_refuses_a_mismatched_mpi(monkeypatch):
+    """No launcher: the stand-in. A launcher's two processes: mpi4py missing, or an MPI that sees
+    one process (mpi4py built against another MPI), each a RuntimeError naming the remedy."""
+    import types
+
+    from fbmflow.parallel import world
+    for size, _ in LAUNCHER_VARIABLES:
+        monkeypatch.delenv(size, raising=False)
+    assert isinstance(world(), SerialComm)
+    monkeypatch.setenv("PMI_SIZE", "2")
+    monkeypatch.setenv("PMI_RANK", "0")
+    monkeypatch.setitem(sys.modules, "mpi4py", None)
+    with pytest.raises(RuntimeError, match=r"pip install -e \"\.\[mpi\]\""):
+        world()
+    alone = types.SimpleNamespace(COMM_WORLD=types.SimpleNamespace(Get_size=lambda: 1))
+    monkeypatch.setitem(sys.modules, "mpi4py", types.SimpleNamespace(MPI=alone))
+    with pytest.raises(RuntimeError, match="another MPI"):
+        world()

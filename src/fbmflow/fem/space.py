@@ -20,6 +20,11 @@ from .dofmap import DofMap, PressureDofMap
 from .elements import ElementQ1
 from .quadrature import gauss_tensor
 
+#: cell groups per Numba thread in the parallel loops over one colour's cells: with ``G`` groups,
+#: ``k`` threads take ``ceil(G / k)`` groups' time, so 15 threads of 16 with one group per thread
+#: would run at the speed of 8; with four per thread, at that of 13
+GROUPS_PER_THREAD = 4
+
 
 class FlowSpace:
     """Q2 velocity / P1disc pressure spaces on a structured mesh.
@@ -132,13 +137,15 @@ class FlowSpace:
     def batches(self) -> list[np.ndarray]:
         """Cell batches for assembly, each (n_groups, length) int64, padded with -1.
 
-        The slabs of one colour are split into ``n_groups`` contiguous groups, the most Numba
-        threads (``fbmflow._jit.max_threads``: the groups do not change with the threads in
-        use); row ``g`` of a batch is the next piece of group ``g``'s cell sequence. Rows never
-        share a DOF, so kernels run the rows in parallel and each row sequentially, in
-        lexicographic order, which keeps the matrix rows being written in cache.
+        The slabs of one colour are split into ``n_groups`` contiguous groups with about equal
+        numbers of cells, :data:`GROUPS_PER_THREAD` times the most Numba threads
+        (``fbmflow._jit.max_threads``: the groups do not change with the threads in use, and
+        fewer threads than the most still share them evenly); row ``g`` of a batch is the next
+        piece of group ``g``'s cell sequence. Rows never share a DOF, so kernels run the rows in
+        parallel and each row sequentially, in lexicographic order, which keeps the matrix rows
+        being written in cache.
         """
-        return self._colour_batches(max(1, self.batch_size // max_threads()))
+        return self._colour_batches(max(1, self.batch_size // (GROUPS_PER_THREAD * max_threads())))
 
     @cached_property
     def colour_groups(self) -> list[np.ndarray]:
@@ -155,7 +162,7 @@ class FlowSpace:
         return self._colour_batches(None, keep)
 
     def _colour_batches(self, length: int | None, keep: np.ndarray | None = None) -> list[np.ndarray]:
-        n_groups = max_threads()
+        n_groups = GROUPS_PER_THREAD * max_threads()
         out = []
         for slabs in self.mesh.cell_colours():
             if keep is not None:

@@ -38,12 +38,18 @@ class SerialComm:
 def world():
     """MPI's ``COMM_WORLD`` where a launcher started several processes, else a
     :class:`~fbmflow.parallel.comm.SerialComm`; RuntimeError naming the remedy where mpi4py is
-    missing then."""
-    if launched_processes()[1] == 1:
+    missing then, or where MPI sees another number of processes than the launcher started (each
+    would think itself alone and repeat the whole run)."""
+    size = launched_processes()[1]
+    if size == 1:
         return SerialComm()
     try:
         from mpi4py import MPI
     except ImportError as err:
         raise RuntimeError("several processes need mpi4py: pip install -e \".[mpi]\" (mpi4py and the "
                            "MPICH wheel, whose mpiexec then starts the run)") from err
+    if MPI.COMM_WORLD.Get_size() != size:
+        raise RuntimeError(f"the launcher started {size} processes but MPI sees {MPI.COMM_WORLD.Get_size()}: "
+                           "mpi4py was built against another MPI than this mpiexec's; use the mpiexec of "
+                           "the MPI that mpi4py uses (mpi4py.get_config())")
     return MPI.COMM_WORLD

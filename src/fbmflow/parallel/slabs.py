@@ -74,19 +74,22 @@ class SlabPartition:
     def sum_shared(self, values: np.ndarray, comm) -> None:
         """Add the neighbours' parts at the shared node planes to ``values`` (k, n_nodes) float64,
         in place: one exchange with each neighbour (``comm``: an mpi4py communicator, or anything
-        with its ``Sendrecv``). The lower slab's part is added first on both sides, so the two
-        copies of a shared node hold the same bits."""
+        with its ``Sendrecv``), in two rounds whatever the number of processes (even ranks with
+        the slab above first, odd ones with the slab below first). The lower slab's part is added
+        first on both sides, so the two copies of a shared node hold the same bits."""
         p = self.plane
-        if self.rank > 0:  # the plane shared with the slab below: below + mine
-            mine = np.ascontiguousarray(values[:, :p])
-            theirs = np.empty_like(mine)
-            comm.Sendrecv(mine, dest=self.rank - 1, recvbuf=theirs, source=self.rank - 1)
-            values[:, :p] = theirs + mine
-        if self.rank < self.size - 1:  # the plane shared with the slab above: mine + above
-            mine = np.ascontiguousarray(values[:, -p:])
-            theirs = np.empty_like(mine)
-            comm.Sendrecv(mine, dest=self.rank + 1, recvbuf=theirs, source=self.rank + 1)
-            values[:, -p:] = mine + theirs
+        lower = np.ascontiguousarray(values[:, :p]) if self.rank > 0 else None
+        upper = np.ascontiguousarray(values[:, -p:]) if self.rank < self.size - 1 else None
+        rounds = [(upper, self.rank + 1), (lower, self.rank - 1)]
+        received = {}
+        for mine, other in rounds if self.rank % 2 == 0 else rounds[::-1]:
+            if mine is not None:
+                received[other] = np.empty_like(mine)
+                comm.Sendrecv(mine, dest=other, recvbuf=received[other], source=other)
+        if lower is not None:
+            values[:, :p] = received[self.rank - 1] + lower
+        if upper is not None:
+            values[:, -p:] = upper + received[self.rank + 1]
 
     def dot(self, x: np.ndarray, y: np.ndarray, comm) -> float:
         """``sum x y`` over all nodes of the mesh, each once, for slab vectors ``x, y`` (k, n_nodes)

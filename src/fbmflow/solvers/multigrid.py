@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -228,10 +229,13 @@ class MultigridHierarchy(Factorization):
 
     def solve(self, f, g, rtol=None):
         """Cycles (inside FGMRES, or stand-alone) until the residual drops ``rtol`` times (None:
-        the solver's target); the report counts cycles and smoothing sweeps on all levels."""
+        the solver's target), on the free cores where the settings say so (:func:`_threads`);
+        the report counts cycles and smoothing sweeps on all levels."""
+        with _threads(self.settings):
+            return self._solve(f, g, rtol)
+
+    def _solve(self, f, g, rtol):
         system, s = self.system, self.settings
-        if s.threads == "free":
-            FREE_CORES.adapt()
         t0 = time.perf_counter()
         setup = self._charge_setup()
         rtol = self.rtol if rtol is None else rtol
@@ -264,6 +268,13 @@ class MultigridHierarchy(Factorization):
                               residuals=residuals, smoothing_sweeps=cycles * self.sweeps_per_cycle,
                               setup_time_s=setup, converged=converged)
         return x[:system.n_u], x[system.n_u:], report
+
+
+def _threads(settings: MultigridSettings):
+    """The context a set-up or solve runs in: :meth:`fbmflow.cores.FreeCores.free` under
+    ``threads = "free"`` (Numba's count lowered to the cores other processes leave, then
+    restored), nothing under ``"fixed"``."""
+    return FREE_CORES.free() if settings.threads == "free" else nullcontext()
 
 
 def _border(system: SaddlePointSystem) -> np.ndarray | None:
@@ -314,7 +325,12 @@ class MultigridSolver(LinearSolver):
 
     def factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
         """Set up the hierarchy of ``system`` (of its ``preconditioner`` where it has one): the
-        smoothers' blocks on every level and the coarsest level's factorisation."""
+        smoothers' blocks on every level and the coarsest level's factorisation, on the free
+        cores where the settings say so (:func:`_threads`)."""
+        with _threads(self.settings):
+            return self._factor(system)
+
+    def _factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
         s = self.settings
         if system.preconditioner is not None and s.krylov != "fgmres":
             raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
@@ -326,8 +342,6 @@ class MultigridSolver(LinearSolver):
             raise ValueError("only the vanka-factored smoother handles row constraints (the sharp fictitious "
                              f"boundary), not {s.smoother!r}; set solver.multigrid.smoother = "
                              "\"auto\" or \"vanka-factored\", or use the direct solver")
-        if s.threads == "free":
-            FREE_CORES.adapt()
         t0 = time.perf_counter()
         base = system if system.preconditioner is None else system.preconditioner
         chain = [base]
