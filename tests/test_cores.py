@@ -43,10 +43,10 @@ def _two_cpus_seeing(monkeypatch, looks):
     return free
 
 
-def test_free_follows_the_other_processes_and_restores_the_count(monkeypatch):
-    """On two CPUs: another process busy on one core (1.0 of 1 s) -> one thread inside the block,
-    two again after it; the other stops -> two; a window shorter than MIN_WINDOW_S keeps the last
-    decision; a count the caller set lower is the most threads."""
+def test_adapt_follows_the_other_processes_and_keeps_the_callers_most(monkeypatch):
+    """On two CPUs: another process busy on one core (1.0 of 1 s) -> one thread, kept until the
+    next look; a window shorter than MIN_WINDOW_S keeps the last decision; the other stops -> two
+    again; a count the caller sets afterwards becomes the most threads."""
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("needs two Numba threads")
     before = numba.get_num_threads()
@@ -55,18 +55,12 @@ def test_free_follows_the_other_processes_and_restores_the_count(monkeypatch):
         free = _two_cpus_seeing(monkeypatch, [(0.0, 0.0, 0.0), (1.0, 2.0, 1.0),  # others 1.0
                                               (1.1, 2.2, 1.1),  # too short: still 1.0
                                               (2.0, 3.0, 2.0),  # others 0.0
-                                              (3.0, 5.0, 3.0)])  # others 1.0, the caller asks 1
-        with free.free() as threads:
-            assert threads == 1 and numba.get_num_threads() == 1
-        assert numba.get_num_threads() == 2
-        with free.free() as threads:
-            assert threads == 1
-        with free.free() as threads:
-            assert threads == 2 and numba.get_num_threads() == 2
+                                              (3.0, 4.0, 3.0)])  # others 0.0, the caller asks 1
+        assert free.adapt() == 1 and numba.get_num_threads() == 1
+        assert free.adapt() == 1
+        assert free.adapt() == 2 and numba.get_num_threads() == 2
         numba.set_num_threads(1)
-        with free.free() as threads:
-            assert threads == 1
-        assert numba.get_num_threads() == 1
+        assert free.adapt() == 1 and free.limit == 1
     finally:
         numba.set_num_threads(before)
 
@@ -74,16 +68,13 @@ def test_free_follows_the_other_processes_and_restores_the_count(monkeypatch):
 def test_without_proc_stat_the_count_stays(monkeypatch):
     free = FreeCores()
     monkeypatch.setattr(free, "_look", lambda: None)
-    with free.free() as threads:
-        assert threads == numba.get_num_threads()
+    assert free.adapt() == numba.get_num_threads()
 
 
 def test_fixed_threads_leave_the_count_alone(monkeypatch):
     """``solver.multigrid.threads = "fixed"``: a set-up and solve never look."""
-    from fbmflow.solvers.multigrid import MultigridSettings, _threads
+    from fbmflow.solvers.multigrid import MultigridSettings, _take_free_cores
     monkeypatch.setattr(cores.FREE_CORES, "threads", lambda limit: pytest.fail("looked"))
-    with _threads(MultigridSettings(threads="fixed")):
-        pass
+    _take_free_cores(MultigridSettings(threads="fixed"))
     with pytest.raises(pytest.fail.Exception, match="looked"):
-        with _threads(MultigridSettings(threads="free")):
-            pass
+        _take_free_cores(MultigridSettings(threads="free"))

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import time
-from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -229,10 +228,10 @@ class MultigridHierarchy(Factorization):
 
     def solve(self, f, g, rtol=None):
         """Cycles (inside FGMRES, or stand-alone) until the residual drops ``rtol`` times (None:
-        the solver's target), on the free cores where the settings say so (:func:`_threads`);
+        the solver's target), on the free cores where the settings say so (:func:`_take_free_cores`);
         the report counts cycles and smoothing sweeps on all levels."""
-        with _threads(self.settings):
-            return self._solve(f, g, rtol)
+        _take_free_cores(self.settings)
+        return self._solve(f, g, rtol)
 
     def _solve(self, f, g, rtol):
         system, s = self.system, self.settings
@@ -270,11 +269,11 @@ class MultigridHierarchy(Factorization):
         return x[:system.n_u], x[system.n_u:], report
 
 
-def _threads(settings: MultigridSettings):
-    """The context a set-up or solve runs in: :meth:`fbmflow.cores.FreeCores.free` under
-    ``threads = "free"`` (Numba's count lowered to the cores other processes leave, then
-    restored), nothing under ``"fixed"``."""
-    return FREE_CORES.free() if settings.threads == "free" else nullcontext()
+def _take_free_cores(settings: MultigridSettings) -> None:
+    """Under ``threads = "free"`` Numba's count set to the cores other processes leave
+    (:meth:`fbmflow.cores.FreeCores.adapt`); under ``"fixed"`` nothing."""
+    if settings.threads == "free":
+        FREE_CORES.adapt()
 
 
 def _border(system: SaddlePointSystem) -> np.ndarray | None:
@@ -326,9 +325,9 @@ class MultigridSolver(LinearSolver):
     def factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
         """Set up the hierarchy of ``system`` (of its ``preconditioner`` where it has one): the
         smoothers' blocks on every level and the coarsest level's factorisation, on the free
-        cores where the settings say so (:func:`_threads`)."""
-        with _threads(self.settings):
-            return self._factor(system)
+        cores where the settings say so (:func:`_take_free_cores`)."""
+        _take_free_cores(self.settings)
+        return self._factor(system)
 
     def _factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
         s = self.settings
