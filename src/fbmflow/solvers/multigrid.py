@@ -228,8 +228,9 @@ class MultigridHierarchy(Factorization):
 
     def solve(self, f, g, rtol=None):
         """Cycles (inside FGMRES, or stand-alone) until the residual drops ``rtol`` times (None:
-        the solver's target), on the free cores where the settings say so (:func:`_take_free_cores`);
-        the report counts cycles and smoothing sweeps on all levels."""
+        the solver's target), on the free cores where the settings say so
+        (:meth:`fbmflow.cores.FreeCores.adapt`); the report counts cycles and smoothing sweeps on
+        all levels."""
         _take_free_cores(self.settings)
         return self._solve(f, g, rtol)
 
@@ -325,7 +326,7 @@ class MultigridSolver(LinearSolver):
     def factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
         """Set up the hierarchy of ``system`` (of its ``preconditioner`` where it has one): the
         smoothers' blocks on every level and the coarsest level's factorisation, on the free
-        cores where the settings say so (:func:`_take_free_cores`)."""
+        cores where the settings say so (:meth:`fbmflow.cores.FreeCores.adapt`)."""
         _take_free_cores(self.settings)
         return self._factor(system)
 
