@@ -31,12 +31,9 @@ writes benchmarks/results/sweep_parts.{json,md}: the rows of this run; ``--tag``
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
-from studies.thread_scaling import commit, machine
+from studies.thread_scaling import commit, machine, run_child
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
@@ -90,13 +87,8 @@ print(json.dumps(dict(threads=numba.get_num_threads(), step_s=step, unknowns=int
 
 def one(threads: int, chunk: int, scene: str, level: int, overrides: list[str], warm: int) -> dict:
     """One process at ``threads`` Numba threads and group chunk size ``chunk``."""
-    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     args = dict(scene=scene, level=level, overrides=overrides, warm=warm, chunk=chunk)
-    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(args)], env=env, capture_output=True,
-                         text=True, check=False)
-    if out.returncode != 0:
-        raise RuntimeError(f"{threads} threads, chunk {chunk} failed:\n{out.stderr[-3000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return run_child(CHILD, args, threads, what=f"{threads} threads, chunk {chunk}")[0]
 
 
 def table(rows: list[dict]) -> str:

@@ -110,17 +110,26 @@ def one(tree: Path, threads: int, scene: str, level: int, overrides: list[str], 
     """One process: the package from ``tree`` at ``threads`` Numba threads (``profile``: its last
     step's functions by own time printed; ``free_cores``: multigrid may take fewer threads where
     other processes are busy, :mod:`fbmflow.cores`)."""
-    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
     args = dict(scene=scene, level=level, overrides=overrides, warm=warm, steps=steps, profile=profile,
                 free_cores=free_cores)
-    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(args)], env=env, capture_output=True,
+    result, stderr = run_child(CHILD, args, threads, tree, f"{tree} at {threads} threads")
+    if profile:
+        print(stderr[-6000:], flush=True)
+    return result
+
+
+def run_child(code: str, args: dict, threads: int, tree: Path | None = None, what: str = "child") -> tuple:
+    """Run ``code`` (reading ``json.loads(sys.argv[1])``, printing a JSON line last) in a process
+    of its own at ``threads`` Numba threads and one BLAS thread, with the package from ``tree``
+    first on the path (default: the installed one): its last line's JSON and its stderr."""
+    env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    if tree is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
+    out = subprocess.run([sys.executable, "-c", code, json.dumps(args)], env=env, capture_output=True,
                          text=True, check=False)
     if out.returncode != 0:
-        raise RuntimeError(f"{tree} at {threads} threads failed:\n{out.stderr[-3000:]}")
-    if profile:
-        print(out.stderr[-6000:], flush=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+        raise RuntimeError(f"{what} failed:\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1]), out.stderr
 
 
 def table(rows: list[dict]) -> str:
