@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 #: the environment variables of the world size and rank that MPI launchers set in every process
 #: (Open MPI's mpiexec; MPICH's and Intel MPI's Hydra, and Slurm's srun with PMI-2)
 LAUNCHER_VARIABLES = (("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"), ("PMI_SIZE", "PMI_RANK"))
@@ -53,3 +55,15 @@ def world():
                            "mpi4py was built against another MPI than this mpiexec's; use the mpiexec of "
                            "the MPI that mpi4py uses (mpi4py.get_config())")
     return MPI.COMM_WORLD
+
+
+def sum_over(v, comm):
+    """The elementwise sum of every process's array ``v`` (float64), the same on all (one
+    ``Allreduce``); ``v`` itself for one process."""
+    if comm.size == 1:
+        return v
+    from mpi4py import MPI
+
+    out = np.empty_like(v)
+    comm.Allreduce(np.ascontiguousarray(v), out, op=MPI.SUM)
+    return out

@@ -1,16 +1,22 @@
-"""A structured mesh split into slabs of cell layers along its last axis, one per process.
+"""A structured mesh split into slabs of cell layers along its last axis, one per process, each
+with one layer of halo cells towards each neighbour.
 
-Process ``r`` of ``P`` owns the cell layers ``[a_r, b_r)`` (the layers split as evenly as they
-go) and every Q2 node of its cells: the node planes ``2 a_r`` to ``2 b_r`` of the lattice
-(:mod:`fbmflow.fem.dofmap`: node ``I + L_x (J + L_y K)``, so a process's nodes are one run of
-global numbers). Neighbouring slabs share one node plane. An operator applied cell by cell on a
-slab's own mesh gives, at a shared node, the part of its cells;
-:meth:`~fbmflow.parallel.slabs.SlabPartition.sum_shared` adds the neighbour's part, exchanged
-with that neighbour only, and then every process holds the whole operator's value at each of its
-nodes. A shared node belongs to the lower slab in sums over nodes
-(:meth:`~fbmflow.parallel.slabs.SlabPartition.dot`), so that each node counts once. A cell reads
-only its own nodes, so no halo cells are needed for these products; the smoother's patches will
-need them.
+Process ``r`` of ``P`` *owns* the cell layers ``[a_r, b_r)`` and holds the layers
+``[a_r - 1, b_r + 1)`` (no halo layer beyond the mesh's ends): its *slab mesh*. In
+:mod:`fbmflow.fem.dofmap`'s numbering (node ``I + L_x (J + L_y K)``) a slab's Q2 nodes are the
+node planes ``2 (a_r - 1)`` to ``2 (b_r + 1)``, one run of global numbers, and its cells one run
+too. A node plane shared by two slabs' owned cells belongs to the lower slab: process ``r`` owns
+the node planes ``2 a_r + 1`` to ``2 b_r`` (from plane 0 on process 0), and the P1disc pressures
+of its owned cells; everything else on its slab mesh is a *ghost*, a copy of what a neighbour
+owns.
+
+An operator assembled or applied cell by cell on the slab mesh gives the whole mesh's rows at
+every node of the owned cells (the planes ``2 a_r`` to ``2 b_r``: their cells are all on the
+slab mesh) and at the owned cells' pressures; only the rows of the outer halo planes miss cells.
+A vector is *consistent* when its ghosts hold their owners' values
+(:meth:`~fbmflow.parallel.slabs.SlabPartition.update_ghosts`, one exchange with each neighbour).
+Local vectors are the saddle-point system's ``[u, p]``: ``dim`` velocity components of the slab's
+``n_v`` nodes, then ``dim + 1`` P1disc values per slab cell.
 """
 from __future__ import annotations
 
@@ -19,80 +25,130 @@ import numpy as np
 from ..mesh import StructuredMesh
 
 
+def cut_layers(mesh: StructuredMesh, a: int, b: int) -> StructuredMesh:
+    """The cells of ``mesh`` in the layers ``[a, b)`` along its last axis as a mesh of their own
+    (its cells and vertices the global ones, in order)."""
+    vertex_plane = int(np.prod([n + 1 for n in mesh.shape[:-1]]))
+    vertices = mesh.vertices[a * vertex_plane:(b + 1) * vertex_plane]
+    lower = mesh.lower[:-1] + (float(vertices[:, -1].min()),)
+    upper = mesh.upper[:-1] + (float(vertices[:, -1].max()),)
+    return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, mesh.periodic, vertices.copy())
+
+
+def split_layers(n_layers: int, size: int, multiple: int = 1) -> np.ndarray:
+    """Bounds ``(size + 1,)`` of ``size`` slabs of ``n_layers`` cell layers, as even as they go
+    in whole multiples of ``multiple`` layers (so that ``multiple = 2^k`` slabs stay slabs on
+    ``k`` coarser levels)."""
+    units = n_layers // multiple
+    return np.linspace(0, units, size + 1).round().astype(np.int64) * multiple
+
+
 class SlabPartition:
-    """Process ``rank``'s slab of ``mesh`` among ``size`` processes.
+    """Process ``rank``'s slab of ``mesh`` among ``size`` processes (see the module docstring).
 
     Parameters
     ----------
     mesh : StructuredMesh, 2D or 3D, not periodic along its last axis
     size, rank : int, the number of processes and this one's rank (0-based)
+    bounds : (size + 1,) int or None, the slabs' first cell layers and the last one's end
+        (:func:`split_layers` where None); every slab needs two layers at least, so that a
+        neighbour's ghosts are all owned by this slab
 
     Attributes
     ----------
     layers : (int, int), the owned cell layers ``[a, b)`` along the last axis
-    mesh : StructuredMesh, the slab's own mesh (its cells are the global cells ``cells``, in
-        order; its vertices the global ones)
-    cells : (n_cells,) int64, the slab's global cells
+    held : (int, int), the slab mesh's layers ``[a - 1, b + 1)`` (clipped to the mesh)
+    mesh : StructuredMesh, the slab mesh
+    cells : (n_cells,) int64, the slab mesh's global cells
     nodes : (n_nodes,) int64, the global Q2 node of every slab node (one run of numbers)
-    plane : int, Q2 nodes per lattice plane normal to the last axis (the shared ones)
+    owned_nodes, owned_cells : bool masks over the slab's nodes and cells
+    owned : (dim n_nodes + (dim + 1) n_cells,) bool, the owned unknowns of a local vector
     """
 
-    def __init__(self, mesh: StructuredMesh, size: int, rank: int):
+    def __init__(self, mesh: StructuredMesh, size: int, rank: int, bounds=None):
         n_last = mesh.shape[-1]
         if mesh.periodic[-1]:
             raise ValueError("slabs need a last axis that is not periodic; periodic axes may come first")
-        if not 1 <= size <= n_last:
-            raise ValueError(f"{size} processes need at least as many cell layers along the last axis, "
-                             f"the mesh has {n_last}: use fewer processes or a finer mesh")
         if not 0 <= rank < size:
             raise ValueError(f"rank {rank} is not one of {size} processes")
-        self.size, self.rank = size, rank
-        bounds = np.linspace(0, n_last, size + 1).round().astype(int)
+        bounds = split_layers(n_last, size) if bounds is None else np.asarray(bounds, dtype=np.int64)
+        if size > 1 and (bounds.shape != (size + 1,) or bounds[0] != 0 or bounds[-1] != n_last
+                         or np.diff(bounds).min() < 2):
+            raise ValueError(f"{size} processes need two cell layers each along the last axis, the mesh has "
+                             f"{n_last}: use at most {n_last // 2} processes or a finer mesh")
+        self.size, self.rank, self.bounds = size, rank, bounds
         a, b = int(bounds[rank]), int(bounds[rank + 1])
-        self.layers = (a, b)
+        ha, hb = (a - 1 if rank > 0 else a), (b + 1 if rank < size - 1 else b)
+        self.layers, self.held = (a, b), (ha, hb)
+        self.whole = mesh
+        self.mesh = cut_layers(mesh, ha, hb)
         per_layer = int(np.prod(mesh.shape[:-1]))
-        self.cells = np.arange(a * per_layer, b * per_layer, dtype=np.int64)
-        vertex_plane = int(np.prod([n + 1 for n in mesh.shape[:-1]]))
-        vertices = mesh.vertices[a * vertex_plane:(b + 1) * vertex_plane]
-        shape = mesh.shape[:-1] + (b - a,)
-        lower = mesh.lower[:-1] + (float(vertices[:, -1].min()),)
-        upper = mesh.upper[:-1] + (float(vertices[:, -1].max()),)
-        self.mesh = StructuredMesh(shape, lower, upper, mesh.periodic, vertices.copy())
-        self.plane = int(np.prod([2 * n if p else 2 * n + 1
-                                  for n, p in zip(mesh.shape[:-1], mesh.periodic[:-1])]))
-        self.nodes = np.arange(2 * a * self.plane, (2 * b + 1) * self.plane, dtype=np.int64)
+        self.cells = np.arange(ha * per_layer, hb * per_layer, dtype=np.int64)
+        plane = int(np.prod([2 * n if p else 2 * n + 1 for n, p in zip(mesh.shape[:-1], mesh.periodic[:-1])]))
+        self.plane = plane
+        self.nodes = np.arange(2 * ha * plane, (2 * hb + 1) * plane, dtype=np.int64)
+        node_plane = np.arange(2 * ha, 2 * hb + 1).repeat(plane)  # global plane of every slab node
+        cell_layer = np.arange(ha, hb).repeat(per_layer)
+        self.owned_nodes = (node_plane > 2 * a if rank > 0 else node_plane >= 0) & (node_plane <= 2 * b)
+        self.owned_cells = (cell_layer >= a) & (cell_layer < b)
+        dim, npl = mesh.dim, mesh.dim + 1
+        self.dim, self.n_v, self.n_cells = dim, self.nodes.size, self.cells.size
+        self.owned = np.concatenate([np.tile(self.owned_nodes, dim), np.repeat(self.owned_cells, npl)])
+        n_v_whole = plane * (2 * n_last + 1)
+        #: the whole mesh's unknown of every local one
+        self.unknowns_of_whole = np.concatenate([self.nodes + k * n_v_whole for k in range(dim)]
+                                                + [dim * n_v_whole + (self.cells[:, None] * npl
+                                                                      + np.arange(npl)).ravel()])
 
-    @property
-    def owned(self) -> np.ndarray:
-        """(n_nodes,) bool: the slab nodes this process counts in sums over nodes (all but the
-        plane it shares with the slab below)."""
-        own = np.ones(self.nodes.size, dtype=bool)
-        if self.rank > 0:
-            own[:self.plane] = False
-        return own
+        def unknowns(planes, layers):  # local unknowns of global node planes and cell layers
+            v = np.flatnonzero(np.isin(node_plane, planes))
+            c = np.flatnonzero(np.isin(cell_layer, layers))
+            return np.concatenate([v + k * self.n_v for k in range(dim)]
+                                  + [dim * self.n_v + (c[:, None] * npl + np.arange(npl)).ravel()])
 
-    def sum_shared(self, values: np.ndarray, comm) -> None:
-        """Add the neighbours' parts at the shared node planes to ``values`` (k, n_nodes) float64,
-        in place: one exchange with each neighbour (``comm``: an mpi4py communicator, or anything
-        with its ``Sendrecv``), in two rounds whatever the number of processes (even ranks with
-        the slab above first, odd ones with the slab below first). The lower slab's part is added
-        first on both sides, so the two copies of a shared node hold the same bits."""
-        p = self.plane
-        lower = np.ascontiguousarray(values[:, :p]) if self.rank > 0 else None
-        upper = np.ascontiguousarray(values[:, -p:]) if self.rank < self.size - 1 else None
-        rounds = [(upper, self.rank + 1), (lower, self.rank - 1)]
-        received = {}
-        for mine, other in rounds if self.rank % 2 == 0 else rounds[::-1]:
-            if mine is not None:
-                received[other] = np.empty_like(mine)
-                comm.Sendrecv(mine, dest=other, recvbuf=received[other], source=other)
-        if lower is not None:
-            values[:, :p] = received[self.rank - 1] + lower
-        if upper is not None:
-            values[:, -p:] = upper + received[self.rank + 1]
+        #: per neighbour ``(rank, send, receive)``: the local unknowns this process owns that are
+        #: the neighbour's ghosts, and its ghosts that the neighbour owns, in global order
+        self.neighbours = []
+        if rank > 0:  # the lower neighbour's ghosts: planes 2a+1, 2a+2, layer a
+            self.neighbours.append((rank - 1, unknowns([2 * a + 1, 2 * a + 2], [a]),
+                                    unknowns(np.arange(2 * ha, 2 * a + 1), [ha])))
+        if rank < size - 1:  # the upper neighbour's: planes 2b-2 .. 2b, layer b-1
+            self.neighbours.append((rank + 1, unknowns(np.arange(2 * b - 2, 2 * b + 1), [b - 1]),
+                                    unknowns(np.arange(2 * b + 1, 2 * hb + 1), [b])))
+        if rank % 2:  # odd ranks talk to the lower neighbour first, even ones to the upper one
+            self.neighbours.reverse()
+
+    def update_ghosts(self, x: np.ndarray, comm) -> None:
+        """Copy the owners' values into the ghosts of the local vector ``x`` in place (``comm``: an
+        mpi4py communicator, or anything with its ``Sendrecv``): one exchange with each
+        neighbour, in two rounds whatever the number of processes."""
+        for other, send, receive in self.neighbours:
+            buffer = np.empty(receive.size)
+            comm.Sendrecv(np.ascontiguousarray(x[send]), dest=other, recvbuf=buffer, source=other)
+            x[receive] = buffer
+
+    def add_ghosts(self, x: np.ndarray, comm) -> None:
+        """Add the ghosts' values of ``x`` to their owners' and zero the ghosts, in place: the
+        whole sum at every owned unknown of a vector summed cell by cell (a restricted
+        residual), each process holding a part."""
+        for other, send, receive in self.neighbours:
+            buffer = np.empty(send.size)
+            comm.Sendrecv(np.ascontiguousarray(x[receive]), dest=other, recvbuf=buffer, source=other)
+            x[send] += buffer
+        x[~self.owned] = 0.0
 
     def dot(self, x: np.ndarray, y: np.ndarray, comm) -> float:
-        """``sum x y`` over all nodes of the mesh, each once, for slab vectors ``x, y`` (k, n_nodes)
-        (one reduction)."""
+        """``x · y`` over the whole mesh's unknowns, each once, for local vectors (one reduction)."""
         own = self.owned
-        return float(comm.allreduce(float(np.sum(x[:, own] * y[:, own]))))
+        return float(comm.allreduce(float(x[own] @ y[own])))
+
+    def coarsened(self, mesh: StructuredMesh) -> "SlabPartition":
+        """This split on ``mesh``, the next coarser level of the slab's mesh (half the layers);
+        ValueError where a slab's bounds are odd or it would keep fewer than two layers."""
+        if np.any(self.bounds % 2) or (self.size > 1 and np.diff(self.bounds).min() < 4):
+            raise ValueError("the slabs do not coarsen")
+        return SlabPartition(mesh, self.size, self.rank, self.bounds // 2)
+
+    def local(self, whole: np.ndarray) -> np.ndarray:
+        """The slab's part of a whole mesh's vector ``[u, p]`` (a copy)."""
+        return whole[self.unknowns_of_whole]

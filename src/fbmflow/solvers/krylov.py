@@ -8,7 +8,7 @@ import numpy as np
 
 def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndarray, rtol: float,
            max_iterations: int, restart: int = 40, project: Callable | None = None,
-           augment: np.ndarray | None = None):
+           augment: np.ndarray | None = None, inner: Callable | None = None):
     """Solve ``A x = b`` to ``|b - A x| <= rtol |b - A x0|``.
 
     Parameters
@@ -22,6 +22,9 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         ``project`` enforces). Every restart cycle takes ``e`` as one extra search direction (no
         preconditioner application, not counted in ``iterations``); ``x`` is returned, ``lam``
         dropped, and the residuals are those of ``A x + lam e = b``.
+    inner : optional ``(x, y) -> float``, the inner product (default ``x @ y``): a distributed
+        vector's sum over the unknowns each process owns
+        (:meth:`fbmflow.parallel.slabs.SlabPartition.dot`)
 
     Returns
     -------
@@ -30,10 +33,15 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         every iteration
     iterations : int
     """
+    if inner is None:
+        inner, norm = np.dot, np.linalg.norm
+    else:
+        def norm(v):
+            return np.sqrt(inner(v, v))
     x = x0.copy()
     lam = 0.0
     r = b - apply_A(x)
-    beta = float(np.linalg.norm(r))
+    beta = float(norm(r))
     residuals = [beta]
     target = rtol * beta
     its = 0
@@ -60,9 +68,9 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
                 w = apply_A(z)
                 its += 1
             for j in range(k + 1):  # modified Gram–Schmidt
-                H[j, k] = w @ V[j]
+                H[j, k] = inner(w, V[j])
                 w -= H[j, k] * V[j]
-            H[k + 1, k] = np.linalg.norm(w)
+            H[k + 1, k] = norm(w)
             if H[k + 1, k] > 0:
                 V[k + 1] = w / H[k + 1, k]
             for j in range(k):  # apply previous Givens rotations
@@ -82,6 +90,6 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         if aug and k_done:
             lam += y[0]
         r = b - apply_A(x) - (lam * augment if aug else 0.0)
-        beta = float(np.linalg.norm(r))
+        beta = float(norm(r))
         residuals.append(beta)
     return x, residuals, its

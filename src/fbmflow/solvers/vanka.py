@@ -234,10 +234,14 @@ class FactoredVankaSmoother:
         symmetry plane's unit rows) solved through the Schur complement of their ``d``
         component blocks (True) or by an LU of the whole block (False: 2.5 times their factors'
         memory, the same corrections to rounding).
+    cells : (n_cells,) bool or None, the cells whose patches the sweeps update (None: all): a
+        process's owned cells on its slab of the mesh (:mod:`fbmflow.parallel.slabs`), whose halo
+        cells are a neighbour's to update
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "single",
-                 interface_sweeps: int = 2, symmetric: bool = False, component_blocks: bool = True):
+                 interface_sweeps: int = 2, symmetric: bool = False, component_blocks: bool = True,
+                 cells: np.ndarray | None = None):
         if precision not in PRECISIONS:
             raise ValueError(f"unknown precision {precision!r}; choose one of {sorted(PRECISIONS)}")
         dtype = PRECISIONS[precision]
@@ -249,7 +253,7 @@ class FactoredVankaSmoother:
         cell_dofs = np.concatenate([nodes + i * n_v for i in range(d)]
                                    + [n_u + np.arange(n_cells)[:, None] * npl + np.arange(npl)], axis=1)
         del nodes
-        plain = np.ones(n_cells, dtype=bool)
+        plain = np.ones(n_cells, dtype=bool) if cells is None else np.array(cells, dtype=bool)
         merged = []
         if system.extension is not None:
             E = system.extension.matrix.tocsr()
@@ -420,9 +424,10 @@ class FactoredVankaSmoother:
             _kernels.vanka_sweep_sequential(patches, b, x, self.omega if omega is None else omega,
                                             *self._patches, *self.op)
 
-    def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
-        """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place."""
-        for k in range(sweeps):
+    def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int, first: int = 0) -> None:
+        """``sweeps`` smoothing sweeps on ``K x = b``, updating ``x`` in place; ``first``: the
+        number of the first (the direction it goes in symmetric sweeps)."""
+        for k in range(first, first + sweeps):
             phases, far = self.sweeps[k % len(self.sweeps)]
             if k % len(self.sweeps) == 1:  # backwards: the far patches first
                 self.update(far, b, x)
