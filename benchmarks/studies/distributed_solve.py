@@ -13,15 +13,15 @@ Measured: 2026-11-29, commit d7dfcd3; quoted in docs/validation/several-processe
 linear solve over processes"
 Run: python -m fbmbench distributed_solve --rows 2x1 1x2 1x1 2x1 1x2 1x1 --level 1
 
-Every row is one ``mpiexec -n P`` run (``P x T``: P processes of T Numba threads each), one after
-the other: the ten Cate box at ``level`` (its graded mesh, walls all round, no particle: the fluid
-part of a step's system), the Oseen system of a backward-Euler step (``dt``, water-glycerol E4's
-density and viscosity) linearised at a swirl about the box's axis of 0.1 m/s at 5 cm from it, a random right-hand side
-(the same for every row), solved to ``rtol``. Rank 0 reports the set-up (slab levels, systems,
-smoothers, the coarsest factorisation) and solve seconds, the cycles, the unknowns and the peak
-resident memory of the largest process and the sum over processes. Oversubscribed rows (more
-processes times threads than cores) are marked: their times mean nothing, their cycles and
-memory do.
+Every row is one ``mpiexec -n P`` run (``P x T``: P processes of T Numba threads each), one
+after the other: the ten Cate box at ``level`` (its graded mesh, walls all round, no particle:
+the fluid part of a step's system), the Oseen system of a backward-Euler step (``dt``, water-
+glycerol E4's density and viscosity) linearised at a swirl about the box's axis of 0.1 m/s at 5
+cm from it, a random right-hand side (the same for every row), solved to ``rtol``. Rank 0
+reports the set-up (slab levels, systems, smoothers, the coarsest factorisation) and solve
+seconds, the cycles, the unknowns and the peak resident memory of the largest process and the
+sum over processes. Oversubscribed rows (more processes times threads than cores) are marked:
+their times mean nothing, their cycles and memory do.
 
 writes benchmarks/results/distributed_solve.{json,md}; ``--tag`` names the run (rows with other
 tags are kept).
@@ -56,13 +56,13 @@ slabs = SlabFlowLevels(mesh, boundary, True, comm, min_cells=64)
 x = slabs.levels[0].space.V.coordinates
 c = x - np.array([0.05, 0.05, 0.08])
 u = np.concatenate([-c[:, 1], c[:, 0], 0.0 * c[:, 2]]) * (0.1 / 0.05)
-levels, coarsest = slabs.systems(u, m=1.0 / args["dt"], a=1.0, rho=1250.0, mu=0.0373, convection=True)
-solver = DistributedMultigrid(levels, coarsest, comm, rtol=args["rtol"])
+system = slabs.systems(u, m=1.0 / args["dt"], a=1.0, rho=1250.0, mu=0.0373, convection=True)
+solver = DistributedMultigrid(system, rtol=args["rtol"])
 setup = time.perf_counter() - t0
 fine = slabs.partitions[0]
 rng = np.random.default_rng(11)
 b = fine.local(rng.standard_normal(comm.allreduce(int(fine.owned.sum()))))
-n_u = levels[0].system.n_u
+n_u = system.n_u
 t1 = time.perf_counter()
 _, _, report = solver.solve(b[:n_u], b[n_u:])
 solve = time.perf_counter() - t1
@@ -71,7 +71,7 @@ peaks = comm.allgather(peak) if comm.size > 1 else [peak]
 unknowns = comm.allreduce(int(fine.owned.sum()))
 if comm.rank == 0:
     print(json.dumps(dict(processes=comm.size, threads=numba.get_num_threads(),
-                          unknowns=unknowns, levels=len(levels) + 1,
+                          unknowns=unknowns, levels=len(solver.levels) + 1,
                           setup_s=setup, solve_s=solve, cycles=report.iterations,
                           converged=report.converged, peak_gb_max=max(peaks), peak_gb_sum=sum(peaks))))
 """
@@ -94,8 +94,8 @@ def one(processes: int, threads: int, level: int, dt: float, rtol: float) -> dic
 def table(rows: list[dict]) -> str:
     lines = ["# One step's linear solve over processes (python -m fbmbench distributed_solve)", "",
              "One `mpiexec -n P` run per row, one after the other, nothing else running. Speed-up: the "
-             "mean solve seconds of the 1 x 1 rows of the same run (tag) over this row's; `*`: more processes times threads "
-             "than cores (the times mean nothing).", "",
+             "mean solve seconds of the 1 x 1 rows of the same run (tag) over this row's; `*`: more "
+             "processes times threads than cores (the times mean nothing).", "",
              "| tag | machine | tree | level | unknowns | P x T | levels | cycles | set-up s | solve s | "
              "speed-up | peak GB (largest process) | peak GB (all) | command |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -52,16 +52,16 @@ def solve(communicator):
     slabs = SlabFlowLevels(mesh, boundary, closed, communicator)
     fine = slabs.partitions[0]
     u = velocity(slabs.levels[0].space.V.coordinates)
-    levels, coarsest = slabs.systems(u, **coefficients)
-    solver = DistributedMultigrid(levels, coarsest, communicator, rtol=1e-11)
+    system = slabs.systems(u, **coefficients)
+    solver = DistributedMultigrid(system, rtol=1e-11)
     rhs = fine.local(b)
-    u, p, report = solver.solve(rhs[:levels[0].system.n_u], rhs[levels[0].system.n_u:])
+    u, p, report = solver.solve(rhs[:system.n_u], rhs[system.n_u:])
     x = np.concatenate([u, p])
     want = fine.local(x_ref)
     own = fine.owned
     error = float(np.abs(x[own] - want[own]).max() / np.abs(x_ref).max())
     ghosts = float(np.abs(x - want).max() / np.abs(x_ref).max())  # consistent: ghosts too
-    return error, ghosts, report.iterations, len(levels) + 1
+    return error, ghosts, report.iterations, len(solver.levels) + 1
 
 
 error, ghosts, cycles, n_levels = solve(comm)

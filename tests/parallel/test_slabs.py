@@ -139,3 +139,16 @@ def test_world_is_one_process_without_a_launcher_and_refuses_a_mismatched_mpi(mo
     monkeypatch.setitem(sys.modules, "mpi4py", types.SimpleNamespace(MPI=alone))
     with pytest.raises(RuntimeError, match="another MPI"):
         world()
+
+
+@pytest.mark.parametrize("case, size", [("cavity", 2), ("channel", 3)])
+def test_under_mpiexec_time_steps_on_slabs_follow_the_whole_meshs(case, size):
+    """``mpiexec -n P``: three Navier–Stokes time steps on the slabs
+    (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`, 2D) end where the same steps on the
+    whole mesh end, to 1e-8 at every owned unknown, in at most 1.3 times the cycles (plus one);
+    where the ``mpi`` extra is installed."""
+    script = Path(__file__).with_name("_slab_flow.py")
+    out = subprocess.run([_mpiexec(), "-n", str(size), sys.executable, str(script), "2", case, "3"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.count(f" of {size}: {case}") == size

@@ -99,7 +99,7 @@ class NavierStokesProblem:
         self.linear_solver = linear_solver
         pressure_fixed = not pressure_is_determined(boundary)
         self.extra_constraints = extra_constraints
-        self.fine = FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
+        self.fine = self._fine_level(mesh, boundary, pressure_fixed, extra_constraints)
         self.space = self.fine.space
         self.BT = self.fine.BT
         self.mean_weights = self.fine.mean_weights
@@ -118,6 +118,20 @@ class NavierStokesProblem:
         #: :class:`~fbmflow.solvers.system.SaddlePointSystem`
         #: it solved (a hook for studies and profiles; None: none)
         self.on_linear_solve = None
+
+    #: the inner product of pressure vectors in sums over the mesh (None: ``p @ q``; one
+    #: process's part of the mesh: the sum over its owned cells)
+    _pressure_dot = None
+
+    def _fine_level(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool,
+                    extra_constraints) -> FlowLevel:
+        """The fine level's operators (a subclass holding them already returns its own)."""
+        return FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
+
+    def norm(self, x: np.ndarray) -> float:
+        """The Euclidean norm of a vector of this problem's unknowns (or velocities) over the
+        whole mesh."""
+        return float(np.linalg.norm(x))
 
     # -- data ---------------------------------------------------------------------------------
     @property
@@ -222,7 +236,8 @@ class NavierStokesProblem:
             Fp = Fp - orphans @ Fp
         if self.mean_weights is None:
             return Fp
-        return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1, con.extension)
+        return balance_volume(Fp, self.mean_weights, orphans, self.space.dim + 1, con.extension,
+                              dot=self._pressure_dot)
 
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """Pressure modes that no free velocity sees under the constraints ``con`` (those of the
@@ -368,7 +383,7 @@ class NavierStokesProblem:
 
         orphans = self.orphans(con)
         if guess is not None:
-            reference = float(np.linalg.norm(self.residual(x0, m, a, rhs, con, orphans)))
+            reference = self.norm(self.residual(x0, m, a, rhs, con, orphans))
             x0 = guess.copy()
             con.apply_to_vector(x0)
         settings = newton or self.newton
@@ -376,7 +391,7 @@ class NavierStokesProblem:
         if None not in (linear_rtol, settings.linear_rtol) and linear_rtol > settings.linear_rtol:
             settings = dataclasses.replace(settings, linear_rtol=linear_rtol)
         x, report = solve_newton(lambda x: self.residual(x, m, a, rhs, con, orphans), linear_step, x0,
-                                 settings, reference)
+                                 settings, reference, norm=self.norm)
         self._linearise(x, m, a, con, t, False, extra)  # keeps one for lifting_response
         return x, report
 

@@ -1,6 +1,7 @@
-"""The flow levels of one process among several: every multigrid level's slab
+"""The flow of one process among several: every multigrid level's slab
 (:mod:`fbmflow.parallel.slabs`) with its operators, the transfers between the slabs, and the
-whole coarsest mesh, which every process holds (:mod:`fbmflow.solvers.distributed`).
+whole coarsest mesh, which every process holds (:mod:`fbmflow.solvers.distributed`); and the
+Navier–Stokes problem on the slabs.
 
 The fine mesh is coarsened as for one process (:func:`~fbmflow.flow.levels.coarse_levels`). The
 slabs are cut on the fine mesh in whole multiples of ``2^J`` cell layers, so that they stay
@@ -16,10 +17,13 @@ from ..fem.dofmap import DofMap, PressureDofMap
 from ..mesh import StructuredMesh
 from ..parallel import SlabPartition, sum_over
 from ..parallel.slabs import cut_layers, split_layers
-from ..solvers.distributed import SlabLevel
+from ..solvers import NewtonSettings
+from ..solvers.multigrid import MultigridSettings, MultigridSolver
+from ..solvers.system import SaddlePointSystem
 from ..solvers.transfer import prolongation_p1disc, prolongation_q2
-from .boundary import DoNothing
+from .boundary import DoNothing, check_boundary, pressure_is_determined
 from .levels import FlowLevel
+from .navier_stokes import NavierStokesProblem
 
 
 class SlabFlowLevels:
@@ -57,7 +61,7 @@ class SlabFlowLevels:
         J = deepest[-1]
         bounds = split_layers(n_last, size, 2**J)
         self.comm = comm
-        self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j) for j in range(J + 1)]
+        self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j, comm) for j in range(J + 1)]
         self.levels = [FlowLevel(part.mesh, _slab_boundary(boundary, part), pressure_fixed)
                        for part in self.partitions]
         self.coarsest = FlowLevel(meshes[J + 1], boundary, pressure_fixed)
@@ -90,17 +94,26 @@ class SlabFlowLevels:
                 out.append(sum_over(v.ravel(), self.comm))
         return out
 
-    def systems(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool):
-        """The Picard systems ``m rho M + a (mu L + rho N(u))`` of every level at the consistent
-        local fine velocity ``u``: the slab levels (:class:`~fbmflow.solvers.distributed.SlabLevel`,
-        finest first, their prolongations set) and the whole coarsest mesh's system."""
+    def systems(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
+                newton: bool = False) -> SaddlePointSystem:
+        """The linearisations ``m rho M + a (mu L + rho N(u))`` (with the Newton term ``R(u)``
+        where ``newton``) at the consistent local fine velocity ``u`` on every level, chained:
+        this process's part of the fine system, its ``coarser`` chain the slab levels' (each
+        with its ``partition`` and ``prolongation``) and the whole coarsest mesh's last
+        (:class:`~fbmflow.solvers.distributed.DistributedMultigrid`'s input)."""
         velocities = self.inject(u)
-        out = []
+        coarsest = self.coarsest.system(velocities[-1], m, a, rho, mu, convection, newton=newton)
+        finer = None
+        chain = []
         for part, level, P, v in zip(self.partitions, self.levels, self.prolongations, velocities):
-            system = level.system(v, m, a, rho, mu, convection, newton=False)
-            system.prolongation = P
-            out.append(SlabLevel(part, system))
-        return out, self.coarsest.system(velocities[-1], m, a, rho, mu, convection, newton=False)
+            system = level.system(v, m, a, rho, mu, convection, newton=newton)
+            system.partition, system.prolongation = part, P
+            if finer is not None:
+                finer.coarser = system
+            chain.append(system)
+            finer = system
+        finer.coarser = coarsest
+        return chain[0]
 
 
 def _slab_boundary(boundary: dict, part: SlabPartition) -> dict:
@@ -159,3 +172,77 @@ def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse:
             cut(P_p, (fa - 2 * sa) * fine_layer * npl, fine.n_cells * npl, (sa - ca) * coarse_layer * npl,
                 n_p_c))
 
+
+
+class SlabNavierStokesProblem(NavierStokesProblem):
+    """A :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` of which this process holds one
+    slab (its owned cell layers and a halo layer each side, :mod:`fbmflow.parallel.slabs`), for
+    flows without particles so far.
+
+    Vectors are this process's local ``[u, p]`` on its slab mesh, *consistent* (ghosts hold their
+    owners' values): every residual and operator product is completed by a ghost update, norms
+    and the closed box's volume balance sum over the owned unknowns, and the linear steps are
+    solved by :class:`~fbmflow.solvers.distributed.DistributedMultigrid` on the slab levels of
+    :class:`SlabFlowLevels` (the Picard hierarchy inside FGMRES, which applies the Newton
+    operator where there is convection). The time schemes (:func:`~fbmflow.flow.time_schemes.advance`)
+    run unchanged on every process.
+
+    Parameters
+    ----------
+    mesh : StructuredMesh, the whole fine mesh
+    viscosity, boundary, density, body_force, convection, newton :
+        as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (``boundary``: the whole
+        mesh's conditions)
+    comm : the processes' communicator
+    multigrid : MultigridSettings or None, the solver's (V-cycles, vanka-factored, FGMRES)
+    """
+
+    def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict, comm, density: float = 1.0,
+                 body_force=None, convection: bool = True, newton: NewtonSettings = NewtonSettings(),
+                 multigrid: MultigridSettings | None = None):
+        check_boundary(mesh.tags, boundary)
+        self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm)
+        self.partition = part = self.slabs.partitions[0]
+        solver = MultigridSolver(multigrid or MultigridSettings(), rtol=newton.linear_rtol or 1e-8)
+        super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
+                         convection, solver, newton)
+        self.whole_mesh = mesh
+        self._pressure_fixed = not pressure_is_determined(boundary)
+        self._pressure_dot = part.pressure_dot
+
+    def _fine_level(self, mesh, boundary, pressure_fixed, extra_constraints) -> FlowLevel:
+        return self.slabs.levels[0]
+
+    def norm(self, x: np.ndarray) -> float:
+        return float(np.sqrt(self.partition.dot(x, x)))
+
+    def residual(self, x, m, a, rhs, con, orphans=None) -> np.ndarray:
+        F = super().residual(x, m, a, rhs, con, orphans)
+        self.partition.update_ghosts(F)
+        return F
+
+    def load(self, t: float = 0.0) -> np.ndarray:
+        f = super().load(t)
+        self.partition.update_ghosts(f)
+        return f
+
+    def apply_mass(self, u: np.ndarray) -> np.ndarray:
+        v = super().apply_mass(u)
+        self.partition.update_ghosts(v)
+        return v
+
+    def apply_spatial(self, u: np.ndarray) -> np.ndarray:
+        v = super().apply_spatial(u)
+        self.partition.update_ghosts(v)
+        return v
+
+    def linear_system(self, x, m, a, con, t=0.0, extra=None) -> SaddlePointSystem:
+        """The Picard linearisation on every slab level (:meth:`SlabFlowLevels.systems`), or,
+        with convection, the Newton system whose ``preconditioner`` it is."""
+        if extra is not None or self.extra_constraints is not None:
+            raise NotImplementedError("particles are not distributed over processes yet")
+        u = x[:self.space.n_u]
+        picard = self.slabs.systems(u, m, a, self.rho, self.mu, self.convection)
+        if self.convection and a != 0.0:
+            return self.fine.newton_system(picard, u, a, self.rho)
+        return picard

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh import StructuredMesh
+from .comm import SerialComm
 
 
 def cut_layers(mesh: StructuredMesh, a: int, b: int) -> StructuredMesh:
@@ -53,6 +54,9 @@ class SlabPartition:
     bounds : (size + 1,) int or None, the slabs' first cell layers and the last one's end
         (:func:`split_layers` where None); every slab needs two layers at least, so that a
         neighbour's ghosts are all owned by this slab
+    comm : the processes' communicator (mpi4py's, or anything with its ``Sendrecv`` and
+        ``allreduce``; :class:`~fbmflow.parallel.comm.SerialComm` where None), which the exchanges
+        and sums use
 
     Attributes
     ----------
@@ -65,7 +69,7 @@ class SlabPartition:
     owned : (dim n_nodes + (dim + 1) n_cells,) bool, the owned unknowns of a local vector
     """
 
-    def __init__(self, mesh: StructuredMesh, size: int, rank: int, bounds=None):
+    def __init__(self, mesh: StructuredMesh, size: int, rank: int, bounds=None, comm=None):
         n_last = mesh.shape[-1]
         if mesh.periodic[-1]:
             raise ValueError("slabs need a last axis that is not periodic; periodic axes may come first")
@@ -77,6 +81,7 @@ class SlabPartition:
             raise ValueError(f"{size} processes need two cell layers each along the last axis, the mesh has "
                              f"{n_last}: use at most {n_last // 2} processes or a finer mesh")
         self.size, self.rank, self.bounds = size, rank, bounds
+        self.comm = comm if comm is not None else SerialComm()
         a, b = int(bounds[rank]), int(bounds[rank + 1])
         ha, hb = (a - 1 if rank > 0 else a), (b + 1 if rank < size - 1 else b)
         self.layers, self.held = (a, b), (ha, hb)
@@ -118,36 +123,50 @@ class SlabPartition:
         if rank % 2:  # odd ranks talk to the lower neighbour first, even ones to the upper one
             self.neighbours.reverse()
 
-    def update_ghosts(self, x: np.ndarray, comm) -> None:
-        """Copy the owners' values into the ghosts of the local vector ``x`` in place (``comm``: an
-        mpi4py communicator, or anything with its ``Sendrecv``): one exchange with each
-        neighbour, in two rounds whatever the number of processes."""
+    def update_ghosts(self, x: np.ndarray, comm=None) -> None:
+        """Copy the owners' values into the ghosts of the local vector ``x`` in place (``comm``:
+        another communicator than the partition's): one exchange with each neighbour, in two
+        rounds whatever the number of processes. ``x`` may be a velocity alone (its first
+        ``dim n_nodes`` entries)."""
+        comm = comm or self.comm
+        n = x.size
         for other, send, receive in self.neighbours:
+            if n < self.owned.size:
+                send, receive = send[send < n], receive[receive < n]
             buffer = np.empty(receive.size)
             comm.Sendrecv(np.ascontiguousarray(x[send]), dest=other, recvbuf=buffer, source=other)
             x[receive] = buffer
 
-    def add_ghosts(self, x: np.ndarray, comm) -> None:
+    def add_ghosts(self, x: np.ndarray, comm=None) -> None:
         """Add the ghosts' values of ``x`` to their owners' and zero the ghosts, in place: the
         whole sum at every owned unknown of a vector summed cell by cell (a restricted
         residual), each process holding a part."""
+        comm = comm or self.comm
         for other, send, receive in self.neighbours:
             buffer = np.empty(send.size)
             comm.Sendrecv(np.ascontiguousarray(x[receive]), dest=other, recvbuf=buffer, source=other)
             x[send] += buffer
         x[~self.owned] = 0.0
 
-    def dot(self, x: np.ndarray, y: np.ndarray, comm) -> float:
-        """``x · y`` over the whole mesh's unknowns, each once, for local vectors (one reduction)."""
-        own = self.owned
+    def dot(self, x: np.ndarray, y: np.ndarray, comm=None) -> float:
+        """``x · y`` over the whole mesh's unknowns, each once, for local vectors (one reduction);
+        velocities alone too."""
+        comm = comm or self.comm
+        own = self.owned[:x.size]
         return float(comm.allreduce(float(x[own] @ y[own])))
+
+    def pressure_dot(self, p: np.ndarray, q: np.ndarray) -> float:
+        """``p · q`` over the whole mesh's pressure unknowns, each once, for local pressures
+        ``(dim + 1) n_cells`` (one reduction)."""
+        own = self.owned[self.dim * self.n_v:]
+        return float(self.comm.allreduce(float(p[own] @ q[own])))
 
     def coarsened(self, mesh: StructuredMesh) -> "SlabPartition":
         """This split on ``mesh``, the next coarser level of the slab's mesh (half the layers);
         ValueError where a slab's bounds are odd or it would keep fewer than two layers."""
         if np.any(self.bounds % 2) or (self.size > 1 and np.diff(self.bounds).min() < 4):
             raise ValueError("the slabs do not coarsen")
-        return SlabPartition(mesh, self.size, self.rank, self.bounds // 2)
+        return SlabPartition(mesh, self.size, self.rank, self.bounds // 2, self.comm)
 
     def local(self, whole: np.ndarray) -> np.ndarray:
         """The slab's part of a whole mesh's vector ``[u, p]`` (a copy)."""

@@ -25,62 +25,62 @@ The Krylov method (FGMRES) sums its inner products over the owned unknowns, one 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..parallel import sum_over
+from .base import Factorization
 from .direct import factorize
 from .galerkin import truncated_prolongation
 from .krylov import fgmres
 from .multigrid import MultigridSettings
 from .reports import LinearReport
-from .system import SaddlePointSystem, expansion
+from .system import SaddlePointSystem, balance_volume, expansion
 from .vanka import VANKA_VARIANTS, FactoredVankaSmoother
 
 
-@dataclass
-class SlabLevel:
-    """One level of a process's slabs: its partition (:class:`~fbmflow.parallel.slabs.SlabPartition`:
-    ``owned``, ``owned_cells``, ``update_ghosts``, ``add_ghosts``, ``dot``) and the system on the
-    slab mesh, whose ``prolongation`` comes from the next coarser level's local vectors (the
-    whole coarsest mesh's, below the last slab level)."""
-
-    partition: object
-    system: SaddlePointSystem
-
-
-class DistributedMultigrid:
-    """The multigrid solver of one process among several (see the module docstring).
+class DistributedMultigrid(Factorization):
+    """The multigrid solver of one process among several (see the module docstring), set up for
+    ``system``.
 
     Parameters
     ----------
-    levels : list of SlabLevel, finest first, every one but the coarsest
-    coarsest : SaddlePointSystem, the whole coarsest mesh's system
-    comm : the processes' communicator (mpi4py's, or :class:`~fbmflow.parallel.comm.SerialComm`)
+    system : SaddlePointSystem, this process's part of the fine system (its ``partition`` set),
+        its ``coarser`` chain the slab levels' systems (each with its ``partition`` and its
+        ``prolongation`` from the next one's local vectors) down to the whole coarsest mesh's
+        (``partition`` None); or a system whose ``preconditioner`` is such a chain (FGMRES then
+        applies ``system``: the Newton operator of a Picard hierarchy)
     settings : MultigridSettings (V-cycles, vanka-factored smoothing, FGMRES)
-    rtol : float, the residual reduction a solve reaches
+    rtol : float, the residual reduction a solve reaches when it is asked for none
     """
 
-    def __init__(self, levels: list[SlabLevel], coarsest: SaddlePointSystem, comm,
-                 settings: MultigridSettings | None = None, rtol: float = 1e-8):
+    def __init__(self, system: SaddlePointSystem, settings: MultigridSettings | None = None,
+                 rtol: float = 1e-8):
         t0 = time.perf_counter()
         self.settings = s = settings or MultigridSettings()
         if s.cycle != "V" or s.krylov != "fgmres" or s.smoother not in ("auto", "vanka-factored"):
             raise ValueError("the distributed multigrid runs V-cycles of the vanka-factored smoother inside "
                              f"FGMRES, not {s.cycle}-cycles of {s.smoother} with krylov = {s.krylov!r}")
-        self.levels, self.coarsest, self.comm, self.rtol = levels, coarsest, comm, rtol
-        fine = levels[0].system
+        self.system, self.rtol = system, rtol
+        chain = [system if system.preconditioner is None else system.preconditioner]
+        while chain[-1].partition is not None:
+            if chain[-1].coarser is None:
+                raise ValueError("a process's part of a system needs its coarser chain down to the whole "
+                                 "coarsest mesh")
+            chain.append(chain[-1].coarser)
+        self.levels, self.coarsest = chain[:-1], chain[-1]
+        self.partition = system.partition
+        self.comm = self.partition.comm
         omega = s.omega or VANKA_VARIANTS["vanka-factored"]
-        symmetric = s.symmetric_sweeps(fine.transient)
-        self.smoothers = [FactoredVankaSmoother(lv.system, omega, symmetric=symmetric,
-                                                cells=lv.partition.owned_cells) for lv in levels]
-        self.transfers = [truncated_prolongation(lv.system, *lv.system.prolongation) for lv in levels]
-        self.direct = factorize(coarsest)
-        self.setup_time_s = time.perf_counter() - t0
+        symmetric = s.symmetric_sweeps(chain[0].transient)
+        self.smoothers = [FactoredVankaSmoother(lv, omega, symmetric=symmetric,
+                                                cells=lv.partition.owned_cells) for lv in self.levels]
+        self.transfers = [truncated_prolongation(lv, *lv.prolongation) for lv in self.levels]
+        self.direct = factorize(self.coarsest)
+        super().__init__(time.perf_counter() - t0)
 
     def _coarse(self, depth: int) -> SaddlePointSystem:
-        return self.levels[depth + 1].system if depth + 1 < len(self.levels) else self.coarsest
+        return self.levels[depth + 1] if depth + 1 < len(self.levels) else self.coarsest
 
     def cycle(self, b: np.ndarray, x: np.ndarray, depth: int = 0) -> np.ndarray:
         """One V-cycle on level ``depth`` for ``K x = b`` from ``x`` (both consistent; ``x``
@@ -92,13 +92,13 @@ class DistributedMultigrid:
         level, smoother = self.levels[depth], self.smoothers[depth]
         part = level.partition
         self._smooth(smoother, part, b, x, s.pre_smooth)
-        r = b - level.system.apply(x)
+        r = b - level.apply(x)
         r[~part.owned] = 0.0
         rc = self.transfers[depth].restrict(r)
         coarse = self._coarse(depth)
         if depth + 1 < len(self.levels):
             coarse_part = self.levels[depth + 1].partition
-            coarse_part.add_ghosts(rc, self.comm)
+            coarse_part.add_ghosts(rc)
         else:
             rc = sum_over(rc, self.comm)
         if coarse.fixed is not None:
@@ -106,7 +106,7 @@ class DistributedMultigrid:
         if coarse.orphans is not None:
             rc[coarse.n_u:] -= coarse.orphans @ rc[coarse.n_u:]
         if depth + 1 < len(self.levels):
-            coarse_part.update_ghosts(rc, self.comm)
+            coarse_part.update_ghosts(rc)
         ec = self.cycle(rc, np.zeros_like(rc), depth + 1)
         x += self.transfers[depth].prolongate(ec)
         self._smooth(smoother, part, b, x, s.post_smooth)
@@ -115,12 +115,12 @@ class DistributedMultigrid:
     def _smooth(self, smoother, part, b, x, sweeps):
         for k in range(sweeps):
             smoother.smooth(b, x, 1, first=k)
-            part.update_ghosts(x, self.comm)
+            part.update_ghosts(x)
 
     def apply(self, x: np.ndarray) -> np.ndarray:
-        """``K x`` for a consistent local ``x``, consistent."""
-        y = self.levels[0].system.apply(x)
-        self.levels[0].partition.update_ghosts(y, self.comm)
+        """``K x`` (the system's, not the hierarchy's) for a consistent local ``x``, consistent."""
+        y = self.system.apply(x)
+        self.partition.update_ghosts(y)
         return y
 
     def solve(self, f: np.ndarray, g: np.ndarray, rtol: float | None = None):
@@ -129,7 +129,8 @@ class DistributedMultigrid:
         returns the local ``u``, ``p`` (consistent) and a
         :class:`~fbmflow.solvers.reports.LinearReport` (the same on every process)."""
         t0 = time.perf_counter()
-        system, part, s = self.levels[0].system, self.levels[0].partition, self.settings
+        setup = self._charge_setup()
+        system, part, s = self.system, self.partition, self.settings
         rtol = self.rtol if rtol is None else rtol
         n_u = system.n_u
         b = np.concatenate([f, self._balance(system, part, g)])
@@ -148,12 +149,12 @@ class DistributedMultigrid:
             return self.cycle(r, np.zeros_like(r))
 
         x, residuals, cycles = fgmres(self.apply, precondition, b, x, rtol, s.max_iterations, s.restart,
-                                      project, augment, inner=lambda v, w: part.dot(v, w, self.comm))
+                                      project, augment, inner=part.dot)
         if project is not None:
             project(x)
         converged = bool(residuals[-1] <= rtol * residuals[0])
-        report = LinearReport("multigrid", time.perf_counter() - t0, iterations=cycles, residuals=residuals,
-                              converged=converged)
+        report = LinearReport("multigrid", setup + time.perf_counter() - t0, iterations=cycles,
+                              residuals=residuals, setup_time_s=setup, converged=converged)
         return x[:n_u], x[n_u:], report
 
     def _balance(self, system, part, g):
@@ -161,15 +162,8 @@ class DistributedMultigrid:
         with the sums over the owned cells)."""
         if system.mean_weights is None:
             return g
-        npl = system.space.dim + 1
-        q = np.zeros(g.size)
-        q[::npl] = 1.0
-        if system.orphans is not None:
-            q = q - system.orphans @ q
-        w = expansion(system.mean_weights, system.orphans, system.extension)
-        own = part.owned[system.n_u:]
-        qg, qw = self.comm.allreduce(np.array([q[own] @ g[own], q[own] @ w[own]]))
-        return g - (qg / qw) * w
+        return balance_volume(g, system.mean_weights, system.orphans, system.space.dim + 1, system.extension,
+                              dot=part.pressure_dot)
 
     def _remove_pressure_mean(self, system, part, x):
         """Shift the pressure of ``x`` in place so that the whole mesh's ``mean_weights · p = 0``."""

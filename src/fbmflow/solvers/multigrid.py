@@ -323,14 +323,16 @@ class MultigridSolver(LinearSolver):
         ``vanka-full`` stores nothing per cell, for a machine short of memory."""
         return "vanka-factored" if self.settings.smoother == "auto" else self.settings.smoother
 
-    def factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
+    def factor(self, system: SaddlePointSystem) -> Factorization:
         """Set up the hierarchy of ``system`` (of its ``preconditioner`` where it has one): the
         smoothers' blocks on every level and the coarsest level's factorisation, on the free
-        cores where the settings say so (:meth:`fbmflow.cores.FreeCores.adapt`)."""
+        cores where the settings say so (:meth:`fbmflow.cores.FreeCores.adapt`); a
+        :class:`~fbmflow.solvers.distributed.DistributedMultigrid` for one process's part of a
+        system (its ``partition`` set)."""
         _take_free_cores(self.settings)
         return self._factor(system)
 
-    def _factor(self, system: SaddlePointSystem) -> MultigridHierarchy:
+    def _factor(self, system: SaddlePointSystem) -> Factorization:
         s = self.settings
         if system.preconditioner is not None and s.krylov != "fgmres":
             raise ValueError("a system with a separate preconditioner needs krylov = 'fgmres'")
@@ -344,6 +346,10 @@ class MultigridSolver(LinearSolver):
                              "\"auto\" or \"vanka-factored\", or use the direct solver")
         t0 = time.perf_counter()
         base = system if system.preconditioner is None else system.preconditioner
+        if base.partition is not None:  # one process's part: the hierarchy over the processes
+            from .distributed import DistributedMultigrid  # it builds on this module's settings
+
+            return DistributedMultigrid(system, s, self.rtol)
         chain = [base]
         while chain[-1].coarser is not None:
             chain.append(chain[-1].coarser)

@@ -77,7 +77,8 @@ class NewtonReport:
 
 def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
                  linear_step: Callable[[np.ndarray, np.ndarray, bool], tuple[np.ndarray, object]],
-                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings(), reference: float | None = None):
+                 x0: np.ndarray, settings: NewtonSettings = NewtonSettings(), reference: float | None = None,
+                 norm: Callable[[np.ndarray], float] | None = None):
     """Solve ``F(x) = 0``.
 
     Parameters
@@ -91,6 +92,9 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
         The residual norm that ``settings.rtol`` is relative to (default ``|F(x0)|``): a caller
         that starts from a better guess passes the norm at its usual start, so that the stopping
         rule, and with it the accuracy, stays the same.
+    norm : x -> float, optional, the norm of residuals and steps (default the Euclidean norm; one
+        process's part of a distributed vector: the sum over the unknowns it owns,
+        :meth:`fbmflow.parallel.slabs.SlabPartition.dot`)
 
     Returns
     -------
@@ -106,15 +110,19 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
         after its step instead (:mod:`fbmflow.interrupt`).
     """
     with interrupt.safe_point("iteration"):
-        return _iterate(residual, linear_step, x0, settings, reference)
+        return _iterate(residual, linear_step, x0, settings, reference, norm or _euclidean)
 
 
-def _iterate(residual, linear_step, x0, settings, reference):
-    """:func:`solve_newton`'s iteration."""
+def _euclidean(x: np.ndarray) -> float:
+    return float(np.linalg.norm(x))
+
+
+def _iterate(residual, linear_step, x0, settings, reference, size):
+    """:func:`solve_newton`'s iteration (``size``: the norm)."""
     x = x0.copy()
     report = NewtonReport()
     F = residual(x)
-    norm = float(np.linalg.norm(F))
+    norm = size(F)
     report.residuals.append(norm)
     target = max(settings.atol, settings.rtol * (norm if reference is None else reference))
     fresh = not settings.reuse_jacobian
@@ -132,14 +140,14 @@ def _iterate(residual, linear_step, x0, settings, reference):
         dx, lin = linear_step(x, F, fresh, eta)
         report.linear_iterations += lin.iterations
         report.linear_time_s += lin.wall_time_s
-        if np.linalg.norm(dx) <= settings.step_tol * max(np.linalg.norm(x), 1.0):
+        if size(dx) <= settings.step_tol * max(size(x), 1.0):
             x = x + dx  # update below round-off: converged as far as arithmetic allows
             break
         step = 1.0
         for _ in range(settings.max_backtracks + 1):
             x_new = x + step * dx
             F_new = residual(x_new)
-            norm_new = float(np.linalg.norm(F_new))
+            norm_new = size(F_new)
             if np.isfinite(norm_new) and norm_new <= (1.0 - 1e-4 * step) * norm:
                 break
             step *= 0.5

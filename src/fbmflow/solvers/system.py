@@ -76,6 +76,10 @@ class SaddlePointSystem:
         builds its preconditioner from, applying this system's matrix in the Krylov iteration;
         None: the system itself.
     transient : bool, a time step's system (the mass term is part of ``A``)
+    partition : :class:`~fbmflow.parallel.slabs.SlabPartition` or None, the slab of the mesh
+        this process holds where the system is one process's part of the whole mesh's (its rows
+        of the owned unknowns are the whole system's; the solver is then
+        :class:`~fbmflow.solvers.distributed.DistributedMultigrid`); None: the whole mesh's
     """
 
     A: sp.csr_matrix
@@ -92,6 +96,7 @@ class SaddlePointSystem:
     extension: object = None
     preconditioner: "SaddlePointSystem | None" = None
     transient: bool = False
+    partition: object = None
     _gradient: sp.csr_matrix | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
@@ -333,7 +338,7 @@ def _rank_deficient(blocks: np.ndarray, threshold: float) -> np.ndarray:
 
 
 def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matrix | None,
-                   npl: int, extension=None) -> np.ndarray:
+                   npl: int, extension=None, dot=None) -> np.ndarray:
     """Continuity right-hand side(s) ``g`` ((n_p,) or (n_p, k)) made solvable in a closed domain:
     ``g - lambda w`` with ``lambda = (q · g) / (q · w)``, a copy.
 
@@ -348,7 +353,8 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     ``|F_p| = 0.087`` for ever). ``lambda w``, with ``w = (1 - C) int psi`` the mean weights less
     their orphaned part, spreads the defect as a uniform expansion rate ``lambda`` [1/s] over the
     fluid: the Lagrange multiplier that the mean-pressure border row ``w · p = 0`` would carry.
-    For compatible data ``lambda`` is round-off and nothing changes.
+    For compatible data ``lambda`` is round-off and nothing changes. ``dot``: the inner product of
+    pressure vectors (default ``q @ g``; one process's part: the sum over the cells it owns).
     """
     q = np.zeros(len(mean_weights))
     q[::npl] = 1.0
@@ -357,7 +363,10 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     if extension is not None:  # continued cells: no continuity rows of their own
         q[extension.dofs] = 0.0
     w = expansion(mean_weights, orphans, extension)
-    lam = (q @ g) / (q @ w)
+    if dot is None:
+        lam = (q @ g) / (q @ w)
+    else:
+        lam = (dot(q, g) if g.ndim == 1 else np.array([dot(q, c) for c in g.T])) / dot(q, w)
     return g - np.multiply.outer(w, lam)
 
 
