@@ -37,19 +37,31 @@ from pathlib import Path
 
 from studies.thread_scaling import RESULTS, commit, machine
 
-CHILD = r"""
+#: the start of a child run: every process reads its arguments, joins the world and builds the
+#: ten Cate box at the level asked for, walls all round
+CHILD_HEAD = r"""
 import json, resource, sys, time
 import numpy as np
-args = json.loads(sys.argv[1])
 import numba
-from fbmflow.flow import NoSlip
-from fbmflow.flow.slabs import SlabFlowLevels
+from fbmflow.flow import Dirichlet, NoSlip
 from fbmflow.parallel import world
 from fbmflow.scenes.tencate import TenCate
-from fbmflow.solvers.distributed import DistributedMultigrid
+args = json.loads(sys.argv[1])
 comm = world()
 mesh = TenCate.mesh(args["level"], "full")
 boundary = {t: NoSlip() for t in mesh.tags}
+"""
+#: its end: rank 0 prints the body's ``result`` with the processes, threads and peak memory
+CHILD_TAIL = r"""
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
+peaks = comm.allgather(peak) if comm.size > 1 else [peak]
+if comm.rank == 0:
+    print(json.dumps(dict(result, processes=comm.size, threads=numba.get_num_threads(),
+                          peak_gb_max=max(peaks), peak_gb_sum=sum(peaks))))
+"""
+CHILD = CHILD_HEAD + r"""
+from fbmflow.flow.slabs import SlabFlowLevels
+from fbmflow.solvers.distributed import DistributedMultigrid
 comm.Barrier() if comm.size > 1 else None
 t0 = time.perf_counter()
 slabs = SlabFlowLevels(mesh, boundary, True, comm, min_cells=64)
@@ -60,35 +72,59 @@ system = slabs.systems(u, m=1.0 / args["dt"], a=1.0, rho=1250.0, mu=0.0373, conv
 solver = DistributedMultigrid(system, rtol=args["rtol"])
 setup = time.perf_counter() - t0
 fine = slabs.partitions[0]
-rng = np.random.default_rng(11)
-b = fine.local(rng.standard_normal(comm.allreduce(int(fine.owned.sum()))))
-n_u = system.n_u
-t1 = time.perf_counter()
-_, _, report = solver.solve(b[:n_u], b[n_u:])
-solve = time.perf_counter() - t1
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
-peaks = comm.allgather(peak) if comm.size > 1 else [peak]
 unknowns = comm.allreduce(int(fine.owned.sum()))
-if comm.rank == 0:
-    print(json.dumps(dict(processes=comm.size, threads=numba.get_num_threads(),
-                          unknowns=unknowns, levels=len(solver.levels) + 1,
-                          setup_s=setup, solve_s=solve, cycles=report.iterations,
-                          converged=report.converged, peak_gb_max=max(peaks), peak_gb_sum=sum(peaks))))
-"""
+b = fine.local(np.random.default_rng(11).standard_normal(unknowns))
+t1 = time.perf_counter()
+_, _, report = solver.solve(b[:system.n_u], b[system.n_u:])
+result = dict(unknowns=unknowns, levels=len(solver.levels) + 1, setup_s=setup,
+              solve_s=time.perf_counter() - t1, cycles=report.iterations, converged=report.converged)
+""" + CHILD_TAIL
 
 
-def one(processes: int, threads: int, level: int, dt: float, rtol: float) -> dict:
-    """One ``mpiexec -n processes`` run at ``threads`` Numba threads each."""
+def run_mpiexec(code: str, args: dict, processes: int, threads: int) -> dict:
+    """Run ``code`` (reading ``json.loads(sys.argv[1])``, rank 0 printing a JSON line last) under
+    ``mpiexec -n processes`` at ``threads`` Numba threads and one BLAS thread each: that JSON."""
     mpiexec = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
     if mpiexec is None:
-        raise SystemExit("distributed_solve needs mpiexec: pip install -e \".[mpi]\"")
+        raise SystemExit("this study needs mpiexec: pip install -e \".[mpi]\"")
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    args = json.dumps(dict(level=level, dt=dt, rtol=rtol))
-    out = subprocess.run([mpiexec, "-n", str(processes), sys.executable, "-c", CHILD, args], env=env,
-                         capture_output=True, text=True, check=False)
+    out = subprocess.run([mpiexec, "-n", str(processes), sys.executable, "-c", code, json.dumps(args)],
+                         env=env, capture_output=True, text=True, check=False)
     if out.returncode != 0:
         raise RuntimeError(f"{processes} x {threads} failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def speed_ups(rows: list[dict], seconds: str) -> list[str]:
+    """Per row, the mean ``seconds`` of the 1 x 1 rows of its run (tag) over its own ("" where the
+    run has none), with ``*`` beside its processes times threads where they exceed the cores."""
+    alone: dict = {}
+    for r in rows:
+        if r["processes"] == 1 and r["threads"] == 1:
+            alone.setdefault(r["tag"], []).append(r[seconds])
+    return [f"{sum(alone[r['tag']]) / len(alone[r['tag']]) / r[seconds]:.2f}" if r["tag"] in alone else ""
+            for r in rows]
+
+
+def run_rows(name: str, rows: list[str], measure, table, tag: str, options: str) -> list[dict]:
+    """Measure every ``PxT`` row in turn (``measure(processes, threads) -> dict``), writing
+    ``benchmarks/results/NAME.{json,md}`` (``table(rows) -> str``) after each, the rows of other
+    tags kept; ``options``: the study's command-line options beside ``--rows``."""
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
+    done = []
+    for row in rows:
+        processes, threads = (int(v) for v in row.split("x"))
+        r = measure(processes, threads)
+        r.update(tag=tag, machine=machine(), cores=os.cpu_count(), tree=commit(),
+                 command=f"python -m fbmbench {name} --rows {row} {options}")
+        figures = ", ".join(f"{k} {v:.3g}" for k, v in r.items() if isinstance(v, float))
+        print(f"{row}: {figures}", flush=True)
+        done.append(r)
+        path.write_text(json.dumps(kept + done, indent=1))
+        (RESULTS / f"{name}.md").write_text(table(kept + done))
+    return done
 
 
 def table(rows: list[dict]) -> str:
@@ -99,13 +135,7 @@ def table(rows: list[dict]) -> str:
              "| tag | machine | tree | level | unknowns | P x T | levels | cycles | set-up s | solve s | "
              "speed-up | peak GB (largest process) | peak GB (all) | command |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    alone: dict = {}
-    for r in rows:
-        if r["processes"] == 1 and r["threads"] == 1:
-            alone.setdefault(r["tag"], []).append(r["solve_s"])
-    for r in rows:
-        b = alone.get(r["tag"])
-        speedup = f"{sum(b) / len(b) / r['solve_s']:.2f}" if b else ""
+    for r, speedup in zip(rows, speed_ups(rows, "solve_s")):
         over = "*" if r["processes"] * r["threads"] > r["cores"] else ""
         lines.append(f"| {r['tag']} | {r['machine']} | {r['tree']} | {r['level']} | {r['unknowns']} | "
                      f"{r['processes']} x {r['threads']}{over} | {r['levels']} | {r['cycles']} | "
@@ -126,18 +156,7 @@ def run(*, rows: list[str] = ("1x1", "1x2", "2x1", "4x1"), level: int = 1, dt: f
     rtol : the residual reduction per solve
     tag : this run's name in the results (rows with other tags are kept)
     """
-    RESULTS.mkdir(exist_ok=True)
-    path = RESULTS / "distributed_solve.json"
-    kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
-    done = []
-    for row in rows:
-        processes, threads = (int(v) for v in row.split("x"))
-        r = one(processes, threads, level, dt, rtol)
-        r.update(tag=tag, machine=machine(), cores=os.cpu_count(), tree=commit(), level=level,
-                 command=f"python -m fbmbench distributed_solve --rows {row} --level {level} --dt {dt} "
-                         f"--rtol {rtol}")
-        print(f"{row}: {r['cycles']} cycles, set-up {r['setup_s']:.1f} s, solve {r['solve_s']:.1f} s, "
-              f"peak {r['peak_gb_max']:.2f} GB per process ({r['peak_gb_sum']:.2f} GB all)", flush=True)
-        done.append(r)
-        path.write_text(json.dumps(kept + done, indent=1))
-        (RESULTS / "distributed_solve.md").write_text(table(kept + done))
+    def measure(processes, threads):
+        return dict(run_mpiexec(CHILD, dict(level=level, dt=dt, rtol=rtol), processes, threads), level=level)
+
+    run_rows("distributed_solve", rows, measure, table, tag, f"--level {level} --dt {dt} --rtol {rtol}")

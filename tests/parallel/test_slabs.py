@@ -109,7 +109,7 @@ def _mpiexec():
     return mpiexec
 
 
-@pytest.mark.parametrize("dim, case, size", [(2, "channel", 3), (2, "cavity", 4), (3, "channel", 2)])
+@pytest.mark.parametrize("dim, case, size", [(2, "cavity", 4), (3, "channel", 2)])
 def test_under_mpiexec_the_distributed_multigrid_solves_the_whole_system(dim, case, size):
     """``mpiexec -n P``: the distributed multigrid's solution on every process's slab equals the
     whole mesh's direct solution (owned unknowns and ghosts), in at most 1.3 times the cycles of
