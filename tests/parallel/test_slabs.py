@@ -97,8 +97,6 @@ def test_slabs_refuse_what_they_cannot_split():
         SlabPartition(StructuredMesh.box((4, 4), periodic=(False, True)), 2, 0)
     with pytest.raises(ValueError, match="rank 2"):
         SlabPartition(mesh, 2, 2)
-    with pytest.raises(ValueError, match="do not coarsen"):
-        SlabPartition(StructuredMesh.box((4, 6)), 2, 0).coarsened(StructuredMesh.box((2, 3)))
 
 
 def _mpiexec():

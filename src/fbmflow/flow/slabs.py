@@ -68,28 +68,24 @@ class SlabFlowLevels:
         holders = self.partitions[1:] + [None]
         self.prolongations = [_slab_prolongation(part, meshes[j + 1], holders[j])
                               for j, part in enumerate(self.partitions)]
+        #: per coarser level, the finer slab's local node at each of its nodes that the finer
+        #: slab owns, and which they are (the injection's, found once)
+        self._injections = [_injection(self.partitions[j], part, self.coarsest)
+                            for j, part in enumerate(holders)]
 
     def inject(self, u: np.ndarray) -> list[np.ndarray]:
         """A consistent fine velocity ``u`` (local) injected into every coarser level: the slab
         levels' local vectors (consistent) and the whole coarsest mesh's (the same on every
         process)."""
         out = [u]
-        for j, part in enumerate(self.partitions[1:] + [None]):
-            fine = self.partitions[j]
-            coarse_mesh = part.whole if part is not None else self.coarsest.mesh
-            d = fine.dim
-            n_c = part.n_v if part is not None else self.coarsest.space.n_v
-            first = part.nodes[0] if part is not None else 0
-            coarse_nodes = np.arange(first, first + n_c)
-            fine_nodes = _fine_node(coarse_mesh, coarse_nodes) - fine.nodes[0]
-            inside = (fine_nodes >= 0) & (fine_nodes < fine.n_v)
-            inside[inside] &= fine.owned_nodes[fine_nodes[inside]]
-            v = np.zeros((d, n_c))
-            v[:, inside] = out[-1].reshape(d, -1)[:d, fine_nodes[inside]]
+        d = self.partitions[0].dim
+        for part, (fine_nodes, inside) in zip(self.partitions[1:] + [None], self._injections):
+            v = np.zeros((d, inside.size))
+            v[:, inside] = out[-1].reshape(d, -1)[:, fine_nodes]
             if part is not None:
-                local = np.concatenate([v.ravel(), np.zeros(part.n_cells * (d + 1))])
-                part.update_ghosts(local, self.comm)
-                out.append(local[:d * n_c])
+                v = v.ravel()
+                part.update_ghosts(v)
+                out.append(v)
             else:
                 out.append(sum_over(v.ravel(), self.comm))
         return out
@@ -103,17 +99,13 @@ class SlabFlowLevels:
         (:class:`~fbmflow.solvers.distributed.DistributedMultigrid`'s input)."""
         velocities = self.inject(u)
         coarsest = self.coarsest.system(velocities[-1], m, a, rho, mu, convection, newton=newton)
-        finer = None
-        chain = []
-        for part, level, P, v in zip(self.partitions, self.levels, self.prolongations, velocities):
-            system = level.system(v, m, a, rho, mu, convection, newton=newton)
-            system.partition, system.prolongation = part, P
-            if finer is not None:
-                finer.coarser = system
-            chain.append(system)
-            finer = system
-        finer.coarser = coarsest
-        return chain[0]
+        system = coarsest
+        for part, level, P, v in reversed(list(zip(self.partitions, self.levels, self.prolongations,
+                                                   velocities))):
+            finer = level.system(v, m, a, rho, mu, convection, newton=newton)
+            finer.partition, finer.prolongation, finer.coarser = part, P, system
+            system = finer
+        return system
 
 
 def _slab_boundary(boundary: dict, part: SlabPartition) -> dict:
@@ -144,6 +136,18 @@ def _fine_node(coarse: StructuredMesh, nodes: np.ndarray) -> np.ndarray:
         rest //= c
         stride *= f
     return out
+
+
+def _injection(fine: SlabPartition, coarse: SlabPartition | None, coarsest: FlowLevel) -> tuple:
+    """For the coarser level's local nodes (``coarse``'s slab, or the whole ``coarsest`` mesh's):
+    the local node of ``fine``'s slab at those of them that ``fine`` owns, and a mask of which
+    they are."""
+    coarse_mesh = coarse.whole if coarse is not None else coarsest.mesh
+    first, n_c = (coarse.nodes[0], coarse.n_v) if coarse is not None else (0, coarsest.space.n_v)
+    fine_nodes = _fine_node(coarse_mesh, np.arange(first, first + n_c)) - fine.nodes[0]
+    inside = (fine_nodes >= 0) & (fine_nodes < fine.n_v)
+    inside[inside] &= fine.owned_nodes[fine_nodes[inside]]
+    return fine_nodes[inside], inside
 
 
 def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse: SlabPartition | None):

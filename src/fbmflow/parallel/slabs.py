@@ -161,13 +161,6 @@ class SlabPartition:
         own = self.owned[self.dim * self.n_v:]
         return float(self.comm.allreduce(float(p[own] @ q[own])))
 
-    def coarsened(self, mesh: StructuredMesh) -> "SlabPartition":
-        """This split on ``mesh``, the next coarser level of the slab's mesh (half the layers);
-        ValueError where a slab's bounds are odd or it would keep fewer than two layers."""
-        if np.any(self.bounds % 2) or (self.size > 1 and np.diff(self.bounds).min() < 4):
-            raise ValueError("the slabs do not coarsen")
-        return SlabPartition(mesh, self.size, self.rank, self.bounds // 2, self.comm)
-
     def local(self, whole: np.ndarray) -> np.ndarray:
         """The slab's part of a whole mesh's vector ``[u, p]`` (a copy)."""
         return whole[self.unknowns_of_whole]
