@@ -24,8 +24,7 @@ class Relaxing:
 
     def __init__(self, fail_above=np.inf, kick_at=np.inf):
         self.particles = Particles.at_rest([Ball(0.05, dim=2)], 2.0, [[0.5, 5.0]])
-        self.flow = types.SimpleNamespace(mesh=types.SimpleNamespace(
-            cell_size_at=lambda p: np.full(np.shape(p), H)))
+        self.mesh = types.SimpleNamespace(cell_size_at=lambda p: np.full(np.shape(p), H))
         self.t, self.fail_above, self.kick_at, self.steps = 0.0, fail_above, kick_at, []
 
     def step(self, dt):

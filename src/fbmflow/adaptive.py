@@ -104,7 +104,7 @@ class StepControl:
         its :class:`~fbmflow.coupling.system.StepReport`. ConvergenceError when the step would fall
         below ``MIN_FRACTION * time.dt``."""
         before = velocities(sim.particles)
-        h = float(sim.flow.mesh.cell_size_at(sim.particles.position).min())
+        h = float(sim.mesh.cell_size_at(sim.particles.position).min())
         saved, retried = sim.state(), False
         while True:
             dt = self.next_dt(sim.t)
@@ -150,7 +150,7 @@ class StepControl:
         speed = float(np.linalg.norm(p.velocity, axis=1).max(initial=0.0))
         if speed == 0.0:
             return np.inf
-        return self.max_courant * float(sim.flow.mesh.cell_size_at(p.position).min()) / speed
+        return self.max_courant * float(sim.mesh.cell_size_at(p.position).min()) / speed
 
     def state(self) -> dict:
         """The controller's state as arrays and numbers (keys ``control_*``)."""

@@ -28,6 +28,7 @@ from .fem import FlowSpace
 from .fem.functions import sample_pressure, sample_velocity
 from .flow import NoSlip
 from .io import load_checkpoint
+from .parallel import world
 from .params import FluidParams, TimeParams
 from .particles import Particles
 from .run import Progress, RunFiles, claim, output_folder, run_loop
@@ -90,6 +91,13 @@ class Simulation:
         of the whole particles (:func:`~fbmflow.coupling.forces.mirror_images`), the particles' motion
         stays on the planes, and the planes are no walls for contact and repulsion. Gravity must
         lie in the planes.
+    comm : communicator or None
+        The processes that run the simulation together (mpi4py's; default: every process an
+        MPI launcher started, :func:`~fbmflow.parallel.comm.world`, or this one alone). On
+        several, each holds a slab of the mesh along its last axis and :attr:`x` is its part of
+        the flow; the particles are the same on every process
+        (:class:`~fbmflow.coupling.system.CoupledSystem`); the linear solver is multigrid
+        (``solver.linear = "auto"`` takes it).
     frozen : bool
         Hold the particles' positions and orientations: their velocities and the flow still
         evolve, about a fixed configuration. Steps then tend to the configuration's quasi-steady
@@ -110,7 +118,7 @@ class Simulation:
                  coupling: CouplingParams = CouplingParams(),
                  fbm: FictitiousBoundaryParams = FictitiousBoundaryParams(),
                  contact: ContactParams | None = None, repulsion: RepulsionParams | None = None,
-                 symmetry: tuple = (), frozen: bool = False):
+                 symmetry: tuple = (), frozen: bool = False, comm=None):
         check_types("Simulation", particles=(particles, Particles), fluid=(fluid, FluidParams),
                     time=(time, TimeParams), solver=(solver, SolverParams),
                     coupling=(coupling, CouplingParams), fbm=(fbm, FictitiousBoundaryParams),
@@ -128,6 +136,13 @@ class Simulation:
         self.time = time
         #: the adaptive step's controller (None: steps of :attr:`dt`)
         self.control = StepControl(time, particles, bool(contact)) if time.adaptive else None
+        #: the processes that run this simulation together
+        self.comm = world() if comm is None else comm
+        if self.comm.size > 1:
+            if solver.linear == "direct":
+                raise ValueError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
+                                 "'auto') to run on several")
+            solver = dataclasses.replace(solver, linear="multigrid")
         n_unknowns = FlowSpace.estimate_dofs(mesh)
         if coupling.scheme == "auto":
             coupling = dataclasses.replace(coupling, scheme=auto_coupling(n_unknowns, particles, symmetry))
@@ -135,20 +150,25 @@ class Simulation:
         self.coupling = make_coupling(coupling, solver.newton_rtol)
         responses = self.coupling.stored_responses(particles, tuple(symmetry))
         linear = solver.linear_solver(mesh.dim, n_unknowns, responses)
-        check_memory(n_unknowns, mesh.dim, linear, responses, transient=True)
+        check_memory(n_unknowns // self.comm.size, mesh.dim, linear, responses, transient=True)
         boundary = {t: NoSlip() for t in mesh.tags} if boundary is None else boundary
         #: the coupled flow and particles and their state
         self.system = CoupledSystem(mesh, particles, fluid, boundary=boundary, time_scheme=time.scheme,
                                     integrator=coupling.integrator, fbm=fbm, contact=contact,
                                     repulsion=repulsion, symmetry=symmetry, frozen=frozen,
                                     linear_solver=linear, newton=solver.newton_settings(),
-                                    varying_steps=time.adaptive)
+                                    varying_steps=time.adaptive, comm=self.comm)
 
     # -- the state ------------------------------------------------------------------------------
     @property
     def flow(self):
         """The :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` (mesh, space, solvers)."""
         return self.system.flow
+
+    @property
+    def mesh(self):
+        """The whole mesh (:attr:`flow`'s is this process's slab of it on several processes)."""
+        return self.system.mesh
 
     @property
     def particles(self) -> Particles:
@@ -257,7 +277,12 @@ class Simulation:
         simulation made as the run's was). ``progress``: show progress on stderr;
         ``callback(report)`` after every step.
         """
-        dt, progress = (None if self.control else self.dt), (Progress() if progress else None)
+        dt = None if self.control else self.dt
+        progress = Progress() if progress and self.comm.rank == 0 else None  # printed once
+        if out is not None and self.comm.size > 1:
+            raise ValueError(f"runs on {self.comm.size} processes write no output folder yet: run without "
+                             "out and collect what you need from the step reports (the particles are the "
+                             "same on every process)")
         if out is None:
             return run_loop(self, self.n_steps, dt, None, callback=callback, progress=progress).reports
         files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,

@@ -89,6 +89,45 @@ def test_slab_rows_of_the_owned_cells_are_the_whole_meshs_and_ghosts_follow_owne
     assert np.isclose(sum(dots), y @ y, rtol=1e-13)
 
 
+class _Gathering:
+    """Process ``rank``'s side of ``allgather`` among slabs held in one process: a first pass
+    (``given`` None) records what each process gives (and hands it back as everyone's); a second
+    hands every process the list of all."""
+
+    def __init__(self, rank, size, given=None):
+        self.rank, self.size, self.given = rank, size, given
+        self.record = {}
+
+    def allgather(self, value):
+        self.record[self.rank] = value
+        return [value] * self.size if self.given is None else [self.given[r] for r in range(self.size)]
+
+
+@pytest.mark.parametrize("dim, size", [(2, 3), (3, 2)])
+def test_components_joined_over_slabs_are_the_whole_meshs(dim, size):
+    """Connected components of random free nodes found on every slab and joined
+    (:meth:`~fbmflow.parallel.slabs.SlabPartition.join_components`) are the whole mesh's: every
+    node's smallest node of its component, and all components with their node counts (which the
+    closing of fluid pockets takes the largest of)."""
+    mesh = _mesh(dim)
+    whole = FlowSpace(mesh)
+    free = np.random.default_rng(5).random(whole.n_v) < (0.2 if dim == 2 else 0.05)
+    labels = whole.free_node_components(free)
+    roots, sizes = np.unique(labels[free], return_counts=True)
+    assert 3 < roots.size < free.sum() / 2  # components of many sizes, some across slabs
+    parts = [SlabPartition(mesh, size, r) for r in range(size)]
+    local = [FlowSpace(part.mesh).free_node_components(free[part.nodes]) for part in parts]
+    given = {}
+    for r, part in enumerate(parts):
+        comm = _Gathering(r, size)
+        part.join_components(local[r], comm)
+        given.update(comm.record)
+    for r, part in enumerate(parts):
+        got, got_roots, got_sizes = part.join_components(local[r], _Gathering(r, size, given))
+        assert np.array_equal(got, labels[part.nodes])
+        assert np.array_equal(got_roots, roots) and np.array_equal(got_sizes, sizes)
+
+
 def test_slabs_refuse_what_they_cannot_split():
     mesh = StructuredMesh.box((4, 5))
     with pytest.raises(ValueError, match="two cell layers each"):
@@ -150,3 +189,27 @@ def test_under_mpiexec_time_steps_on_slabs_follow_the_whole_meshs(case, size):
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count(f" of {size}: {case}") == size
+
+
+def test_under_mpiexec_a_settling_disk_follows_one_processs_run(tmp_path):
+    """``mpiexec -n 2``: three steps of ``glowinski-free-fall`` at level 0 (the nodal boundary,
+    multigrid, the implicit coupling with the trapezoidal integrator), the disk's positions and
+    velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one)
+    per step; where the ``mpi`` extra is installed."""
+    mpiexec = _mpiexec()
+    script = Path(__file__).with_name("_slab_particles.py")
+    args = ["glowinski-free-fall", "0", "3"]
+    settings = ["fbm.boundary=nodes", "solver.linear=multigrid"]
+    runs = {}
+    for size in (1, 2):
+        launcher = [mpiexec, "-n", "2"] if size == 2 else []
+        out = subprocess.run(launcher + [sys.executable, str(script), *args, str(tmp_path / f"{size}.npz"),
+                                         *settings], capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert out.stdout.count(f" of {size}: glowinski") == size
+        runs[size] = np.load(tmp_path / f"{size}.npz")
+    one, two = runs[1], runs[2]
+    assert int(two["processes"]) == 2
+    for key in ("position", "velocity"):
+        assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
+    assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)

@@ -9,9 +9,12 @@ An estimator has
   pressure's parts separately, each with a rule for its own positions);
 * ``check(shapes, sharp)``: ValueError with a remedy when it cannot serve these shapes with this
   fictitious boundary (``sharp``: the sharp boundary is on);
-* ``prepare(space, centres, shapes, rotations, owner, walls)``: the rule for particles at
+* ``prepare(space, centres, shapes, rotations, owner, walls, cells)``: the rule for particles at
   ``centres (n, dim)`` with rotations ``(n, dim, dim)``; ``owner (n_v,)`` int64 is their node
-  owner where known (None: computed), ``walls`` the velocity nodes held by the walls;
+  owner where known (None: computed), ``walls`` the velocity nodes held by the walls, ``cells``
+  a mask ``(n_cells,)`` of the cells whose part of the integral the rule takes (one process's
+  owned cells, its part of a sum over processes; None: all). Estimators with ``distributed``
+  False take no mask;
 * ``evaluate(rule, u, p, mu, rho, u_old, dt, about)``: force ``(n, dim)`` and torque ``(n, 3)``
   of the flow ``u (dim * n_v,)``, ``p (n_p,)``; ``u_old`` is the velocity at the step's start
   and ``about`` the flow a response ``u`` is a change of (the estimators linear in the flow ignore
@@ -43,6 +46,7 @@ class ForceEstimator:
 
     name = ""
     lags_pressure = True
+    distributed = False  # whether prepare takes a cells mask (runs on several processes)
 
     def check(self, shapes: list, sharp: bool) -> None:
         return None
@@ -62,6 +66,12 @@ class ForceEstimator:
         rule is not linear in the flow override this)."""
         return rule.own_response(W, free, mu)
 
+    def _whole(self, cells) -> None:
+        """ValueError where a cells mask asks an estimator that is not distributed for a part."""
+        if cells is not None:
+            raise ValueError(f"force {self.name!r} does not run on several processes yet; use fbm.force = "
+                             "'volume' (and fbm.boundary = 'nodes') there")
+
     @staticmethod
     def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                owner: np.ndarray | None) -> np.ndarray:
@@ -74,11 +84,13 @@ class VolumeForce(ForceEstimator):
     :class:`~fbmflow.coupling.forces.ForceFunctional` of all particles."""
 
     name = "volume"
+    distributed = True
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
-                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None,
+                cells: np.ndarray | None = None):
         owner = self._owner(space, centres, shapes, rotations, owner)
-        return volume_force_functional(space, owner, centres)
+        return volume_force_functional(space, owner, centres, cells)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu)
@@ -99,7 +111,9 @@ class TestFunctionForce(ForceEstimator):
     lags_pressure = False
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
-                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None,
+                cells: np.ndarray | None = None):
+        self._whole(cells)
         owner = self._owner(space, centres, shapes, rotations, owner)
         return TestFunctionForces(space, owner, centres, shapes, rotations, walls)
 
@@ -129,7 +143,9 @@ class SurfaceForce(ForceEstimator):
                              "surface); use fbm.boundary = 'sharp' with balls, or fbm.force = 'volume'")
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
-                owner: np.ndarray | None = None, walls: np.ndarray | None = None):
+                owner: np.ndarray | None = None, walls: np.ndarray | None = None,
+                cells: np.ndarray | None = None):
+        self._whole(cells)
         return SurfaceForces(space, centres, shapes)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):

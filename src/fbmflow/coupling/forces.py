@@ -127,13 +127,17 @@ def _rows_by_particle(particle: np.ndarray, n: int, w: np.ndarray, cols: np.ndar
     return sp.csr_matrix((data, indices, indptr), shape=(n * r, n_cols))
 
 
-def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray) -> ForceFunctional:
+def volume_force_functional(space: FlowSpace, owner: np.ndarray, centres: np.ndarray,
+                            cells: np.ndarray | None = None) -> ForceFunctional:
     """The cut-cell volume force and torque of every particle (see :func:`hydrodynamic_forces`) as a
     :class:`ForceFunctional`: the (cut cell, particle) pairs of all particles found at once, their
-    coefficients in one kernel pass (``volume_force_rows``)."""
+    coefficients in one kernel pass (``volume_force_rows``). ``cells (n_cells,)`` bool: the cut
+    cells taken (None: all)."""
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
     n = len(centres)
     cut = cut_cells(space, owner)
+    if cells is not None:
+        cut = cut[cells[cut]]
     o = owner[space.V.cell_dofs[cut]]                                   # (n_cut, nl)
     row, col = np.nonzero(o >= 0)
     pairs = np.unique(cut[row] * max(n, 1) + o[row, col])               # (cell, particle), sorted

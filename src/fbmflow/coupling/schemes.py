@@ -439,7 +439,7 @@ class ImplicitCoupling(CouplingScheme):
                 if step @ step > 0.0:  # (a zero step, e.g. a particle in balance, teaches nothing)
                     J += np.outer(dG - J @ step, step) / (step @ step)
                 # the flow's change over the last step that the responses do not explain
-                drift = float(np.abs(x - x_old - step @ dX)[:n_u].max())
+                drift = system.flow.max_abs((x - x_old - step @ dX)[:n_u])
             step = np.linalg.solve(J, res)
             size = float(np.linalg.norm(step))
             if k == 0 or size_old == 0.0:  # no contraction measured: the step bounds both errors

@@ -28,11 +28,14 @@ from ..contact.settings import ContactParams, RepulsionParams
 from ..fem.constraints import DirichletConstraints
 from ..fem.functions import mean_velocity
 from ..flow import NavierStokesProblem
+from ..flow.slabs import SlabNavierStokesProblem
 from ..flow.time_schemes import advance, pressure_lag
+from ..parallel import SerialComm, sum_replicated
 from ..params import FluidParams
 from ..particles import Particles, accelerations, integrate, velocity_gain
 from ..solvers import ConvergenceError, NewtonSettings
 from ..solvers.base import LinearSolver
+from ..solvers.multigrid import MultigridSolver
 from ..solvers.reports import LinearWork
 from .estimators import auto_force, make_force_estimator
 from .forces import mirror_images
@@ -90,10 +93,14 @@ class ParticleGeometry:
     sharp : bool, the sharp fictitious boundary is on
     estimator : a force estimator (:data:`~fbmflow.coupling.estimators.FORCE_ESTIMATORS`)
     wall_nodes : (k,) int64, the velocity nodes the walls hold (for the estimator)
+    cells : (n_cells,) bool or None, the cells whose part of the forces the rule takes (one
+        process's owned cells; None: all)
     """
 
-    def __init__(self, space, particles: Particles, sharp: bool, estimator, wall_nodes: np.ndarray):
+    def __init__(self, space, particles: Particles, sharp: bool, estimator, wall_nodes: np.ndarray,
+                 cells: np.ndarray | None = None):
         self.space, self.sharp_on, self.estimator, self.wall_nodes = space, sharp, estimator, wall_nodes
+        self.cells = cells
         self.position = particles.position.copy()
         self.orientation = np.array(particles.orientation, copy=True)
         self.shapes = particles.shapes
@@ -127,7 +134,8 @@ class ParticleGeometry:
         """The force estimator's rule for this configuration."""
         if self._rule is None:
             self._rule = self.estimator.prepare(self.space, self.position, self.shapes, self.rotations,
-                                                owner=self.owner(self.space.V), walls=self.wall_nodes)
+                                                owner=self.owner(self.space.V), walls=self.wall_nodes,
+                                                cells=self.cells)
         return self._rule
 
     def constraints(self, V, velocity: np.ndarray, angular_velocity: np.ndarray) -> DirichletConstraints:
@@ -137,6 +145,19 @@ class ParticleGeometry:
         rigid = rigid_body_constraints(V, self.owner(V), self.position, velocity, angular_velocity)
         sharp = self.sharp(V)
         return rigid if sharp is None else sharp.constraints(rigid, velocity, angular_velocity)
+
+
+def _check_distributed(sharp: bool, estimator, linear_solver: LinearSolver) -> None:
+    """ValueError naming the setting to change where a coupled system cannot yet run on several
+    processes."""
+    if sharp:
+        raise ValueError("the sharp fictitious boundary does not run on several processes yet: set "
+                         "fbm.boundary = 'nodes'")
+    if not estimator.distributed:
+        raise ValueError(f"force {estimator.name!r} does not run on several processes yet: set fbm.force = "
+                         "'volume'")
+    if not isinstance(linear_solver, MultigridSolver):
+        raise ValueError("several processes solve with multigrid: set solver.linear = 'multigrid'")
 
 
 class CoupledSystem:
@@ -158,6 +179,12 @@ class CoupledSystem:
     linear_solver : LinearSolver, newton : NewtonSettings, the flow's solvers
     varying_steps : bool, the steps change from one to the next (adaptive steps): the
         trapezoidal integrator then takes each step's own pressure force (:attr:`midpoint_pressure`)
+    comm : the processes' communicator (None: one process). On several, each holds a slab of the
+        mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`; the flow ``x`` is its local part),
+        sums the forces of its owned cells, and the sums are added up in the same order on every
+        process (:func:`~fbmflow.parallel.comm.sum_replicated`): the particles, their contact and
+        the coupling's decisions are the same bits everywhere. The nodal boundary with the volume
+        force and the multigrid solver only.
 
     See :class:`~fbmflow.simulation.Simulation` for what each does; ValueError for a set-up that
     cannot run (placement, mirror planes, a boundary or force the shapes do not support).
@@ -166,14 +193,18 @@ class CoupledSystem:
     def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict, time_scheme: str,
                  integrator: str, fbm: FictitiousBoundaryParams, contact: ContactParams | None,
                  repulsion: RepulsionParams | None, symmetry: tuple, frozen: bool,
-                 linear_solver: LinearSolver, newton: NewtonSettings, varying_steps: bool = False):
+                 linear_solver: LinearSolver, newton: NewtonSettings, varying_steps: bool = False, comm=None):
         sharp = fbm.boundary == "sharp"
+        self.comm = comm if comm is not None else SerialComm()
+        self.mesh = mesh  # the whole mesh (the flow's is a slab of it on several processes)
         if sharp and not supports_sharp_boundary(particles.shapes):
             raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                              "(Ball, Box, Cylinder); use fbm.boundary = 'nodes' for the others")
         self.estimator = make_force_estimator(auto_force(particles.shapes, sharp, mesh.dim)
                                               if fbm.force == "auto" else fbm.force)
         self.estimator.check(particles.shapes, sharp)
+        if self.comm.size > 1:
+            _check_distributed(sharp, self.estimator, linear_solver)
         self.sharp = sharp
         self.symmetry, self.frozen, self.integrator = tuple(symmetry), bool(frozen), integrator
         self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)
@@ -211,9 +242,17 @@ class CoupledSystem:
         self._behind = None  # (centres, force rule) where the pressure's force is taken
         self._wall_nodes = np.zeros(0, dtype=np.int64)  # set once the flow is made
         drive = None if not np.any(self.drive) else (lambda x, t: np.broadcast_to(self.drive, x.shape))
-        self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
-                                        body_force=drive, linear_solver=linear_solver, newton=newton,
-                                        extra_constraints=self._own_constraints)
+        if self.comm.size > 1:
+            self.flow = SlabNavierStokesProblem(mesh, fluid.viscosity, boundary, self.comm,
+                                                density=fluid.density, body_force=drive, newton=newton,
+                                                multigrid=linear_solver.settings,
+                                                extra_constraints=self._own_constraints)
+        else:
+            self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
+                                            body_force=drive, linear_solver=linear_solver, newton=newton,
+                                            extra_constraints=self._own_constraints)
+        #: the cells whose part of the forces this process takes (None: all, one process)
+        self._cells = self.flow.partition.owned_cells if self.comm.size > 1 else None
         self.x = self.flow.zero_state()
         self.t = 0.0
         self.step_count = 0
@@ -236,7 +275,7 @@ class CoupledSystem:
         """The :class:`ParticleGeometry` of the particles' current configuration."""
         if self._geometry is None or not self._geometry.describes(self.particles):
             self._geometry = ParticleGeometry(self.flow.space, self.particles, self.sharp, self.estimator,
-                                              self._wall_nodes)
+                                              self._wall_nodes, self._cells)
         return self._geometry
 
     def owner(self) -> np.ndarray:
@@ -356,8 +395,8 @@ class CoupledSystem:
         out (how close the sum comes to the exact blocks: docs/validation/many-particles.md)."""
         p, space, geometry = self.particles, self.flow.space, self.geometry()
         W = rigid_liftings(space.V, geometry.owner(space.V), p.position, free)
-        S = self.estimator.own_response(geometry.rule(), W, free, self.flow.mu, self.flow.rho, dt=dt,
-                                        about=x[:space.n_u])
+        S = sum_replicated(self.estimator.own_response(geometry.rule(), W, free, self.flow.mu, self.flow.rho,
+                                                       dt=dt, about=x[:space.n_u]), self.comm)
         if self.symmetry:  # whole particles on mirror planes: the images' forces, column by column
             d = p.dim
             rows = S[:, d:, :].transpose(2, 0, 1)  # (r, n, 1) in 2D (z), (r, n, 3) in 3D
@@ -396,7 +435,7 @@ class CoupledSystem:
             force, torque = est.evaluate(here, u, None, mu, rho, u_old=u_old, dt=dt, about=linear)
             force_p, torque_p = est.evaluate(behind, None, p, mu, rho, u_old=u_old, dt=dt, about=linear)
             force, torque = force + force_p, torque + torque_p
-        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+        return self._whole_particles(force, torque)
 
     def pressure_forces(self, x: np.ndarray, dt: float):
         """The pressure's part of :meth:`forces` ``(x, dt)``: force (n, dim) and torque (n, 3);
@@ -405,7 +444,7 @@ class CoupledSystem:
         rule = self.geometry().rule() if behind is None else behind
         pressure = x[self.flow.space.n_u:]
         force, torque = self.estimator.evaluate(rule, None, pressure, self.flow.mu, self.flow.rho, dt=dt)
-        return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
+        return self._whole_particles(force, torque)
 
     def _response_forces(self, dX: np.ndarray, dt: float, about: np.ndarray):
         """:meth:`forces` of the ``k`` flow responses ``dX (k, n_dofs)`` about the flow ``about``:
@@ -424,6 +463,14 @@ class CoupledSystem:
             force, torque = est.evaluate_many(here, U, None, mu, rho, dt=dt, about=about[:n_u])
             force_p, torque_p = est.evaluate_many(behind, None, P, mu, rho, dt=dt, about=about[:n_u])
             force, torque = force + force_p, torque + torque_p
+        return self._whole_particles(force, torque)
+
+    def _whole_particles(self, force: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The whole particles' force and torque from this process's part (summed over the
+        processes, :func:`~fbmflow.parallel.comm.sum_replicated`) and their mirror images."""
+        if self.comm.size > 1:
+            both = sum_replicated(np.concatenate([force.ravel(), torque.ravel()]), self.comm)
+            force, torque = both[:force.size].reshape(force.shape), both[force.size:].reshape(torque.shape)
         return mirror_images(force, torque, self.symmetry) if self.symmetry else (force, torque)
 
     def _rule_lagged(self, dt: float):
@@ -436,7 +483,7 @@ class CoupledSystem:
         centres = p.position - self._pressure_lag * dt * p.velocity
         if self._behind is None or not np.array_equal(self._behind[0], centres):
             rule = self.estimator.prepare(self.flow.space, centres, p.shapes, p.rotations(),
-                                          walls=self._wall_nodes)
+                                          walls=self._wall_nodes, cells=self._cells)
             self._behind = (centres.copy(), rule)
         return self._behind[1]
 
@@ -456,7 +503,7 @@ class CoupledSystem:
         pressure = self.pressure_forces(solved.x, dt) if self.midpoint_pressure else None
         moved = new.position - self.particles.position
         self._warn_if_fast(moved, dt)
-        new.position = wrap(self.flow.mesh, new.position)
+        new.position = wrap(self.mesh, new.position)
         self._check_overlap(new, moved, dt)
         self._warn_if_coarse(new)
         self.x, self.particles = solved.x, new
@@ -474,7 +521,7 @@ class CoupledSystem:
         """Stop (ConvergenceError with a remedy that fits) when the step's end ``new`` has a
         particle deeper than :data:`MAX_OVERLAP` of its radius in a wall or another particle
         (:func:`~fbmflow.contact.deepest_overlap`); ``moved (n, dim)`` the step's displacements."""
-        mesh = self.flow.mesh
+        mesh = self.mesh
         periods = mesh.periods if any(mesh.periodic) else None
         overlap = deepest_overlap(new, self._planes, periods, np.asarray(mesh.lower, dtype=float))
         if overlap is None or overlap.fraction <= MAX_OVERLAP:
@@ -501,7 +548,7 @@ class CoupledSystem:
         out of ``glowinski-free-fall``'s fine zone ran 2.3 times as fast as on a uniform mesh);
         where it spans less than a velocity-node spacing the placement check would have refused
         it at the start (:func:`~fbmflow.coupling.placement.too_small`)."""
-        mesh = self.flow.mesh
+        mesh = self.mesh
         if self._warned_coarse or mesh.axis_coordinates is None:
             return
         small, h = too_small(mesh, new.position, new.bounding_radius)
@@ -537,7 +584,7 @@ class CoupledSystem:
         the largest such move doubles."""
         if moved.size == 0:
             return
-        cells = np.linalg.norm(moved, axis=1) / float(np.min(self.flow.mesh.finest_spacing))
+        cells = np.linalg.norm(moved, axis=1) / float(np.min(self.mesh.finest_spacing))
         k = int(np.argmax(cells))
         if cells[k] > max(1.0, 2.0 * self._warned_fast):
             self._warned_fast = float(cells[k])

@@ -167,8 +167,10 @@ class FlowLevel:
             con = con.merged(extra(self.space.V, t))
         return con.homogeneous()
 
-    def close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
-        """Hold still the fluid nodes cut off from the main fluid by constrained nodes.
+    def close_pockets(self, con: DirichletConstraints, partition=None) -> DirichletConstraints:
+        """Hold still the fluid nodes cut off from the main fluid by constrained nodes
+        (``partition``: the :class:`~fbmflow.parallel.slabs.SlabPartition` whose slab this level's
+        mesh is; the components are then the whole mesh's, the largest the same on every process).
 
         A particle within a node layer of a wall or of another particle can enclose a few free
         nodes; the prescribed velocities around them generally carry a net flux into the pocket,
@@ -177,11 +179,14 @@ class FlowLevel:
         velocity; the pressure modes of the cells they leave orphaned drop out."""
         s = self.space
         free = np.bincount(con.dofs % s.n_v, minlength=s.n_v) < s.dim
-        labels = s.free_node_components(free)[free]
-        roots, counts = np.unique(labels, return_counts=True)
+        labels = s.free_node_components(free)
+        if partition is None:
+            roots, counts = np.unique(labels[free], return_counts=True)
+        else:
+            labels, roots, counts = partition.join_components(labels)
         if roots.size <= 1:
             return con
-        pocket = np.flatnonzero(free)[labels != roots[np.argmax(counts)]]
+        pocket = np.flatnonzero(free & (labels != roots[np.argmax(counts)]))
         log.debug("closing %d fluid nodes cut off from the main fluid", pocket.size)
         dofs = np.concatenate([k * s.n_v + pocket for k in range(s.dim)])
         return con.merged(DirichletConstraints(np.sort(dofs), np.zeros(dofs.size)))

@@ -167,6 +167,21 @@ class NavierStokesProblem:
     def _close_pockets(self, con: DirichletConstraints) -> DirichletConstraints:
         return self.fine.close_pockets(con)
 
+    def _any(self, flag: bool) -> bool:
+        """Whether ``flag`` holds on any process that holds part of the mesh (this one's alone
+        here): decisions that every process must take alike."""
+        return bool(flag)
+
+    def max_abs(self, x: np.ndarray) -> float:
+        """``max |x_i|`` over the whole mesh's unknowns of a vector (or its velocity)."""
+        return float(np.abs(x).max(initial=0.0))
+
+    def _complete(self, U: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Columns ``[U; P]`` (velocity rows, pressure rows) computed cell by cell, completed (one
+        process's part of the mesh: their ghosts from the owners); as they are for the whole
+        mesh."""
+        return U, P
+
     def load(self, t: float = 0.0) -> np.ndarray:
         """``int f · v`` for every velocity DOF, (dim * n_v,) float64."""
         s = self.space
@@ -405,7 +420,8 @@ class NavierStokesProblem:
         hierarchy of the earlier point, and contracts like Newton rather than like the chord
         method."""
         last = self._linearisation
-        if (fresh or last is None or last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
+        if fresh or last is None or self._any(
+                last[:2] != (m, a) or not np.array_equal(last[2].dofs, con.dofs)
                 or (con.rows is not None and not con.rows.same_matrix(last[2].rows))):
             self._linearisation = last = None  # freed before the next is built (peak memory)
             system = self.linear_system(x, m, a, con, t, extra)
@@ -472,6 +488,7 @@ class NavierStokesProblem:
             scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
             Ju[con.rows.dofs] = scale[:, None] * (con.rows.matrix @ Wd - dg)
         Jp = self._continuity(W, con, self.orphans(con))
+        Ju, Jp = self._complete(Ju, Jp)
         if solve.multiple_rhs:
             du, dp, _ = self._linear_solve(solve, -Ju, -Jp, rtol)
         else:

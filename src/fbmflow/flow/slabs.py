@@ -15,7 +15,7 @@ import scipy.sparse as sp
 
 from ..fem.dofmap import DofMap, PressureDofMap
 from ..mesh import StructuredMesh
-from ..parallel import SlabPartition, sum_over
+from ..parallel import SlabPartition, max_over, sum_over
 from ..parallel.slabs import cut_layers, split_layers
 from ..solvers import NewtonSettings
 from ..solvers.multigrid import MultigridSettings, MultigridSolver
@@ -36,6 +36,9 @@ class SlabFlowLevels:
     pressure_fixed : bool, whether ``int p = 0`` closes the system (a closed domain)
     comm : the processes' communicator
     min_cells : int, the coarsest level keeps at least so many cells
+    extra_constraints : callable ``(DofMap, t) -> DirichletConstraints`` or None, further
+        constraints on every level (particles), evaluated on each level's DOF map (the slabs'
+        and the whole coarsest mesh's)
 
     Attributes
     ----------
@@ -44,7 +47,8 @@ class SlabFlowLevels:
     coarsest : FlowLevel, on the whole coarsest mesh
     """
 
-    def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool, comm, min_cells: int = 1):
+    def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool, comm, min_cells: int = 1,
+                 extra_constraints=None):
         size, rank = comm.size, comm.rank
         meshes = [mesh]
         while all(n % 2 == 0 for n in meshes[-1].shape) and meshes[-1].n_cells // 2**mesh.dim >= min_cells:
@@ -62,9 +66,9 @@ class SlabFlowLevels:
         bounds = split_layers(n_last, size, 2**J)
         self.comm = comm
         self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j, comm) for j in range(J + 1)]
-        self.levels = [FlowLevel(part.mesh, _slab_boundary(boundary, part), pressure_fixed)
+        self.levels = [FlowLevel(part.mesh, _slab_boundary(boundary, part), pressure_fixed, extra_constraints)
                        for part in self.partitions]
-        self.coarsest = FlowLevel(meshes[J + 1], boundary, pressure_fixed)
+        self.coarsest = FlowLevel(meshes[J + 1], boundary, pressure_fixed, extra_constraints)
         holders = self.partitions[1:] + [None]
         self.prolongations = [_slab_prolongation(part, meshes[j + 1], holders[j])
                               for j, part in enumerate(self.partitions)]
@@ -91,18 +95,28 @@ class SlabFlowLevels:
         return out
 
     def systems(self, u: np.ndarray, m: float, a: float, rho: float, mu: float, convection: bool,
-                newton: bool = False) -> SaddlePointSystem:
+                newton: bool = False, con=None, orphans=None, t: float = 0.0,
+                extra=None) -> SaddlePointSystem:
         """The linearisations ``m rho M + a (mu L + rho N(u))`` (with the Newton term ``R(u)``
         where ``newton``) at the consistent local fine velocity ``u`` on every level, chained:
         this process's part of the fine system, its ``coarser`` chain the slab levels' (each
         with its ``partition`` and ``prolongation``) and the whole coarsest mesh's last
-        (:class:`~fbmflow.solvers.distributed.DistributedMultigrid`'s input)."""
+        (:class:`~fbmflow.solvers.distributed.DistributedMultigrid`'s input).
+
+        ``con``, ``orphans``: the fine system's constraints and orphaned pressure modes (default:
+        the walls'); the coarser levels' are the walls' and the extra constraints at time ``t``
+        (``extra``: a solve's own instead of the levels'), homogeneous."""
         velocities = self.inject(u)
-        coarsest = self.coarsest.system(velocities[-1], m, a, rho, mu, convection, newton=newton)
+        coarsest = self.coarsest.system(velocities[-1], m, a, rho, mu, convection, newton=newton,
+                                        con=self.coarsest.homogeneous_constraints(t, extra))
         system = coarsest
-        for part, level, P, v in reversed(list(zip(self.partitions, self.levels, self.prolongations,
-                                                   velocities))):
-            finer = level.system(v, m, a, rho, mu, convection, newton=newton)
+        for j, (part, level, P, v) in reversed(list(enumerate(zip(self.partitions, self.levels,
+                                                                  self.prolongations, velocities)))):
+            if j == 0 and con is not None:
+                finer = level.system(v, m, a, rho, mu, convection, newton=newton, con=con, orphans=orphans)
+            else:
+                finer = level.system(v, m, a, rho, mu, convection, newton=newton,
+                                     con=level.homogeneous_constraints(t, extra))
             finer.partition, finer.prolongation, finer.coarser = part, P, system
             system = finer
         return system
@@ -180,8 +194,7 @@ def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse:
 
 class SlabNavierStokesProblem(NavierStokesProblem):
     """A :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` of which this process holds one
-    slab (its owned cell layers and a halo layer each side, :mod:`fbmflow.parallel.slabs`), for
-    flows without particles so far.
+    slab (its owned cell layers and a halo layer each side, :mod:`fbmflow.parallel.slabs`).
 
     Vectors are this process's local ``[u, p]`` on its slab mesh, *consistent* (ghosts hold their
     owners' values): every residual and operator product is completed by a ghost update, norms
@@ -198,18 +211,27 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (``boundary``: the whole
         mesh's conditions)
     comm : the processes' communicator
-    multigrid : MultigridSettings or None, the solver's (V-cycles, vanka-factored, FGMRES)
+    multigrid : MultigridSettings or None, the solver's (V-cycles, vanka-factored, FGMRES; the
+        coarse levels see particles by their own nodes)
+    extra_constraints : as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (particles),
+        evaluated on every slab's and the whole coarsest mesh's DOF map; the fine level's fluid
+        pockets are closed over the whole mesh (:meth:`~fbmflow.parallel.slabs.SlabPartition.join_components`)
     """
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict, comm, density: float = 1.0,
                  body_force=None, convection: bool = True, newton: NewtonSettings = NewtonSettings(),
-                 multigrid: MultigridSettings | None = None):
+                 multigrid: MultigridSettings | None = None, extra_constraints=None):
         check_boundary(mesh.tags, boundary)
-        self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm)
+        multigrid = multigrid or MultigridSettings()
+        if extra_constraints is not None and multigrid.coarse_obstacle != "nodes":
+            raise ValueError("on several processes the coarse levels see particles by their own nodes: set "
+                             "solver.multigrid.coarse_obstacle = 'nodes'")
+        self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm,
+                                    extra_constraints=extra_constraints)
         self.partition = part = self.slabs.partitions[0]
-        solver = MultigridSolver(multigrid or MultigridSettings(), rtol=newton.linear_rtol or 1e-8)
+        solver = MultigridSolver(multigrid, rtol=newton.linear_rtol or 1e-8)
         super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
-                         convection, solver, newton)
+                         convection, solver, newton, extra_constraints=extra_constraints)
         self.whole_mesh = mesh
         self._pressure_fixed = not pressure_is_determined(boundary)
         self._pressure_dot = part.pressure_dot
@@ -219,6 +241,21 @@ class SlabNavierStokesProblem(NavierStokesProblem):
 
     def norm(self, x: np.ndarray) -> float:
         return float(np.sqrt(self.partition.dot(x, x)))
+
+    def _any(self, flag: bool) -> bool:
+        return max_over(float(bool(flag)), self.partition.comm) > 0.0
+
+    def max_abs(self, x: np.ndarray) -> float:
+        own = self.partition.owned[:x.size]
+        return max_over(float(np.abs(x[own]).max(initial=0.0)), self.partition.comm)
+
+    def _close_pockets(self, con):
+        return self.fine.close_pockets(con, self.partition)
+
+    def _complete(self, U: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        X = np.vstack([U, P])
+        self.partition.update_ghosts(X)
+        return X[:U.shape[0]], X[U.shape[0]:]
 
     def residual(self, x, m, a, rhs, con, orphans=None) -> np.ndarray:
         F = super().residual(x, m, a, rhs, con, orphans)
@@ -241,12 +278,12 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         return v
 
     def linear_system(self, x, m, a, con, t=0.0, extra=None) -> SaddlePointSystem:
-        """The Picard linearisation on every slab level (:meth:`SlabFlowLevels.systems`), or,
+        """The Picard linearisation on every slab level (:meth:`SlabFlowLevels.systems`; the fine
+        level under ``con``, the coarser ones under their walls and the particles' nodes), or,
         with convection, the Newton system whose ``preconditioner`` it is."""
-        if extra is not None or self.extra_constraints is not None:
-            raise NotImplementedError("particles are not distributed over processes yet")
         u = x[:self.space.n_u]
-        picard = self.slabs.systems(u, m, a, self.rho, self.mu, self.convection)
+        picard = self.slabs.systems(u, m, a, self.rho, self.mu, self.convection, con=con,
+                                    orphans=self._known_orphans(con), t=t, extra=extra)
         if self.convection and a != 0.0:
             return self.fine.newton_system(picard, u, a, self.rho)
         return picard

@@ -36,6 +36,9 @@ class SerialComm:
     def bcast(self, value, root: int = 0):
         return value
 
+    def allgather(self, value):
+        return [value]
+
 
 def world():
     """MPI's ``COMM_WORLD`` where a launcher started several processes, else a
@@ -67,3 +70,22 @@ def sum_over(v, comm):
     out = np.empty_like(v)
     comm.Allreduce(np.ascontiguousarray(v), out, op=MPI.SUM)
     return out
+
+
+def sum_replicated(v, comm):
+    """The sum of every process's array ``v`` taken in rank order on every process, so that all
+    hold the same bits whatever the MPI library's reduction order (the particles' forces, which
+    every process integrates alike); ``v`` itself for one process. For small arrays: one
+    ``allgather``."""
+    if comm.size == 1:
+        return v
+    parts = comm.allgather(np.ascontiguousarray(v))
+    out = parts[0].copy()
+    for part in parts[1:]:
+        out += part
+    return out
+
+
+def max_over(value: float, comm) -> float:
+    """The largest of every process's ``value`` (one ``allgather``)."""
+    return value if comm.size == 1 else float(max(comm.allgather(float(value))))

@@ -21,6 +21,8 @@ Local vectors are the saddle-point system's ``[u, p]``: ``dim`` velocity compone
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
 
 from ..mesh import StructuredMesh
 from .comm import SerialComm
@@ -127,13 +129,13 @@ class SlabPartition:
         """Copy the owners' values into the ghosts of the local vector ``x`` in place (``comm``:
         another communicator than the partition's): one exchange with each neighbour, in two
         rounds whatever the number of processes. ``x`` may be a velocity alone (its first
-        ``dim n_nodes`` entries)."""
+        ``dim n_nodes`` entries), and may have columns (``(n, k)``: ``k`` vectors)."""
         comm = comm or self.comm
-        n = x.size
+        n = len(x)
         for other, send, receive in self.neighbours:
             if n < self.owned.size:
                 send, receive = send[send < n], receive[receive < n]
-            buffer = np.empty(receive.size)
+            buffer = np.empty((receive.size,) + x.shape[1:])
             comm.Sendrecv(np.ascontiguousarray(x[send]), dest=other, recvbuf=buffer, source=other)
             x[receive] = buffer
 
@@ -160,6 +162,46 @@ class SlabPartition:
         ``(dim + 1) n_cells`` (one reduction)."""
         own = self.owned[self.dim * self.n_v:]
         return float(self.comm.allreduce(float(p[own] @ q[own])))
+
+    def join_components(self, labels: np.ndarray, comm=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The whole mesh's connected components of nodes from every slab's own: ``labels
+        (n_nodes,)`` int64 labels a component of the slab's nodes by its smallest local node (-1:
+        in none), two nodes joined where the slab mesh's cells join them. Components of two slabs
+        that share a node are one; as the slab meshes' cells cover the whole mesh's, these are the
+        whole mesh's components.
+
+        Returns the smallest global node of every local node's component (-1 where in none),
+        ``(n_nodes,)`` int64, and every component of the whole mesh by that node, ascending, with
+        its number of nodes: ``roots (m,)`` int64 and ``sizes (m,)`` int64, the same on every
+        process (one ``allgather`` of the nodes on the planes two slabs share and of the slab
+        components' owned node counts)."""
+        comm = comm or self.comm
+        inside = labels >= 0
+        ids = np.where(inside, self.nodes[np.maximum(labels, 0)], -1)  # a slab component's smallest node
+        shared = np.unique(np.concatenate([np.zeros(0, np.int64)] + [
+            np.concatenate([send[send < self.n_v], receive[receive < self.n_v]])
+            for _, send, receive in self.neighbours]))
+        shared = shared[inside[shared]]
+        counted, counts = np.unique(ids[inside & self.owned_nodes], return_counts=True)
+        parts = comm.allgather((self.nodes[shared], ids[shared], np.unique(ids[inside]), counted, counts))
+        nodes = np.concatenate([q[0] for q in parts])
+        joined = np.concatenate([q[1] for q in parts])
+        every = np.unique(np.concatenate([q[2] for q in parts]))
+        index = np.searchsorted(every, joined)
+        order = np.argsort(nodes, kind="stable")  # a shared node's ids side by side: join them
+        same = nodes[order][1:] == nodes[order][:-1]
+        a, b = index[order][:-1][same], index[order][1:][same]
+        graph = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(every.size, every.size))
+        _, component = csgraph.connected_components(graph, directed=False)
+        root_of = np.full(component.max(initial=-1) + 1, np.iinfo(np.int64).max)
+        np.minimum.at(root_of, component, every)  # every id is its part's smallest node
+        sizes = np.zeros(root_of.size, dtype=np.int64)
+        for _, _, _, c, n in parts:
+            np.add.at(sizes, component[np.searchsorted(every, c)], n)
+        out = np.full(labels.shape, -1, dtype=np.int64)
+        out[inside] = root_of[component[np.searchsorted(every, ids[inside])]]
+        order = np.argsort(root_of)
+        return out, root_of[order], sizes[order]
 
     def local(self, whole: np.ndarray) -> np.ndarray:
         """The slab's part of a whole mesh's vector ``[u, p]`` (a copy)."""

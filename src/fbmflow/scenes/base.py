@@ -111,7 +111,7 @@ class SimulationScene(Scene):
         v = sim.particles.velocity
         dt = sim.control.last_dt if sim.control else sim.dt
         speed = float(np.sqrt((v**2).sum(axis=1)).max(initial=0.0))
-        return {**self.observe(params, sim), "_courant": speed * dt / min(sim.flow.mesh.finest_spacing)}
+        return {**self.observe(params, sim), "_courant": speed * dt / min(sim.mesh.finest_spacing)}
 
     def quantities(self, params, series: dict[str, list], sim) -> dict:
         raise NotImplementedError
@@ -144,7 +144,7 @@ class SimulationScene(Scene):
         quantities = {**self.quantities(params, done.series, sim), **self._steps(setup, sim),
                       "courant_number": max(done.series.pop("_courant", []), default=0.0),
                       "force_estimator": sim.system.estimator.name}
-        return SceneResult(quantities, sim.flow.mesh.n_cells, sim.flow.n_dofs,
+        return SceneResult(quantities, sim.mesh.n_cells, sim.flow.n_dofs,
                            steps=sim.step_count, newton_iterations=done.newton_iterations,
                            extra={} if done.failure is None else {"failure": done.failure},
                            linear_solver=sim.flow.linear_solver_description)

@@ -159,7 +159,7 @@ class ParticleScene(SimulationScene):
         needed = level + math.ceil(math.log2(ratio / SKIN_FRACTION) - 1e-9)
         remedy = (f"use --level {needed} or finer" if needed <= self.max_level
                   else f"levels up to {self.max_level} do not reach it")
-        cell = float(max(sim.flow.mesh.finest_spacing))
+        cell = float(max(sim.mesh.finest_spacing))
         log.warning("%s at level %d: the contact skin (%.3g, %.3g cells of %.3g) is %.2g particle radii, so "
                     "contact stops the particles that far apart and contact times and distances lose their "
                     "meaning; %s (a skin of at most %.2g radii) or lower contact.skin_cells", self.name,

@@ -121,7 +121,7 @@ class DKT2D(ParticleScene):
         q = {"t_kiss": _first_crossing(t, distance - c.kiss_distance - skin),
              "t_tumble": _first_crossing(t, trail[:, 1] - lead[:, 1]),  # trailing below leading
              "min_distance_over_d": float(distance.min()),
-             "cells_per_diameter": float(d / sim.flow.mesh.spacing[0]), **series}
+             "cells_per_diameter": float(d / sim.mesh.spacing[0]), **series}
         for key, ref in REFERENCE.get(c.setup, {}).items():
             q[f"{key}_reference"] = ref
             if q[key] is not None:

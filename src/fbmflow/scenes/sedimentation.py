@@ -236,7 +236,7 @@ class _ManyParticles(ParticleScene):
                         pp.spacing, gap, skin, params.contact.skin_cells, level, need)
 
     def observe(self, params, sim) -> dict:
-        p, mesh = sim.particles, sim.flow.mesh
+        p, mesh = sim.particles, sim.mesh
         row = {"t": sim.t, "mean_velocity": float(p.velocity[:, -1].mean()),
                "overlap": max_overlap(p, mesh.lower, mesh.upper),
                "min_height": float(p.position[:, -1].min()), "max_height": float(p.position[:, -1].max())}
@@ -246,8 +246,8 @@ class _ManyParticles(ParticleScene):
     def quantities(self, params, series: dict, sim) -> dict:
         q = {"max_overlap": max(series["overlap"]), "min_height": min(series["min_height"]),
              "max_height": max(series["max_height"]),
-             "cells_per_diameter": float(params.particles.diameter / sim.flow.mesh.spacing[0]),
-             "box": [float(b) for b in sim.flow.mesh.upper],
+             "cells_per_diameter": float(params.particles.diameter / sim.mesh.spacing[0]),
+             "box": [float(b) for b in sim.mesh.upper],
              "t": series["t"], "mean_velocity": series["mean_velocity"], "overlap": series["overlap"],
              "final_positions": sim.particles.position.tolist(), self.height_name: series[self.height_name]}
         return q

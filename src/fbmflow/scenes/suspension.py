@@ -183,13 +183,13 @@ class _Suspension(ParticleScene):
         from ..fem.functions import mean_velocity
 
         mixture = float(mean_velocity(sim.flow.space, sim.x[:sim.flow.space.n_u])[-1])
-        p, mesh = sim.particles, sim.flow.mesh
+        p, mesh = sim.particles, sim.mesh
         return {"t": sim.t, "settling_velocity": mixture - float(p.velocity[:, -1].mean()),
                 "mixture_velocity": mixture,
                 "overlap": nearest_overlap(p.position, params.particles.diameter / 2, mesh.periods)}
 
     def quantities(self, params, series: dict, sim) -> dict:
-        pp, fl, mesh = params.particles, params.fluid, sim.flow.mesh
+        pp, fl, mesh = params.particles, params.fluid, sim.mesh
         t = np.array(series["t"])
         late = t >= 0.5 * t[-1]
         volume = Ball(pp.diameter / 2, self.dim).volume

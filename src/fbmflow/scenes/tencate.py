@@ -190,7 +190,7 @@ class TenCate(ParticleScene):
                 "gap_max_deviation_from_velocity": gap_deviation(
                     np.array(series["t"]), np.array(series["gap_over_d"]), case,
                     reference=tencate2002.gap_from_velocity(case)),
-                "cells_per_diameter": float(params.particle.diameter / sim.flow.mesh.finest_spacing.max()),
+                "cells_per_diameter": float(params.particle.diameter / sim.mesh.finest_spacing.max()),
                 **series}
 
     def plot(self, summary: dict, path) -> bool:
