@@ -204,10 +204,12 @@ def test_a_particle_leaving_a_graded_mesh_s_fine_zone_is_warned_of_once(tmp_path
 
 @pytest.mark.parametrize("size, rank", [("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"),
                                         ("PMI_SIZE", "PMI_RANK")])
-def test_several_mpi_processes_stop_before_any_work_with_one_line(size, rank, tmp_path, monkeypatch, capsys):
-    """Started by mpiexec as 2 processes (the launcher's variables), ``run`` and ``resume`` exit
-    2 on both, the first with one line that says why and what to do, the other silent; nothing
-    is written. One process (size 1) runs as usual."""
+def test_several_processes_without_mpi_stop_before_any_work_with_one_line(size, rank, tmp_path, monkeypatch,
+                                                                          capsys):
+    """Started by a launcher as 2 processes (its variables) where mpi4py is missing, ``run`` and
+    ``resume`` exit 2 on both, the first with one line naming the remedy (the ``mpi`` extra), the
+    other silent; nothing is written. One process (size 1) runs as usual."""
+    monkeypatch.setitem(sys.modules, "mpi4py", None)
     out = tmp_path / "out"
     for r, lines in (("0", 1), ("1", 0)):
         monkeypatch.setenv(size, "2")
@@ -216,7 +218,7 @@ def test_several_mpi_processes_stop_before_any_work_with_one_line(size, rank, tm
                      ["resume", str(out)]):
             assert main(argv) == 2
             err = capsys.readouterr().err
-            assert err.count("\n") == lines and (not lines or "2 MPI processes" in err and "without" in err)
+            assert err.count("\n") == lines and (not lines or '".[mpi]"' in err and "mpi4py" in err)
     assert not out.exists()
     monkeypatch.setenv(size, "1")
     monkeypatch.setenv(rank, "0")

@@ -7,8 +7,10 @@
     fbmflow resume DIR [--quiet] [--no-plot]
     fbmflow plot DIR
 
-``run`` and ``resume`` started as several MPI processes (``mpiexec -n P``) stop on every process
-with status 2 and one line from the first: fbmflow does not divide a run among processes yet.
+``run`` and ``resume`` started as several MPI processes (``mpiexec -n P fbmflow run ...``) divide
+a particle scene's mesh among them (:class:`~fbmflow.simulation.Simulation`): the first process
+writes the output and the progress and prints the errors, every process exits with the same
+status; the scenes without particles run on one process and are refused.
 
 User errors (and unusable checkpoints) exit with status 2 and one line on stderr; a run that fails
 to converge, or leaves the physically possible, exits with status 1 and a message naming a remedy;
@@ -25,7 +27,7 @@ from pathlib import Path
 
 from . import __version__, interrupt
 from .config import ParamError
-from .parallel.comm import launched_processes
+from .parallel.comm import LaunchError, launched_processes, on_first, world
 from .solvers import ConvergenceError
 
 log = logging.getLogger("fbmflow")
@@ -34,9 +36,16 @@ STEADY_REMEDY = ("refine the mesh (--level) or lower the Reynolds number (a stea
                  "or Newton may not reach it from the Stokes start, above a few hundred at coarse levels)")
 
 
+def _say(text: str) -> None:
+    """Write ``text`` to stderr from the first of several processes only (all meet the same
+    error: one message)."""
+    if launched_processes()[0] == 0:
+        sys.stderr.write(text)
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, status 2, no usage dump
-        sys.stderr.write(f"fbmflow: error: {message} (see 'fbmflow {self.prog.split()[-1]} --help')\n"
+        _say(f"fbmflow: error: {message} (see 'fbmflow {self.prog.split()[-1]} --help')\n"
                          if " " in self.prog else f"fbmflow: error: {message} (see 'fbmflow --help')\n")
         sys.exit(2)
 
@@ -78,11 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     """The command line; ``argv`` None: the process's own arguments (as the ``fbmflow`` program,
     which keeps its signal handlers to the end), else these (as from Python)."""
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
-                        format="%(message)s", stream=sys.stderr)
+    first = launched_processes()[0] == 0  # the one of several processes that speaks
+    level = logging.WARNING if getattr(args, "quiet", False) else logging.INFO
+    logging.basicConfig(level=level if first else logging.ERROR, format="%(message)s", stream=sys.stderr)
     from .run import Progress
 
-    progress = None if getattr(args, "quiet", False) else Progress()
+    progress = None if getattr(args, "quiet", False) or not first else Progress()
     with interrupt.handling(restore=argv is not None):
         status = _command(args, progress)
     if argv is None:  # the program: its work is done, a late signal must not kill its exit
@@ -95,13 +105,6 @@ def _command(args, progress) -> int:
     from .io import CheckpointError
     from .run import OutputError, RunInterrupted, output_folder
 
-    rank, size = launched_processes()
-    if size > 1 and args.command in ("run", "resume"):  # each would run the whole job into the same files
-        if rank == 0:
-            sys.stderr.write(f"fbmflow: error: started as {size} MPI processes, but fbmflow runs a job in "
-                             "one process (each would run all of it and write the same files); run it "
-                             "without mpiexec: Numba's threads use the machine's cores (NUMBA_NUM_THREADS)\n")
-        return 2
     try:
         from .scenes import SCENES, get_scene, load_scene, resume, run_scene
         from .scenes.registry import check_estimate
@@ -128,6 +131,7 @@ def _command(args, progress) -> int:
             print(path if plotted else f"scene {scene.name} has no plot")
             return 0
         if args.command == "resume":
+            world()  # every process joins before any can fail alone
             out = args.directory
             log.info("fbmflow %s: resuming %s", __version__, out)
             summary = resume(out, progress, plot=not args.no_plot)
@@ -138,10 +142,12 @@ def _command(args, progress) -> int:
         else:
             if args.checkpoint_every < 0 or args.fields_every < 0:
                 raise ParamError("--checkpoint-every and --fields-every must be >= 0")
+            comm = world()  # every process joins before any can fail alone (a lone exit would hang the rest)
             scene, params, level = load_scene(args.scene, args.level, args.overrides)
             if args.estimate_error:
                 check_estimate(scene, level)
-            out = Path("fbmflow-out") / scene.name if args.out is None else output_folder(args.out)
+            out = Path("fbmflow-out") / scene.name if args.out is None else \
+                on_first(lambda: output_folder(args.out), comm) or Path(args.out)
             log.info("fbmflow %s: %s at level %d -> %s", __version__, scene.name, level, out)
             summary = run_scene(scene, params, level, out, progress, plot=not args.no_plot,
                                 checkpoint_every=args.checkpoint_every, fields_every=args.fields_every,
@@ -153,27 +159,27 @@ def _command(args, progress) -> int:
                  out / "summary.json")
         return 0
     except RunInterrupted as err:
-        sys.stderr.write(f"fbmflow: {err}\n")
+        _say(f"fbmflow: {err}\n")
         return err.exit_status
     except interrupt.StopRequested as err:
-        sys.stderr.write(f"fbmflow: {err}; nothing to resume from (no time loop had started)\n")
+        _say(f"fbmflow: {err}; nothing to resume from (no time loop had started)\n")
         return err.exit_status
     except KeyboardInterrupt:
-        sys.stderr.write("fbmflow: aborted; the last checkpoint (if any) is in the output directory\n")
+        _say("fbmflow: aborted; the last checkpoint (if any) is in the output directory\n")
         return 130
-    except (ParamError, CheckpointError) as err:
-        sys.stderr.write(f"fbmflow: error: {err}\n")
+    except (ParamError, CheckpointError, LaunchError) as err:
+        _say(f"fbmflow: error: {err}\n")
         return 2
     except OutputError as err:
-        sys.stderr.write(f"fbmflow: error: {err}\n")
+        _say(f"fbmflow: error: {err}\n")
         return 1
     except OSError as err:  # a file the run reads or writes, outside the guarded paths
         where = f"{err.filename}: " if err.filename else ""
-        sys.stderr.write(f"fbmflow: error: {where}{err.strerror or err}\n")
+        _say(f"fbmflow: error: {where}{err.strerror or err}\n")
         return 1
     except ConvergenceError as err:
         remedy = err.remedy or STEADY_REMEDY
-        sys.stderr.write(f"fbmflow: run failed: {err}. Remedy: {remedy}.\n")
+        _say(f"fbmflow: run failed: {err}. Remedy: {remedy}.\n")
         return 1
 
 

@@ -37,6 +37,7 @@ import numpy as np
 from . import interrupt
 from .config import ParamError
 from .io import FieldWriter, RunData, save_checkpoint
+from .parallel import SerialComm, max_over, on_first
 from .solvers import ConvergenceError
 
 log = logging.getLogger(__name__)
@@ -143,45 +144,56 @@ def run_loop(sim, n_steps: int, dt: float | None, files: RunFiles | None = None,
     """
     files = files or RunFiles()
     out = Path(files.out) if files.out is not None else None
+    comm = getattr(sim, "comm", None) or SerialComm()  # the first process writes, all call
     series = {k: [v] for k, v in observe(sim).items()} if observe is not None else {}
     newton = 0
     if resumed is not None:
         series, newton = resumed.get("series", series), int(resumed.get("newton_iterations", 0))
-    data = fields = None
+    data = fields = state_bytes = None
     saved = {"step": sim.step_count if files.resume else None}  # the last checkpoint's step
 
     def guarded(path, action, nbytes: float = 0.0):
-        """``action()``, a write of ``path``: a full disk or any OS error an OutputError naming
-        the file, the cause and the last checkpoint, which stays intact."""
-        try:
-            if nbytes:
-                room(out, nbytes, path.name)
-            return action()
-        except (OSError, OutputError) as err:
-            cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
-            kept = f"; the last checkpoint (step {saved['step']}) in {out / 'checkpoint.h5'} is intact: " \
-                   f"fix the cause and `fbmflow resume {out}`" if saved["step"] is not None else ""
-            raise OutputError(f"cannot write {path}: {cause}{kept}") from None
+        """``action()``, a write of ``path`` by the first process (every process calls this): a
+        full disk or any OS error an OutputError on every process naming the file, the cause and
+        the last checkpoint, which stays intact."""
+        def write():
+            try:
+                if nbytes:
+                    room(out, nbytes, path.name)
+                return action()
+            except (OSError, OutputError) as err:
+                cause = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+                kept = "" if saved["step"] is None else \
+                    f"; the last checkpoint (step {saved['step']}) in {out / 'checkpoint.h5'} is intact: " \
+                    f"fix the cause and `fbmflow resume {out}`"
+                raise OutputError(f"cannot write {path}: {cause}{kept}") from None
+        return on_first(write, comm)
+
+    def write_fields(step: int, force) -> None:
+        x_owner = sim.field_data()  # the whole mesh's flow and node owner, on the first process
+        guarded(out / "fields", lambda: fields.write(step, sim.t, *x_owner, sim.particles, force),
+                4.0 * state_bytes)
 
     if out is not None:
         if not files.resume:  # written once the set-up has passed its checks: a refused run leaves nothing
             guarded(out / "run.json", lambda: write_run_info(files, files.setup))
-        state_bytes = float(sim.x.nbytes) + 64.0 * sim.particles.n * sim.particles.dim * 8
+        state_bytes = 8.0 * sim.n_dofs + 64.0 * sim.particles.n * sim.particles.dim * 8
         data = guarded(out / "run.h5", lambda: RunData(out / "run.h5", files.meta,
                                                        sim.step_count if files.resume else None,
                                                        particles=sim.particles.n))
         if not files.resume:
             guarded(out / "run.h5", lambda: data.append(_row(sim, None)))
         if files.fields_every:
-            fields = FieldWriter(out, sim.flow.space, start_step=sim.step_count, fmt=files.fields_format)
+            fields = on_first(lambda: FieldWriter(out, sim.field_space(), start_step=sim.step_count,
+                                                  fmt=files.fields_format), comm)
             if not files.resume:
-                zero = np.zeros_like(sim.particles.position)
-                guarded(out / "fields", lambda: fields.write(0, sim.t, sim.x, sim.owner(), sim.particles,
-                                                            zero), 4.0 * state_bytes)
+                write_fields(0, np.zeros_like(sim.particles.position))
 
     def checkpoint(step: int) -> None:
+        state = sim.state()
+        state["x"] = sim.whole(state["x"])  # the whole mesh's flow: a resume on any number of processes
         guarded(out / "checkpoint.h5", lambda: save_checkpoint(
-            out / "checkpoint.h5", sim.state(), {**files.meta, "step": step},
+            out / "checkpoint.h5", state, {**files.meta, "step": step},
             {"series": series, "newton_iterations": newton}), 2.0 * state_bytes)
         saved["step"] = step
 
@@ -210,11 +222,10 @@ def run_loop(sim, n_steps: int, dt: float | None, files: RunFiles | None = None,
             row = observe(sim) if observe is not None else {}
             for key, value in row.items():
                 series.setdefault(key, []).append(value)  # (a key added since a checkpoint)
-            if data is not None:
+            if out is not None:
                 guarded(out / "run.h5", lambda: data.append(_row(sim, report)))
-            if fields is not None and k % files.fields_every == 0:
-                guarded(out / "fields", lambda: fields.write(k, sim.t, sim.x, sim.owner(), sim.particles,
-                                                            report.force), 4.0 * state_bytes)
+            if out is not None and files.fields_every and k % files.fields_every == 0:
+                write_fields(k, report.force)
             if callback is not None:
                 callback(report)
             if progress is not None:
@@ -225,6 +236,8 @@ def run_loop(sim, n_steps: int, dt: float | None, files: RunFiles | None = None,
             if until is not None and until(row):
                 break
             signum = interrupt.requested()
+            if comm.size > 1:  # all stop after the same step: a signal seen by any process
+                signum = int(max_over(float(signum or 0), comm)) or None
             if signum is not None:
                 if out is not None:
                     checkpoint(k)
@@ -323,6 +336,22 @@ RUN_FILES = ("run.json", "run.h5", "checkpoint.h5", "checkpoint.h5.tmp", "summar
              "particles.pvd")
 #: the lock a run holds on its folder while it writes there
 LOCK = ".fbmflow.lock"
+
+
+def claim_once(out: Path, resume: bool, overwrite: bool, comm):
+    """:func:`claim` of ``out`` by the first process of ``comm`` for all of them (a refusal
+    raised on every process); the plain claim on one process."""
+    if comm.size == 1:
+        return claim(out, resume, overwrite)
+    stack = contextlib.ExitStack()
+    on_first(lambda: stack.enter_context(claim(out, resume, overwrite)), comm)
+    return _holding(stack, out)
+
+
+@contextlib.contextmanager
+def _holding(stack: contextlib.ExitStack, out: Path):
+    with stack:
+        yield out
 
 
 @contextlib.contextmanager

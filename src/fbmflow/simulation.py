@@ -21,6 +21,7 @@ from .adaptive import StepControl
 from .config import check_types
 from .contact.settings import ContactParams, RepulsionParams
 from .coupling import make_coupling
+from .coupling.indicator import node_owner
 from .coupling.schemes import auto_coupling
 from .coupling.settings import CouplingParams, FictitiousBoundaryParams
 from .coupling.system import CoupledSystem, StepReport
@@ -28,10 +29,10 @@ from .fem import FlowSpace
 from .fem.functions import sample_pressure, sample_velocity
 from .flow import NoSlip
 from .io import load_checkpoint
-from .parallel import world
+from .parallel import on_first, world
 from .params import FluidParams, TimeParams
 from .particles import Particles
-from .run import Progress, RunFiles, claim, output_folder, run_loop
+from .run import Progress, RunFiles, claim_once, output_folder, run_loop
 from .solvers import ConvergenceError
 from .solvers.choice import check_memory
 from .solvers.settings import SolverParams
@@ -138,6 +139,7 @@ class Simulation:
         self.control = StepControl(time, particles, bool(contact)) if time.adaptive else None
         #: the processes that run this simulation together
         self.comm = world() if comm is None else comm
+        self._whole_space = None  # the whole mesh's FlowSpace for output on several processes
         if self.comm.size > 1:
             if solver.linear == "direct":
                 raise ValueError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
@@ -169,6 +171,19 @@ class Simulation:
     def mesh(self):
         """The whole mesh (:attr:`flow`'s is this process's slab of it on several processes)."""
         return self.system.mesh
+
+    @property
+    def n_dofs(self) -> int:
+        """The whole mesh's unknowns (:attr:`x` holds this process's part on several)."""
+        return FlowSpace.estimate_dofs(self.mesh)
+
+    def whole(self, x: np.ndarray) -> np.ndarray | None:
+        """The whole mesh's flow vector ``(n_dofs,)`` from every process's part ``x`` (such as
+        :attr:`x`): on the first process, None on the others (every process calls it); ``x``
+        itself on one process."""
+        if self.comm.size == 1:
+            return x
+        return self.flow.partition.gather(x, self.n_dofs)
 
     @property
     def particles(self) -> Particles:
@@ -234,6 +249,26 @@ class Simulation:
         lies in)."""
         return sample_pressure(self.flow.space, self.x[self.flow.space.n_u:], np.atleast_2d(points))
 
+    def field_space(self) -> FlowSpace:
+        """The whole mesh's FlowSpace, for output (:attr:`flow`'s on one process; on several made
+        once, where the first process writes the fields)."""
+        if self.comm.size == 1:
+            return self.flow.space
+        if self._whole_space is None:
+            self._whole_space = FlowSpace(self.mesh)
+        return self._whole_space
+
+    def field_data(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The whole mesh's flow ``x (n_dofs,)`` and node owner ``(n_v,)`` for output: on the
+        first process, None on the others (every process calls it)."""
+        x = self.whole(self.x)
+        if self.comm.size == 1:
+            return x, self.owner()
+        if x is None:
+            return None
+        p = self.particles
+        return x, node_owner(self.field_space().V, p.position, p.shapes, p.rotations())
+
     def write_fields(self, out, step: int | None = None, fmt: str = "vtu") -> Path:
         """Write the flow (velocity, pressure, vorticity, owner) and the particles for ParaView
         into the directory ``out`` (:class:`~fbmflow.io.fields.FieldWriter`), as output number ``step``
@@ -254,7 +289,12 @@ class Simulation:
         return {**self.system.state(), **self.coupling.state(), **control}
 
     def set_state(self, state: dict) -> None:
-        """Restore :meth:`state`; ValueError when it does not fit this simulation."""
+        """Restore :meth:`state`; ValueError when it does not fit this simulation. On several
+        processes the flow may be this process's part or the whole mesh's (a checkpoint's,
+        written on any number of processes: this process takes its part)."""
+        x = np.asarray(state["x"])
+        if self.comm.size > 1 and x.shape == (self.n_dofs,):
+            state = {**state, "x": self.flow.partition.local(x)}
         self.system.set_state(state)
         self.coupling.set_state(state)
         if self.control is not None:
@@ -279,15 +319,12 @@ class Simulation:
         """
         dt = None if self.control else self.dt
         progress = Progress() if progress and self.comm.rank == 0 else None  # printed once
-        if out is not None and self.comm.size > 1:
-            raise ValueError(f"runs on {self.comm.size} processes write no output folder yet: run without "
-                             "out and collect what you need from the step reports (the particles are the "
-                             "same on every process)")
         if out is None:
             return run_loop(self, self.n_steps, dt, None, callback=callback, progress=progress).reports
-        files = RunFiles(output_folder(out), checkpoint_every, resume, fields_every, fields_format,
+        folder = on_first(lambda: output_folder(out), self.comm) or Path(out)
+        files = RunFiles(folder, checkpoint_every, resume, fields_every, fields_format,
                          {"kind": "simulation", "fbmflow_version": __version__}, self._setup)
-        with claim(files.out, resume, overwrite):
+        with claim_once(files.out, resume, overwrite, self.comm):
             resumed = None
             if resume:
                 state, _, resumed = load_checkpoint(files.out / "checkpoint.h5", expect=files.meta)

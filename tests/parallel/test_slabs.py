@@ -1,4 +1,5 @@
 """Slabs of a structured mesh, one per process (:mod:`fbmflow.parallel.slabs`)."""
+import json
 import shutil
 import subprocess
 import sys
@@ -178,35 +179,65 @@ def test_world_is_one_process_without_a_launcher_and_refuses_a_mismatched_mpi(mo
         world()
 
 
-@pytest.mark.parametrize("case, size", [("cavity", 2), ("channel", 3)])
-def test_under_mpiexec_time_steps_on_slabs_follow_the_whole_meshs(case, size):
-    """``mpiexec -n P``: three Navier–Stokes time steps on the slabs
-    (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`, 2D) end where the same steps on the
-    whole mesh end, to 1e-8 at every owned unknown, in at most 1.3 times the cycles (plus one);
-    where the ``mpi`` extra is installed."""
-    script = Path(__file__).with_name("_slab_flow.py")
-    out = subprocess.run([_mpiexec(), "-n", str(size), sys.executable, str(script), "2", case, "3"],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stdout + out.stderr
-    assert out.stdout.count(f" of {size}: {case}") == size
+def _fbmflow(launcher, *args):
+    """``fbmflow ARGS`` (under ``launcher``, e.g. ``mpiexec -n 2``), the completed process."""
+    command = [*launcher, sys.executable, "-m", "fbmflow.cli", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=600)
 
 
-def test_under_mpiexec_a_settling_disk_follows_one_processs_run(tmp_path):
-    """``mpiexec -n 2``: three steps of ``glowinski-free-fall`` at level 0 (the nodal boundary,
-    multigrid, the implicit coupling with the trapezoidal integrator), the disk's positions and
-    velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one)
-    per step; where the ``mpi`` extra is installed."""
+def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other_process_counts(tmp_path):
+    """``mpiexec -n 2 fbmflow run glowinski-free-fall`` (level 0, the nodal boundary, multigrid,
+    the implicit coupling with the trapezoidal integrator): the disk's positions and velocities
+    in ``run.h5`` are one process's to 1e-8 relative, in at most 1.3 times the cycles (plus one)
+    per step; the output is written once, the progress printed once. Its checkpoint at step 2,
+    resumed on one process, ends where the uninterrupted run ends. A scene without particles
+    and a bad setting stop both processes with one line and status 2. Where the ``mpi`` extra
+    is installed."""
+    import h5py
+
+    mpiexec = [_mpiexec(), "-n", "2"]
+    settings = ["fbm.boundary=nodes", "solver.linear=multigrid", "time.dt=0.005", "time.t_end=0.02"]
+    run = ["run", "glowinski-free-fall", "--level", "0", "--no-plot", "--checkpoint-every", "2"]
+    run += [a for s in settings for a in ("--set", s)]
+    one = _fbmflow([], *run, "--out", str(tmp_path / "one"))
+    assert one.returncode == 0, one.stderr
+    two = _fbmflow(mpiexec, *run, "--out", str(tmp_path / "two"))
+    assert two.returncode == 0, two.stderr
+    assert two.stderr.count("fbmflow") == one.stderr.count("fbmflow")  # every line once
+    summary = json.loads((tmp_path / "two" / "summary.json").read_text())
+    assert summary["processes"] == 2 and summary["steps"] == 4
+    with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
+        for key in ("position", "velocity"):
+            assert f[key].shape == g[key].shape == (5, 1, 2)
+            assert np.abs(g[key][:] - f[key][:]).max() <= 1e-8 * np.abs(f[key][:]).max()
+        assert np.all(g["linear_iterations"][1:] <= 1.3 * f["linear_iterations"][1:] + 1)
+    resumed = _fbmflow([], "resume", str(tmp_path / "two"), "--no-plot")  # from step 2, one process
+    assert resumed.returncode == 0, resumed.stderr
+    with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
+        assert np.abs(g["velocity"][:] - f["velocity"][:]).max() <= 1e-8 * np.abs(f["velocity"][:]).max()
+    for args, what in ((["run", "cavity-2d", "--out", str(tmp_path / "c")], "runs on one process"),
+                       (run[:2] + ["--set", "solver.linear=multigrid", "--out", str(tmp_path / "s")],
+                        "fbm.boundary = 'nodes'")):
+        refused = _fbmflow(mpiexec, *args)
+        assert refused.returncode == 2 and refused.stderr.count("fbmflow: error") == 1, refused.stderr
+        assert what in refused.stderr and "Traceback" not in refused.stderr
+
+
+def test_under_mpiexec_a_settling_sphere_follows_one_processs_steps(tmp_path):
+    """``mpiexec -n 2``: two steps of a sphere settling in a closed box (3D, the nodal boundary,
+    multigrid, the implicit coupling), its positions and velocities those of one process to
+    1e-8 relative, in at most 1.3 times the cycles (plus one) per step; where the ``mpi`` extra
+    is installed."""
     mpiexec = _mpiexec()
     script = Path(__file__).with_name("_slab_particles.py")
-    args = ["glowinski-free-fall", "0", "3"]
-    settings = ["fbm.boundary=nodes", "solver.linear=multigrid"]
     runs = {}
     for size in (1, 2):
         launcher = [mpiexec, "-n", "2"] if size == 2 else []
-        out = subprocess.run(launcher + [sys.executable, str(script), *args, str(tmp_path / f"{size}.npz"),
-                                         *settings], capture_output=True, text=True, timeout=600)
+        out = subprocess.run(launcher + [sys.executable, str(script), "sphere", "0", "2",
+                                         str(tmp_path / f"{size}.npz")], capture_output=True, text=True,
+                             timeout=600)
         assert out.returncode == 0, out.stdout + out.stderr
-        assert out.stdout.count(f" of {size}: glowinski") == size
+        assert out.stdout.count(f" of {size}: sphere") == size
         runs[size] = np.load(tmp_path / f"{size}.npz")
     one, two = runs[1], runs[2]
     assert int(two["processes"]) == 2

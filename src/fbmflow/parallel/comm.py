@@ -24,6 +24,11 @@ def launched_processes() -> tuple[int, int]:
     return 0, 1
 
 
+class LaunchError(RuntimeError):
+    """Several processes were started but cannot run together (mpi4py missing, or built against
+    another MPI than the launcher's); the message names the remedy."""
+
+
 class SerialComm:
     """One process: mpi4py's communicator calls that the slabs use, each the identity."""
 
@@ -39,10 +44,13 @@ class SerialComm:
     def allgather(self, value):
         return [value]
 
+    def gather(self, value, root: int = 0):
+        return [value]
+
 
 def world():
     """MPI's ``COMM_WORLD`` where a launcher started several processes, else a
-    :class:`~fbmflow.parallel.comm.SerialComm`; RuntimeError naming the remedy where mpi4py is
+    :class:`~fbmflow.parallel.comm.SerialComm`; :class:`LaunchError` naming the remedy where mpi4py is
     missing then, or where MPI sees another number of processes than the launcher started (each
     would think itself alone and repeat the whole run)."""
     size = launched_processes()[1]
@@ -51,10 +59,10 @@ def world():
     try:
         from mpi4py import MPI
     except ImportError as err:
-        raise RuntimeError("several processes need mpi4py: pip install -e \".[mpi]\" (mpi4py and the "
+        raise LaunchError("several processes need mpi4py: pip install -e \".[mpi]\" (mpi4py and the "
                            "MPICH wheel, whose mpiexec then starts the run)") from err
     if MPI.COMM_WORLD.Get_size() != size:
-        raise RuntimeError(f"the launcher started {size} processes but MPI sees {MPI.COMM_WORLD.Get_size()}: "
+        raise LaunchError(f"the launcher started {size} processes but MPI sees {MPI.COMM_WORLD.Get_size()}: "
                            "mpi4py was built against another MPI than this mpiexec's; use the mpiexec of "
                            "the MPI that mpi4py uses (mpi4py.get_config())")
     return MPI.COMM_WORLD
@@ -89,3 +97,21 @@ def sum_replicated(v, comm):
 def max_over(value: float, comm) -> float:
     """The largest of every process's ``value`` (one ``allgather``)."""
     return value if comm.size == 1 else float(max(comm.allgather(float(value))))
+
+
+def on_first(action, comm):
+    """``action()`` on the first process of ``comm`` only (a file written once), its exception
+    raised on every process (one ``bcast``), so that all stop together with the same error;
+    returns the action's result on the first process, None on the others."""
+    if comm.size == 1:
+        return action()
+    result = error = None
+    if comm.rank == 0:
+        try:
+            result = action()
+        except Exception as err:  # noqa: BLE001 (every process raises it below)
+            error = err
+    error = comm.bcast(error)
+    if error is not None:
+        raise error
+    return result

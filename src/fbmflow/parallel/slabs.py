@@ -203,6 +203,18 @@ class SlabPartition:
         order = np.argsort(root_of)
         return out, root_of[order], sizes[order]
 
+    def gather(self, x: np.ndarray, n_whole: int, root: int = 0, comm=None) -> np.ndarray | None:
+        """The whole mesh's vector ``(n_whole,)`` of every process's local ``x`` (its owned
+        unknowns) on process ``root``, None on the others (one ``gather``)."""
+        comm = comm or self.comm
+        parts = comm.gather((self.unknowns_of_whole[self.owned], x[self.owned]), root=root)
+        if comm.rank != root:
+            return None
+        whole = np.empty(n_whole)
+        for index, values in parts:
+            whole[index] = values
+        return whole
+
     def local(self, whole: np.ndarray) -> np.ndarray:
         """The slab's part of a whole mesh's vector ``[u, p]`` (a copy)."""
         return whole[self.unknowns_of_whole]

@@ -144,7 +144,7 @@ class SimulationScene(Scene):
         quantities = {**self.quantities(params, done.series, sim), **self._steps(setup, sim),
                       "courant_number": max(done.series.pop("_courant", []), default=0.0),
                       "force_estimator": sim.system.estimator.name}
-        return SceneResult(quantities, sim.mesh.n_cells, sim.flow.n_dofs,
+        return SceneResult(quantities, sim.mesh.n_cells, sim.n_dofs,
                            steps=sim.step_count, newton_iterations=done.newton_iterations,
                            extra={} if done.failure is None else {"failure": done.failure},
                            linear_solver=sim.flow.linear_solver_description)

@@ -14,7 +14,8 @@ import numpy as np
 from .. import __version__
 from ..config import ParamError, from_dict, parse_value, set_dotted, to_dict
 from ..io import export_csv
-from ..run import OutputError, RunFiles, claim, output_folder, read_run_info
+from ..parallel import on_first, world
+from ..run import OutputError, RunFiles, claim_once, output_folder, read_run_info
 from ..simulation import Simulation
 from ..solvers.choice import peak_resident_memory
 from . import richardson
@@ -129,16 +130,21 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     """
     if estimate_error:
         check_estimate(scene, level)
-    out = output_folder(out)
+    comm = world()  # the processes an MPI launcher started: the first writes, all compute
+    if comm.size > 1 and not isinstance(scene, SimulationScene):
+        raise ParamError(f"scene {scene.name} runs on one process (only particle scenes are divided among "
+                         "processes yet): run it without mpiexec")
+    out = on_first(lambda: output_folder(out), comm) or Path(out)
     if not isinstance(scene, SimulationScene) and (checkpoint_every or resume or fields_every):
         raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
     meta = {"scene": scene.name, "level": level, "params": to_dict(params), "fbmflow_version": __version__}
-    with claim(out, resume, overwrite):
+    with claim_once(out, resume, overwrite, comm):
         t0 = time.perf_counter()
         if isinstance(scene, SimulationScene):
             files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
             result = scene.run(params, level, progress, files)
-            _write(out / "particles.csv", lambda: export_csv(out / "run.h5", out / "particles.csv"))
+            on_first(lambda: _write(out / "particles.csv",
+                                    lambda: export_csv(out / "run.h5", out / "particles.csv")), comm)
         else:
             result = scene.run(params, level, progress)
         wall = time.perf_counter() - t0
@@ -146,11 +152,11 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
                    "level": level, "n_cells": result.n_cells, "n_dofs": result.n_dofs,
                    "steps": result.steps, "wall_time_s": wall, "linear_solver": result.linear_solver,
                    "newton_iterations": result.newton_iterations, **memory_figures(result.n_dofs),
-                   "quantities": finite(result.quantities)}
-        _save_summary(out, summary)
+                   "quantities": finite(result.quantities), "processes": comm.size}
+        on_first(lambda: _save_summary(out, summary), comm)
     if estimate_error:
         summary = _estimate_error(scene, params, level, out, progress, plot, summary)
-    if plot:
+    if plot and comm.rank == 0:
         try:
             if scene.plot(summary, out / f"{scene.name}.png"):
                 log.info("plot written to %s", out / f"{scene.name}.png")
@@ -194,10 +200,11 @@ def _estimate_error(scene: Scene, params, level: int, out: Path, progress, plot:
     summary["error_estimate"] = {"levels": [*levels, level], "quantities": finite(estimates),
                                  "failed_levels": failed,
                                  "wall_time_s": sum(s["wall_time_s"] for s in coarser)}
-    _save_summary(out, summary)
+    comm = world()
+    on_first(lambda: _save_summary(out, summary), comm)
     log.info("error estimates (levels %s):\n%s", ", ".join(map(str, [*levels, level])),
              richardson.table(estimates))
-    if plot:
+    if plot and comm.rank == 0:
         try:
             richardson.plot(estimates, [*levels, level], out / "error_estimate.png",
                             f"{scene.name}: Richardson error estimate at level {level}")

@@ -1,0 +1,111 @@
+"""Particle scenes over several processes: the same trajectory, the cycles, the time per step.
+
+Question: do ``mpiexec -n P`` runs of a particle scene (fbmflow.simulation.Simulation on slabs,
+the nodal boundary and multigrid) give one process's particle trajectory, in how many cycles, and
+is a step of ten Cate's level 1 faster on two processes than on one process of one or two
+threads?
+Answer: PENDING
+Measured: PENDING
+Run: python -m fbmbench distributed_particles --rows 1x1 2x1 4x1 --scene ten-cate --level 0 --steps 10
+--settings fbm.boundary=nodes solver.linear=multigrid solver.newton_rtol=1e-10
+solver.linear_rtol=1e-10 coupling.tol=1e-10
+
+Every row is one ``mpiexec -n P`` run (``P x T``: P processes of T Numba threads each), one after
+the other: the scene at ``level`` with the ``settings`` (``KEY=VALUE``, as ``fbmflow run
+--set``), ``steps`` time steps. Rank 0 reports every step's particle positions and velocities,
+the cycles per step (every linear solve of the step: Newton's and the implicit coupling's
+responses), the seconds per step after the first (which also builds the hierarchies), the
+unknowns and the peak resident memory of the largest process. The table gives each row's largest
+difference from the trajectory of the 1 x 1 row of the same run (tag, scene, level), relative to
+that trajectory's largest value. Oversubscribed rows (more processes times threads than cores)
+are marked: their times mean nothing, their trajectories and cycles do.
+
+writes benchmarks/results/distributed_particles.{json,md}; ``--tag`` names the run (rows with
+other tags are kept).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from studies.distributed_solve import CHILD_TAIL, run_mpiexec, run_rows, speed_ups
+
+CHILD = r"""
+import json, resource, sys, time
+import numpy as np
+import numba
+from fbmflow.scenes.registry import load_scene
+args = json.loads(sys.argv[1])
+scene, params, level = load_scene(args["scene"], args["level"], args["settings"])
+sim = scene.build(params, level).sim
+comm = sim.comm
+times, cycles, position, velocity = [], [], [], []
+for k in range(args["steps"]):
+    t0 = time.perf_counter()
+    report = sim.step()
+    times.append(time.perf_counter() - t0)
+    cycles.append(report.linear.iterations)
+    position.append(report.position.tolist())
+    velocity.append(report.velocity.tolist())
+result = dict(unknowns=sim.n_dofs, s_per_step=float(np.mean(times[1:] or times)),
+              cycles_per_step=float(np.mean(cycles)), position=position, velocity=velocity)
+""" + CHILD_TAIL
+
+
+def differences(rows: list[dict]) -> list[str]:
+    """Per row, ``position / velocity``: the largest difference from the 1 x 1 row of its run
+    (tag, scene, level), relative to that row's largest value ("" where there is none)."""
+    alone = {(r["tag"], r["scene"], r["level"]): r for r in rows if r["processes"] == 1 and r["threads"] == 1}
+    out = []
+    for r in rows:
+        one = alone.get((r["tag"], r["scene"], r["level"]))
+        if one is None or len(one["position"]) != len(r["position"]):
+            out.append("")
+            continue
+        figures = []
+        for key in ("position", "velocity"):
+            a, b = np.array(one[key]), np.array(r[key])
+            figures.append(f"{np.abs(b - a).max() / np.abs(a).max():.1e}")
+        out.append(" / ".join(figures))
+    return out
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["# Particle scenes over processes (python -m fbmbench distributed_particles)", "",
+             "One `mpiexec -n P` run per row, one after the other, nothing else running. Difference: the "
+             "largest difference of the particles' positions / velocities over the steps from the 1 x 1 "
+             "row of the same run (tag, scene, level), relative to that row's largest value. Speed-up: the "
+             "mean seconds per step (after the first) of the 1 x 1 rows of the same tag over this row's; "
+             "`*`: more processes times threads than cores (the times mean nothing).", "",
+             "| tag | machine | tree | scene | level | unknowns | P x T | steps | difference | "
+             "cycles / step | s / step | speed-up | peak GB (largest process) | command |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r, difference, speedup in zip(rows, differences(rows), speed_ups(rows, "s_per_step")):
+        over = "*" if r["processes"] * r["threads"] > r["cores"] else ""
+        lines.append(f"| {r['tag']} | {r['machine']} | {r['tree']} | {r['scene']} | {r['level']} | "
+                     f"{r['unknowns']} | {r['processes']} x {r['threads']}{over} | {len(r['position'])} | "
+                     f"{difference} | {r['cycles_per_step']:.1f} | {r['s_per_step']:.2f} | {speedup} | "
+                     f"{r['peak_gb_max']:.2f} | `{r['command']}` |")
+    return "\n".join(lines) + "\n"
+
+
+def run(*, rows: list[str] = ("1x1", "2x1", "4x1"), scene: str = "ten-cate", level: int = 0, steps: int = 10,
+        settings: list[str] = ("fbm.boundary=nodes", "solver.linear=multigrid"), tag: str = "dev") -> None:
+    """Run ``steps`` steps of ``scene`` once per row.
+
+    Parameters
+    ----------
+    rows : ``PxT``: P processes of T Numba threads each, one run per row in this order
+    scene : a particle scene's name
+    level : its level
+    steps : the time steps of every row
+    settings : the scene's settings, ``KEY=VALUE`` as ``fbmflow run --set``
+    tag : this run's name in the results (rows with other tags are kept)
+    """
+    settings = list(settings)
+
+    def measure(processes, threads):
+        args = dict(scene=scene, level=level, steps=steps, settings=settings)
+        return dict(run_mpiexec(CHILD, args, processes, threads), scene=scene, level=level)
+
+    run_rows("distributed_particles", rows, measure, table, tag,
+             f"--scene {scene} --level {level} --steps {steps} --settings {' '.join(settings)}")
