@@ -236,22 +236,33 @@ class Simulation:
         return np.zeros((self.particles.n, 3)) if m is None else m.copy()
 
     def owner(self) -> np.ndarray:
-        """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64."""
+        """Particle owning every Q2 velocity node at the current state (-1: fluid), (n_v,) int64
+        (the nodes of this process's slab on several)."""
         return self.system.owner()
 
     def velocity_at(self, points) -> np.ndarray:
         """Fluid velocity at ``points (m, dim)``, (m, dim) float64 (inside a particle: its rigid
-        motion, as the constraints hold it)."""
-        return sample_velocity(self.flow.space, self.x[:self.flow.space.n_u], np.atleast_2d(points))
+        motion, as the constraints hold it). On several processes every process calls it and gets
+        the answer (the whole flow gathered and broadcast: for a few looks, not every step)."""
+        space, x = self._whole_flow()
+        return sample_velocity(space, x[:space.n_u], np.atleast_2d(points))
 
     def pressure_at(self, points) -> np.ndarray:
         """Pressure at ``points (m, dim)``, (m,) float64 (P1disc: the value of the cell each point
-        lies in)."""
-        return sample_pressure(self.flow.space, self.x[self.flow.space.n_u:], np.atleast_2d(points))
+        lies in); on several processes as :meth:`velocity_at`."""
+        space, x = self._whole_flow()
+        return sample_pressure(space, x[space.n_u:], np.atleast_2d(points))
+
+    def _whole_flow(self) -> tuple[FlowSpace, np.ndarray]:
+        """The whole mesh's space and flow on every process (one gather and one broadcast on
+        several)."""
+        if self.comm.size == 1:
+            return self.flow.space, self.x
+        return self.field_space(), self.comm.bcast(self.whole(self.x))
 
     def field_space(self) -> FlowSpace:
-        """The whole mesh's FlowSpace, for output (:attr:`flow`'s on one process; on several made
-        once, where the first process writes the fields)."""
+        """The whole mesh's FlowSpace (:attr:`flow`'s on one process; on several made once, on a
+        process that asks: the first, which writes the fields)."""
         if self.comm.size == 1:
             return self.flow.space
         if self._whole_space is None:
@@ -276,10 +287,15 @@ class Simulation:
         from .io import FieldWriter
 
         out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
         step = self.step_count if step is None else step
-        writer = FieldWriter(out, self.flow.space, start_step=step, fmt=fmt)
-        writer.write(step, self.t, self.x, self.owner(), self.particles, self.force)
+        x_owner = self.field_data()  # every process's part, gathered on the first
+
+        def write():
+            out.mkdir(parents=True, exist_ok=True)
+            writer = FieldWriter(out, self.field_space(), start_step=step, fmt=fmt)
+            writer.write(step, self.t, *x_owner, self.particles, self.force)
+
+        on_first(write, self.comm)
         return out
 
     def state(self) -> dict:
