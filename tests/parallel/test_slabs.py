@@ -47,16 +47,20 @@ def _mesh(dim):
                               periodic=(True,) + (False,) * (dim - 1))
 
 
-@pytest.mark.parametrize("dim, size", [(2, 1), (2, 3), (3, 2), (3, 4)])
-def test_slab_rows_of_the_owned_cells_are_the_whole_meshs_and_ghosts_follow_owners(dim, size):
+@pytest.mark.parametrize("dim, size, halo",
+                         [(2, 1, 1), (2, 3, 1), (3, 2, 1), (3, 4, 1), (2, 3, 2), (3, 2, 3)])
+def test_slab_rows_of_the_owned_cells_are_the_whole_meshs_and_ghosts_follow_owners(dim, size, halo):
     """The operator applied on every slab mesh: the whole mesh's product at every node of the
-    owned cells; after the ghost update at every slab node. The owned unknowns cover the whole
-    mesh's once; the ghosts' parts added to the owners sum to the whole; dots count each once."""
+    owned cells; after the ghost update at every slab node (halos of one cell layer and of
+    several). The owned unknowns cover the whole mesh's once; the ghosts' parts added to the
+    owners sum to the whole; dots count each once."""
     mesh = _mesh(dim)
     whole = FlowSpace(mesh)
     u = np.random.default_rng(3).standard_normal(whole.n_u)
     want = apply_mass_laplace(whole, 2.0, 0.3, u, convection=0.7).reshape(dim, whole.n_v)
-    parts = [SlabPartition(mesh, size, r) for r in range(size)]
+    parts = [SlabPartition(mesh, size, r, halo=halo) for r in range(size)]
+    assert all(part.held == (max(part.layers[0] - halo, 0), min(part.layers[1] + halo, mesh.shape[-1]))
+               for part in parts)
     scale = np.abs(want).max()
     got = []
     for part in parts:
@@ -137,6 +141,8 @@ def test_slabs_refuse_what_they_cannot_split():
         SlabPartition(StructuredMesh.box((4, 4), periodic=(False, True)), 2, 0)
     with pytest.raises(ValueError, match="rank 2"):
         SlabPartition(mesh, 2, 2)
+    with pytest.raises(ValueError, match="4 cell layers each \\(a halo of 3\\).* at most 1 process"):
+        SlabPartition(mesh, 2, 0, halo=3)
 
 
 def _mpiexec():

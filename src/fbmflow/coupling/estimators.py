@@ -9,12 +9,13 @@ An estimator has
   pressure's parts separately, each with a rule for its own positions);
 * ``check(shapes, sharp)``: ValueError with a remedy when it cannot serve these shapes with this
   fictitious boundary (``sharp``: the sharp boundary is on);
-* ``prepare(space, centres, shapes, rotations, owner, walls, cells)``: the rule for particles at
+* ``prepare(space, centres, shapes, rotations, owner, walls, cells, spacing)``: the rule for particles at
   ``centres (n, dim)`` with rotations ``(n, dim, dim)``; ``owner (n_v,)`` int64 is their node
   owner where known (None: computed), ``walls`` the velocity nodes held by the walls, ``cells``
   a mask ``(n_cells,)`` of the cells whose part of the integral the rule takes (one process's
-  owned cells, its part of a sum over processes; None: all). Estimators with ``distributed``
-  False take no mask;
+  owned cells, its part of a sum over processes; None: all), ``spacing`` the whole mesh's
+  finest cell length where ``space``'s mesh is a process's slab (None: its own; for a rule
+  whose points follow the resolution). Estimators with ``distributed`` False take no mask;
 * ``evaluate(rule, u, p, mu, rho, u_old, dt, about)``: force ``(n, dim)`` and torque ``(n, 3)``
   of the flow ``u (dim * n_v,)``, ``p (n_p,)``; ``u_old`` is the velocity at the step's start
   and ``about`` the flow a response ``u`` is a change of (the estimators linear in the flow ignore
@@ -70,7 +71,7 @@ class ForceEstimator:
         """ValueError where a cells mask asks an estimator that is not distributed for a part."""
         if cells is not None:
             raise ValueError(f"force {self.name!r} does not run on several processes yet; use fbm.force = "
-                             "'volume' (and fbm.boundary = 'nodes') there")
+                             "'volume' or 'surface' there")
 
     @staticmethod
     def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
@@ -88,7 +89,7 @@ class VolumeForce(ForceEstimator):
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None,
-                cells: np.ndarray | None = None):
+                cells: np.ndarray | None = None, spacing: float | None = None):
         owner = self._owner(space, centres, shapes, rotations, owner)
         return volume_force_functional(space, owner, centres, cells)
 
@@ -112,7 +113,7 @@ class TestFunctionForce(ForceEstimator):
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None,
-                cells: np.ndarray | None = None):
+                cells: np.ndarray | None = None, spacing: float | None = None):
         self._whole(cells)
         owner = self._owner(space, centres, shapes, rotations, owner)
         return TestFunctionForces(space, owner, centres, shapes, rotations, walls)
@@ -135,6 +136,7 @@ class SurfaceForce(ForceEstimator):
     surface)."""
 
     name = "surface"
+    distributed = True
 
     def check(self, shapes: list, sharp: bool) -> None:
         if not (sharp and supports_surface_force(shapes)):
@@ -144,9 +146,8 @@ class SurfaceForce(ForceEstimator):
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None,
-                cells: np.ndarray | None = None):
-        self._whole(cells)
-        return SurfaceForces(space, centres, shapes)
+                cells: np.ndarray | None = None, spacing: float | None = None):
+        return SurfaceForces(space, centres, shapes, cells=cells, spacing=spacing)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu)

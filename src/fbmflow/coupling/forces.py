@@ -378,16 +378,21 @@ class SurfaceForces(ForceFunctional):
     centres : (n, dim) float64, ball centres [m]
     shapes : list of n :class:`~fbmflow.particles.shapes.Ball`
     points_per_cell : int, default 4
+    cells : (n_cells,) bool or None, the cells whose surface points the integral takes (one
+        process's owned cells: its part of a sum over processes; None: all)
+    spacing : float or None, the finest cell length that sets the points' density (None:
+        ``space``'s mesh's; a process's slab takes the whole mesh's)
     """
 
-    def __init__(self, space: FlowSpace, centres: np.ndarray, shapes: list, points_per_cell: int = 4):
+    def __init__(self, space: FlowSpace, centres: np.ndarray, shapes: list, points_per_cell: int = 4,
+                 cells: np.ndarray | None = None, spacing: float | None = None):
         if not supports_surface_force(shapes):
             raise ValueError("the surface force integrates over balls (disks, spheres) only; use the volume "
                              "force for other shapes")
         mesh, dim = space.mesh, space.dim
         centres = np.atleast_2d(np.asarray(centres, dtype=float))
         radius = np.array([s.radius for s in shapes])
-        h = float(mesh.finest_spacing.min())
+        h = float(mesh.finest_spacing.min()) if spacing is None else float(spacing)
         per_circle = 4 * int(np.ceil(points_per_cell * 2 * np.pi * radius.max() / h / 4))
         phi = (np.arange(per_circle) + 0.5) * 2 * np.pi / per_circle
         if dim == 2:
@@ -410,7 +415,12 @@ class SurfaceForces(ForceFunctional):
             x[:, d] = lower[d] + np.mod(x[:, d] - lower[d], upper[d] - lower[d])
         keep = np.all((x >= lower) & (x <= upper), axis=1)
         x, particle, normal, arm, weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
-        cells, xi = locate(mesh, x)
+        cells_at, xi = locate(mesh, x)
+        if cells is not None:  # (off a slab's mesh: in no owned cell either)
+            own = cells[cells_at]
+            x, particle, normal, arm, weight, cells_at, xi = (
+                a[own] for a in (x, particle, normal, arm, weight, cells_at, xi))
+        cells = cells_at
         _, dphi = space.V.element.tabulate(xi)
         dphi = dphi / space.Q.scale[cells][:, None, :]  # physical gradients (tensor-product cells)
         psi = space.Q.element.tabulate(x, space.Q.centre[cells], space.Q.scale[cells])

@@ -35,12 +35,12 @@ three things in the cells the surface cuts (cells with nodes inside and outside 
 
 Ghost nodes whose image point falls outside the domain (a particle at a wall) and cut cells
 without a fluid cell within two cells keep the nodal treatment. Shapes need ``project``
-(closest surface point and outward normal): balls, boxes, cylinders. The linear systems need the
-direct solver.
+(closest surface point and outward normal): balls, boxes, cylinders. Rows reach
+:func:`reach_layers` cell layers (the halo a process's slab needs).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -67,6 +67,8 @@ class GhostNodes:
         centre (minimum image on periodic axes)
     weight : (n_g,) float64   ``1 + a / l``, the weight of the rigid velocity at ``x_b``
     matrix : (n_g, n_v) CSR   scalar constraint rows ``e_G + (a / l) phi(x_I)``
+    beyond : (m,) int64   particle nodes of cut cells whose image point lies in the domain but
+        off this mesh (one process's slab: their rows are the process's that holds the image)
     """
 
     nodes: np.ndarray
@@ -74,6 +76,7 @@ class GhostNodes:
     surface: np.ndarray
     weight: np.ndarray
     matrix: sp.csr_matrix
+    beyond: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def dim(self) -> int:
@@ -176,24 +179,40 @@ def _rigid_motion(rel: np.ndarray, particle: np.ndarray, velocities: np.ndarray,
     return vel
 
 
+def reach_layers(mesh) -> int:
+    """Cell layers along the last axis of the tensor-product ``mesh`` that the sharp boundary's
+    rows of a node in the finest cells reach beyond the node's own, four at least:
+    ``floor(2 D / h) + 1``, ``D`` the finest cells' diagonal and ``h`` the thinnest layer. A ghost
+    node in a cut cell lies at most a cell's diagonal below the surface (the cell has a fluid
+    node), and its image point ``a + l <= 2 D`` away (``l = max(a, h_node)``); a cut cell's
+    pressure comes from a cell two layers away at most, whose own is chosen among cells two
+    further. On several processes this is the fine slab's halo
+    (:class:`~fbmflow.parallel.slabs.SlabPartition`): 4 for cubic cells, 4 on Glowinski's
+    level 0. Cut cells coarser than the finest (a graded mesh's outer zone) may reach further:
+    :attr:`GhostNodes.beyond` says where."""
+    finest = mesh.finest_spacing
+    return max(4, int(np.floor(2.0 * float(np.linalg.norm(finest)) / float(finest[-1]))) + 1)
+
+
 def supports_sharp_boundary(shapes) -> bool:
     """True when every shape offers ``project`` (closest surface point and normal)."""
     return all(callable(getattr(s, "project", None)) for s in shapes)
 
 
 def sharp_boundary(space: FlowSpace, owner: np.ndarray, centres: np.ndarray, shapes: list,
-                   rotations: np.ndarray | None = None) -> SharpBoundary:
+                   rotations: np.ndarray | None = None, domain=None) -> SharpBoundary:
     """The sharp boundary of the particles at ``centres (n, dim)`` with body-to-world
     ``rotations (n, dim, dim)`` (identity if omitted) and node ``owner`` from
-    :func:`~fbmflow.coupling.indicator.node_owner`, on a tensor-product mesh. Vectorised over nodes and
-    cells; one ``project`` and ``inside`` call per distinct shape."""
+    :func:`~fbmflow.coupling.indicator.node_owner`, on a tensor-product mesh. ``domain``: the
+    whole mesh of which ``space``'s is one process's slab (None: the same). Vectorised over
+    nodes and cells; one ``project`` and ``inside`` call per distinct shape."""
     if not supports_sharp_boundary(shapes):
         raise ValueError("the sharp fictitious boundary needs shapes with a closest-point projection "
                          "(Ball, Box, Cylinder); use the nodal boundary for the others")
     o = owner[space.V.cell_dofs]
     cut = np.flatnonzero((o < 0).any(axis=1) & (o >= 0).any(axis=1))
     centres = np.asarray(centres, dtype=float)
-    return SharpBoundary(ghost_nodes(space.V, owner, cut, centres, shapes, rotations),
+    return SharpBoundary(ghost_nodes(space.V, owner, cut, centres, shapes, rotations, domain),
                          fluid_continuity(space, owner, cut, centres, shapes, rotations),
                          pressure_extension(space, owner, cut, centres))
 
@@ -206,10 +225,13 @@ def _by_shape(shapes: list, particle: np.ndarray):
 
 
 def ghost_nodes(V: DofMap, owner: np.ndarray, cut: np.ndarray, centres: np.ndarray, shapes: list,
-                rotations: np.ndarray | None = None) -> GhostNodes:
+                rotations: np.ndarray | None = None, domain=None) -> GhostNodes:
     """The particles' nodes in the ``cut (n_c,)`` cells with their constraint rows (see the
-    module docstring); those whose image point leaves the domain are left out."""
+    module docstring); those whose image point leaves the ``domain`` mesh's box (None:
+    ``V``'s) are left out, and those whose image lies in it but off ``V``'s mesh are
+    :attr:`GhostNodes.beyond`."""
     mesh = V.mesh
+    domain = mesh if domain is None else domain
     nodes = np.unique(V.cell_dofs[cut][owner[V.cell_dofs[cut]] >= 0])
     part = owner[nodes]
     rel = periodic_offset(V, V.coordinates[nodes], centres[part])
@@ -225,10 +247,12 @@ def ghost_nodes(V: DofMap, owner: np.ndarray, cut: np.ndarray, centres: np.ndarr
     depth = np.linalg.norm(surf_b - body, axis=1)
     reach = np.maximum(depth, _node_spacing(V, nodes))
     image = centres[part] + surface + reach[:, None] * normal
-    lower, upper = np.array(mesh.lower), np.array(mesh.upper)
+    lower, upper = np.array(domain.lower), np.array(domain.upper)
     image = np.where(np.array(mesh.periodic), lower + np.mod(image - lower, upper - lower), image)
     keep = np.all((image >= lower) & (image <= upper), axis=1)
-    nodes, part, surface, depth, reach, image = (a[keep] for a in (nodes, part, surface, depth, reach, image))
+    here = keep & np.all((image >= np.array(mesh.lower)) & (image <= np.array(mesh.upper)), axis=1)
+    beyond = nodes[keep & ~here]
+    nodes, part, surface, depth, reach, image = (a[here] for a in (nodes, part, surface, depth, reach, image))
     cells, xi = locate(mesh, image)
     phi, _ = V.element.tabulate(xi)
     ratio = depth / reach
@@ -238,7 +262,7 @@ def ghost_nodes(V: DofMap, owner: np.ndarray, cut: np.ndarray, centres: np.ndarr
     vals = np.concatenate([np.ones(n_g), (ratio[:, None] * phi).ravel()])
     matrix = sp.csr_matrix((vals, (rows, cols)), shape=(n_g, V.n_dofs))
     matrix.sum_duplicates()
-    return GhostNodes(nodes, part, surface, 1.0 + ratio, matrix)
+    return GhostNodes(nodes, part, surface, 1.0 + ratio, matrix, beyond)
 
 
 def fluid_continuity(space: FlowSpace, owner: np.ndarray, cut: np.ndarray, centres: np.ndarray,

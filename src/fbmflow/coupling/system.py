@@ -30,7 +30,7 @@ from ..fem.functions import mean_velocity
 from ..flow import NavierStokesProblem
 from ..flow.slabs import SlabNavierStokesProblem
 from ..flow.time_schemes import advance, pressure_lag
-from ..parallel import SerialComm, sum_replicated
+from ..parallel import SerialComm, max_over, sum_replicated
 from ..params import FluidParams
 from ..particles import Particles, accelerations, integrate, velocity_gain
 from ..solvers import ConvergenceError, NewtonSettings
@@ -43,7 +43,7 @@ from .indicator import node_owner, rigid_body_constraints, rigid_liftings
 from .placement import check_placement, check_symmetry, periodic_drive, too_small, walls, wrap
 from .schemes import CoupledFlow
 from .settings import FictitiousBoundaryParams
-from .sharp import sharp_boundary, supports_sharp_boundary
+from .sharp import reach_layers, sharp_boundary, supports_sharp_boundary
 
 log = logging.getLogger(__name__)
 
@@ -95,12 +95,16 @@ class ParticleGeometry:
     wall_nodes : (k,) int64, the velocity nodes the walls hold (for the estimator)
     cells : (n_cells,) bool or None, the cells whose part of the forces the rule takes (one
         process's owned cells; None: all)
+    whole : StructuredMesh or None, the whole mesh where ``space``'s is one process's slab
+    comm : the processes' communicator (with ``whole``)
     """
 
     def __init__(self, space, particles: Particles, sharp: bool, estimator, wall_nodes: np.ndarray,
-                 cells: np.ndarray | None = None):
+                 cells: np.ndarray | None = None, whole=None, comm=None):
         self.space, self.sharp_on, self.estimator, self.wall_nodes = space, sharp, estimator, wall_nodes
-        self.cells = cells
+        self.cells, self.whole, self.comm = cells, whole, comm
+        #: the whole mesh's finest cell length on a slab (None: the space's own)
+        self.spacing = None if whole is None else float(whole.finest_spacing.min())
         self.position = particles.position.copy()
         self.orientation = np.array(particles.orientation, copy=True)
         self.shapes = particles.shapes
@@ -122,12 +126,22 @@ class ParticleGeometry:
 
     def sharp(self, V):
         """The sharp boundary on the fine DOF map ``V`` (None for the nodal boundary and on the
-        coarser multigrid levels)."""
+        coarser multigrid levels). On one process's slab, ConvergenceError on every process
+        where a row of an owned cell's node would reach beyond the slab's halo (every process
+        builds it at the same point of a step)."""
         if not self.sharp_on or V is not self.space.V:
             return None
         if self._sharp is None:
             self._sharp = sharp_boundary(self.space, self.owner(V), self.position, self.shapes,
-                                         self.rotations)
+                                         self.rotations, self.whole)
+            if self.whole is not None:
+                beyond = np.isin(self._sharp.ghosts.beyond, V.cell_dofs[self.cells]).sum()
+                if max_over(float(beyond), self.comm) > 0:
+                    raise ConvergenceError(
+                        "the sharp boundary's rows of a particle's nodes reach beyond the halo that the "
+                        "processes' slabs share (cut cells coarser than the mesh's finest, next to the "
+                        "boundary between two slabs)",
+                        "run it on one process, on a uniform mesh, or with fbm.boundary = 'nodes'")
         return self._sharp
 
     def rule(self):
@@ -135,7 +149,7 @@ class ParticleGeometry:
         if self._rule is None:
             self._rule = self.estimator.prepare(self.space, self.position, self.shapes, self.rotations,
                                                 owner=self.owner(self.space.V), walls=self.wall_nodes,
-                                                cells=self.cells)
+                                                cells=self.cells, spacing=self.spacing)
         return self._rule
 
     def constraints(self, V, velocity: np.ndarray, angular_velocity: np.ndarray) -> DirichletConstraints:
@@ -147,12 +161,9 @@ class ParticleGeometry:
         return rigid if sharp is None else sharp.constraints(rigid, velocity, angular_velocity)
 
 
-def _check_distributed(sharp: bool, estimator, linear_solver: LinearSolver) -> None:
+def _check_distributed(estimator, linear_solver: LinearSolver) -> None:
     """ValueError naming the setting to change where a coupled system cannot yet run on several
     processes."""
-    if sharp:
-        raise ValueError("the sharp fictitious boundary does not run on several processes yet: set "
-                         "fbm.boundary = 'nodes'")
     if not estimator.distributed:
         raise ValueError(f"force {estimator.name!r} does not run on several processes yet: set fbm.force = "
                          "'volume'")
@@ -183,8 +194,9 @@ class CoupledSystem:
         mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`; the flow ``x`` is its local part),
         sums the forces of its owned cells, and the sums are added up in the same order on every
         process (:func:`~fbmflow.parallel.comm.sum_replicated`): the particles, their contact and
-        the coupling's decisions are the same bits everywhere. The nodal boundary with the volume
-        force and the multigrid solver only.
+        the coupling's decisions are the same bits everywhere. The sharp boundary's slabs hold
+        :func:`~fbmflow.coupling.sharp.reach_layers` halo layers. The multigrid solver and the
+        volume or surface force only.
 
     See :class:`~fbmflow.simulation.Simulation` for what each does; ValueError for a set-up that
     cannot run (placement, mirror planes, a boundary or force the shapes do not support).
@@ -204,7 +216,7 @@ class CoupledSystem:
                                               if fbm.force == "auto" else fbm.force)
         self.estimator.check(particles.shapes, sharp)
         if self.comm.size > 1:
-            _check_distributed(sharp, self.estimator, linear_solver)
+            _check_distributed(self.estimator, linear_solver)
         self.sharp = sharp
         self.symmetry, self.frozen, self.integrator = tuple(symmetry), bool(frozen), integrator
         self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)
@@ -246,7 +258,8 @@ class CoupledSystem:
             self.flow = SlabNavierStokesProblem(mesh, fluid.viscosity, boundary, self.comm,
                                                 density=fluid.density, body_force=drive, newton=newton,
                                                 multigrid=linear_solver.settings,
-                                                extra_constraints=self._own_constraints)
+                                                extra_constraints=self._own_constraints,
+                                                halo=reach_layers(mesh) if sharp else 1)
         else:
             self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
                                             body_force=drive, linear_solver=linear_solver, newton=newton,
@@ -274,8 +287,9 @@ class CoupledSystem:
     def geometry(self) -> ParticleGeometry:
         """The :class:`ParticleGeometry` of the particles' current configuration."""
         if self._geometry is None or not self._geometry.describes(self.particles):
+            whole = self.mesh if self.comm.size > 1 else None
             self._geometry = ParticleGeometry(self.flow.space, self.particles, self.sharp, self.estimator,
-                                              self._wall_nodes, self._cells)
+                                              self._wall_nodes, self._cells, whole, self.comm)
         return self._geometry
 
     def owner(self) -> np.ndarray:
@@ -483,7 +497,8 @@ class CoupledSystem:
         centres = p.position - self._pressure_lag * dt * p.velocity
         if self._behind is None or not np.array_equal(self._behind[0], centres):
             rule = self.estimator.prepare(self.flow.space, centres, p.shapes, p.rotations(),
-                                          walls=self._wall_nodes, cells=self._cells)
+                                          walls=self._wall_nodes, cells=self._cells,
+                                          spacing=self.geometry().spacing)
             self._behind = (centres.copy(), rule)
         return self._behind[1]
 
@@ -511,6 +526,7 @@ class CoupledSystem:
             dofs, values = sharp.ghosts.uncovered(self.flow.space.V, self.owner(), new.position, new.velocity,
                                                   new.angular_velocity)
             self.x[dofs] = values
+            self.flow.make_consistent(self.x)  # the outer halo's ghost nodes may not be this process's
         shift = self._remove_mean_flux() if self.zero_flux else None
         self.last_force, self.last_torque, self.last_pressure = solved.force, solved.torque, pressure
         self.t += dt

@@ -176,6 +176,12 @@ class NavierStokesProblem:
         """``max |x_i|`` over the whole mesh's unknowns of a vector (or its velocity)."""
         return float(np.abs(x).max(initial=0.0))
 
+    def make_consistent(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (unknowns or velocities, in place) after a change that this process made by its
+        own constraints, with every copy holding its owner's value (one process: as it is);
+        returns ``x``."""
+        return x
+
     def _complete(self, U: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Columns ``[U; P]`` (velocity rows, pressure rows) computed cell by cell, completed (one
         process's part of the mesh: their ghosts from the owners); as they are for the whole
@@ -195,7 +201,7 @@ class NavierStokesProblem:
         """Zero flow with the boundary values at time ``t``: x (n_dofs,) float64."""
         x = np.zeros(self.n_dofs)
         self.constraints(t).apply_to_vector(x)
-        return x
+        return self.make_consistent(x)
 
     # -- operators ----------------------------------------------------------------------------
     def _apply_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
@@ -389,6 +395,7 @@ class NavierStokesProblem:
         con = self.constraints(t, extra)
         x0 = x0.copy()
         con.apply_to_vector(x0)
+        self.make_consistent(x0)
         reference = None
 
         def linear_step(x, F, fresh=True, rtol=None):
@@ -401,6 +408,7 @@ class NavierStokesProblem:
             reference = self.norm(self.residual(x0, m, a, rhs, con, orphans))
             x0 = guess.copy()
             con.apply_to_vector(x0)
+            self.make_consistent(x0)
         settings = newton or self.newton
         settings = settings if rtol is None else dataclasses.replace(settings, rtol=rtol)
         if None not in (linear_rtol, settings.linear_rtol) and linear_rtol > settings.linear_rtol:

@@ -6,7 +6,9 @@ Navier–Stokes problem on the slabs.
 The fine mesh is coarsened as for one process (:func:`~fbmflow.flow.levels.coarse_levels`). The
 slabs are cut on the fine mesh in whole multiples of ``2^J`` cell layers, so that they stay
 slabs of two layers at least on the ``J`` coarser levels; the level below the last slab level is
-the coarsest, held whole.
+the coarsest, held whole. A fine halo of ``w`` layers (rows that reach further than a cell: the
+sharp boundary) halves from level to level, ``max(1, ceil(w / 2^j))`` on level ``j``, so that
+every slab's coarse correction covers the fine slab it is prolongated onto, halo included.
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ class SlabFlowLevels:
     extra_constraints : callable ``(DofMap, t) -> DirichletConstraints`` or None, further
         constraints on every level (particles), evaluated on each level's DOF map (the slabs'
         and the whole coarsest mesh's)
+    halo : int, the fine slab's halo layers (see the module docstring)
 
     Attributes
     ----------
@@ -48,7 +51,7 @@ class SlabFlowLevels:
     """
 
     def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool, comm, min_cells: int = 1,
-                 extra_constraints=None):
+                 extra_constraints=None, halo: int = 1):
         size, rank = comm.size, comm.rank
         meshes = [mesh]
         while all(n % 2 == 0 for n in meshes[-1].shape) and meshes[-1].n_cells // 2**mesh.dim >= min_cells:
@@ -57,15 +60,24 @@ class SlabFlowLevels:
             except ValueError:
                 break
         n_last = mesh.shape[-1]
-        deepest = [j for j in range(len(meshes) - 1) if n_last // 2**j >= 2 * size]
+        halos = [max(1, -(-halo // 2**j)) for j in range(len(meshes))]
+
+        def fits(J):  # slabs in multiples of 2^J layers: each holds halo + 1 layers on levels 0..J
+            bounds = split_layers(n_last, size, 2**J)
+            return all(np.diff(bounds // 2**j).min() > halos[j] for j in range(J + 1))
+
+        deepest = [J for J in range(len(meshes) - 1) if fits(J)]
         if not deepest:
-            raise ValueError(f"{size} processes need two cell layers each on a level above the coarsest; the "
-                             f"mesh has {n_last} along its last axis and {len(meshes)} level(s): use at most "
-                             f"{max(n_last // 4, 1)} processes or a finer mesh")
+            least = max(2, halo + 1)
+            need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
+            raise ValueError(f"{size} processes need {need} on a level above the coarsest; the mesh has "
+                             f"{n_last} along its last axis and {len(meshes)} level(s): use at most "
+                             f"{max(n_last // (2 * least), 1)} processes or a finer mesh")
         J = deepest[-1]
         bounds = split_layers(n_last, size, 2**J)
         self.comm = comm
-        self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j, comm) for j in range(J + 1)]
+        self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j, comm, halos[j])
+                           for j in range(J + 1)]
         self.levels = [FlowLevel(part.mesh, _slab_boundary(boundary, part), pressure_fixed, extra_constraints)
                        for part in self.partitions]
         self.coarsest = FlowLevel(meshes[J + 1], boundary, pressure_fixed, extra_constraints)
@@ -216,18 +228,23 @@ class SlabNavierStokesProblem(NavierStokesProblem):
     extra_constraints : as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (particles),
         evaluated on every slab's and the whole coarsest mesh's DOF map; the fine level's fluid
         pockets are closed over the whole mesh (:meth:`~fbmflow.parallel.slabs.SlabPartition.join_components`)
+    halo : int, the fine slab's halo layers: as far as a constraint row of an owned unknown
+        reaches (the sharp boundary's, :func:`~fbmflow.coupling.sharp.reach_layers`). Constraints
+        of the outer halo may then differ from their owners' (an image point off the slab mesh):
+        every vector a process changes by its own constraints is completed from the owners
+        (:meth:`make_consistent`)
     """
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict, comm, density: float = 1.0,
                  body_force=None, convection: bool = True, newton: NewtonSettings = NewtonSettings(),
-                 multigrid: MultigridSettings | None = None, extra_constraints=None):
+                 multigrid: MultigridSettings | None = None, extra_constraints=None, halo: int = 1):
         check_boundary(mesh.tags, boundary)
         multigrid = multigrid or MultigridSettings()
         if extra_constraints is not None and multigrid.coarse_obstacle != "nodes":
             raise ValueError("on several processes the coarse levels see particles by their own nodes: set "
                              "solver.multigrid.coarse_obstacle = 'nodes'")
         self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm,
-                                    extra_constraints=extra_constraints)
+                                    extra_constraints=extra_constraints, halo=halo)
         self.partition = part = self.slabs.partitions[0]
         solver = MultigridSolver(multigrid, rtol=newton.linear_rtol or 1e-8)
         super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
@@ -251,6 +268,10 @@ class SlabNavierStokesProblem(NavierStokesProblem):
 
     def _close_pockets(self, con):
         return self.fine.close_pockets(con, self.partition)
+
+    def make_consistent(self, x: np.ndarray) -> np.ndarray:
+        self.partition.update_ghosts(x)
+        return x
 
     def _complete(self, U: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         X = np.vstack([U, P])

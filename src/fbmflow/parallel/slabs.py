@@ -1,10 +1,10 @@
 """A structured mesh split into slabs of cell layers along its last axis, one per process, each
-with one layer of halo cells towards each neighbour.
+with ``w`` layers of halo cells towards each neighbour (one by default).
 
 Process ``r`` of ``P`` *owns* the cell layers ``[a_r, b_r)`` and holds the layers
-``[a_r - 1, b_r + 1)`` (no halo layer beyond the mesh's ends): its *slab mesh*. In
+``[a_r - w, b_r + w)`` (no halo layer beyond the mesh's ends): its *slab mesh*. In
 :mod:`fbmflow.fem.dofmap`'s numbering (node ``I + L_x (J + L_y K)``) a slab's Q2 nodes are the
-node planes ``2 (a_r - 1)`` to ``2 (b_r + 1)``, one run of global numbers, and its cells one run
+node planes ``2 (a_r - w)`` to ``2 (b_r + w)``, one run of global numbers, and its cells one run
 too. A node plane shared by two slabs' owned cells belongs to the lower slab: process ``r`` owns
 the node planes ``2 a_r + 1`` to ``2 b_r`` (from plane 0 on process 0), and the P1disc pressures
 of its owned cells; everything else on its slab mesh is a *ghost*, a copy of what a neighbour
@@ -54,8 +54,9 @@ class SlabPartition:
     mesh : StructuredMesh, 2D or 3D, not periodic along its last axis
     size, rank : int, the number of processes and this one's rank (0-based)
     bounds : (size + 1,) int or None, the slabs' first cell layers and the last one's end
-        (:func:`split_layers` where None); every slab needs two layers at least, so that a
-        neighbour's ghosts are all owned by this slab
+        (:func:`split_layers` where None); every slab needs ``halo + 1`` layers at least,
+        so that a neighbour's ghosts are all owned by this slab
+    halo : int, the halo's cell layers towards each neighbour
     comm : the processes' communicator (mpi4py's, or anything with its ``Sendrecv`` and
         ``allreduce``; :class:`~fbmflow.parallel.comm.SerialComm` where None), which the exchanges
         and sums use
@@ -63,7 +64,7 @@ class SlabPartition:
     Attributes
     ----------
     layers : (int, int), the owned cell layers ``[a, b)`` along the last axis
-    held : (int, int), the slab mesh's layers ``[a - 1, b + 1)`` (clipped to the mesh)
+    held : (int, int), the slab mesh's layers ``[a - halo, b + halo)`` (clipped to the mesh)
     mesh : StructuredMesh, the slab mesh
     cells : (n_cells,) int64, the slab mesh's global cells
     nodes : (n_nodes,) int64, the global Q2 node of every slab node (one run of numbers)
@@ -71,21 +72,26 @@ class SlabPartition:
     owned : (dim n_nodes + (dim + 1) n_cells,) bool, the owned unknowns of a local vector
     """
 
-    def __init__(self, mesh: StructuredMesh, size: int, rank: int, bounds=None, comm=None):
+    def __init__(self, mesh: StructuredMesh, size: int, rank: int, bounds=None, comm=None, halo: int = 1):
         n_last = mesh.shape[-1]
+        w = int(halo)
+        if w < 1:
+            raise ValueError(f"a slab's halo needs one cell layer at least, not {halo}")
+        least = w + 1  # the halo's last node plane is the neighbour's own
         if mesh.periodic[-1]:
             raise ValueError("slabs need a last axis that is not periodic; periodic axes may come first")
         if not 0 <= rank < size:
             raise ValueError(f"rank {rank} is not one of {size} processes")
         bounds = split_layers(n_last, size) if bounds is None else np.asarray(bounds, dtype=np.int64)
         if size > 1 and (bounds.shape != (size + 1,) or bounds[0] != 0 or bounds[-1] != n_last
-                         or np.diff(bounds).min() < 2):
-            raise ValueError(f"{size} processes need two cell layers each along the last axis, the mesh has "
-                             f"{n_last}: use at most {n_last // 2} processes or a finer mesh")
-        self.size, self.rank, self.bounds = size, rank, bounds
+                         or np.diff(bounds).min() < least):
+            need = "two cell layers each" if w == 1 else f"{least} cell layers each (a halo of {w})"
+            raise ValueError(f"{size} processes need {need} along the last axis, the mesh has "
+                             f"{n_last}: use at most {n_last // least} processes or a finer mesh")
+        self.size, self.rank, self.bounds, self.halo = size, rank, bounds, w
         self.comm = comm if comm is not None else SerialComm()
         a, b = int(bounds[rank]), int(bounds[rank + 1])
-        ha, hb = (a - 1 if rank > 0 else a), (b + 1 if rank < size - 1 else b)
+        ha, hb = (a - w if rank > 0 else a), (b + w if rank < size - 1 else b)
         self.layers, self.held = (a, b), (ha, hb)
         self.whole = mesh
         self.mesh = cut_layers(mesh, ha, hb)
@@ -116,12 +122,14 @@ class SlabPartition:
         #: per neighbour ``(rank, send, receive)``: the local unknowns this process owns that are
         #: the neighbour's ghosts, and its ghosts that the neighbour owns, in global order
         self.neighbours = []
-        if rank > 0:  # the lower neighbour's ghosts: planes 2a+1, 2a+2, layer a
-            self.neighbours.append((rank - 1, unknowns([2 * a + 1, 2 * a + 2], [a]),
-                                    unknowns(np.arange(2 * ha, 2 * a + 1), [ha])))
-        if rank < size - 1:  # the upper neighbour's: planes 2b-2 .. 2b, layer b-1
-            self.neighbours.append((rank + 1, unknowns(np.arange(2 * b - 2, 2 * b + 1), [b - 1]),
-                                    unknowns(np.arange(2 * b + 1, 2 * hb + 1), [b])))
+        if rank > 0:  # the lower neighbour's ghosts: planes 2a+1 .. 2(a+w), layers a .. a+w-1
+            self.neighbours.append((rank - 1,
+                                    unknowns(np.arange(2 * a + 1, 2 * (a + w) + 1), np.arange(a, a + w)),
+                                    unknowns(np.arange(2 * ha, 2 * a + 1), np.arange(ha, a))))
+        if rank < size - 1:  # the upper neighbour's: planes 2(b-w) .. 2b, layers b-w .. b-1
+            self.neighbours.append((rank + 1,
+                                    unknowns(np.arange(2 * (b - w), 2 * b + 1), np.arange(b - w, b)),
+                                    unknowns(np.arange(2 * b + 1, 2 * hb + 1), np.arange(b, hb))))
         if rank % 2:  # odd ranks talk to the lower neighbour first, even ones to the upper one
             self.neighbours.reverse()
 

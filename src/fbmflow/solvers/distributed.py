@@ -135,8 +135,9 @@ class DistributedMultigrid(Factorization):
         n_u = system.n_u
         b = np.concatenate([f, self._balance(system, part, g)])
         x = np.zeros_like(b)
-        if system.fixed is not None:
+        if system.fixed is not None:  # the outer halo's fixed set may differ from the owners'
             x[system.fixed] = f[system.fixed]
+            part.update_ghosts(x)
         project = augment = None
         if system.mean_weights is not None:
             def project(v):
