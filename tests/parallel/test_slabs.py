@@ -1,5 +1,6 @@
 """Slabs of a structured mesh, one per process (:mod:`fbmflow.parallel.slabs`)."""
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -192,7 +193,7 @@ def _fbmflow(launcher, *args):
 
 
 def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other_process_counts(tmp_path):
-    """``mpiexec -n 4 fbmflow run glowinski-free-fall`` (level 0, the nodal boundary, multigrid,
+    """``mpiexec -n 4 fbmflow run glowinski-free-fall`` (level 0, the sharp boundary, multigrid,
     the implicit coupling with the trapezoidal integrator, tolerances 1e-10), oversubscribed on
     two cores: the disk's positions and velocities in ``run.h5`` are one process's to 1e-8
     relative, in at most 1.3 times the cycles (plus one) per step; the output is written once,
@@ -204,7 +205,7 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
 
     mpiexec = [_mpiexec(), "-n", "2"]
     four = [_mpiexec(), "-n", "4"]  # oversubscribed on two cores: the answer, not the speed
-    settings = ["fbm.boundary=nodes", "solver.linear=multigrid", "time.dt=0.005", "time.t_end=0.02",
+    settings = ["solver.linear=multigrid", "time.dt=0.005", "time.t_end=0.02",
                 "solver.newton_rtol=1e-10", "solver.linear_rtol=1e-10", "coupling.tol=1e-10"]  # the
     # solvers' stopping points (the coupling's 1e-6 by default) far below the 1e-8 compared
     run = ["run", "glowinski-free-fall", "--level", "0", "--no-plot", "--checkpoint-every", "2"]
@@ -226,31 +227,122 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
         assert np.abs(g["velocity"][:] - f["velocity"][:]).max() <= 1e-8 * np.abs(f["velocity"][:]).max()
     for args, what in ((["run", "cavity-2d", "--out", str(tmp_path / "c")], "runs on one process"),
-                       (run[:2] + ["--set", "solver.linear=multigrid", "--out", str(tmp_path / "s")],
-                        "fbm.boundary = 'nodes'")):
+                       (run[:2] + ["--set", "solver.linear=direct", "--out", str(tmp_path / "s")],
+                        "solver.linear = 'multigrid'")):
         refused = _fbmflow(mpiexec, *args)
         assert refused.returncode == 2 and refused.stderr.count("fbmflow: error") == 1, refused.stderr
         assert what in refused.stderr and "Traceback" not in refused.stderr
 
 
-def test_under_mpiexec_a_settling_sphere_follows_one_processs_steps(tmp_path):
-    """``mpiexec -n 2``: two steps of a sphere settling in a closed box (3D, the nodal boundary,
-    multigrid, the implicit coupling), its positions and velocities those of one process to
-    1e-8 relative, in at most 1.3 times the cycles (plus one) per step; where the ``mpi`` extra
-    is installed."""
+def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
+    """``mpiexec -n 2``: a step of ``ten-cate`` at level 0 at its defaults (3D, the sharp boundary
+    with the surface force, multigrid, the implicit coupling; tolerances 1e-10), the sphere's
+    position and velocity those of one process to 1e-8 relative, in at most 1.3 times the cycles
+    (plus one); each process runs on its share of the cores. Where the ``mpi`` extra is
+    installed."""
+    from fbmflow._jit import max_threads
+    from fbmflow.cores import usable_cpus
+
     mpiexec = _mpiexec()
     script = Path(__file__).with_name("_slab_particles.py")
+    settings = ["solver.newton_rtol=1e-10", "solver.linear_rtol=1e-10", "coupling.tol=1e-10"]
     runs = {}
     for size in (1, 2):
         launcher = [mpiexec, "-n", "2"] if size == 2 else []
-        out = subprocess.run(launcher + [sys.executable, str(script), "sphere", "0", "2",
-                                         str(tmp_path / f"{size}.npz")], capture_output=True, text=True,
-                             timeout=600)
+        out = subprocess.run(launcher + [sys.executable, str(script), "ten-cate", "0", "1",
+                                         str(tmp_path / f"{size}.npz"), *settings],
+                             capture_output=True, text=True, timeout=600)
         assert out.returncode == 0, out.stdout + out.stderr
-        assert out.stdout.count(f" of {size}: sphere") == size
+        assert out.stdout.count(f" of {size}: ten-cate") == size
+        if size == 2 and "NUMBA_NUM_THREADS" not in os.environ:
+            share = max(1, min(max_threads(), len(usable_cpus()) // 2))
+            assert out.stdout.count(f"threads {share}\n") == 2, out.stdout
         runs[size] = np.load(tmp_path / f"{size}.npz")
     one, two = runs[1], runs[2]
     assert int(two["processes"]) == 2
     for key in ("position", "velocity"):
         assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
+    assert np.abs(one["velocity"]).max() > 0.0
     assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
+
+
+@pytest.mark.parametrize("dim, size", [(2, 3), (3, 2)])
+def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size):
+    """The sharp boundary built on every slab with a halo of
+    :func:`~fbmflow.coupling.sharp.reach_layers` layers, balls across the slabs' boundaries: the
+    ghost rows of the owned cells' nodes, the owned cut cells' continuity rows and pressure
+    extensions are the whole mesh's (in global numbers), and no owned row reaches beyond the
+    slab (:attr:`~fbmflow.coupling.sharp.GhostNodes.beyond`). The surface and volume forces of
+    the owned cells summed over the slabs are the whole mesh's."""
+    from fbmflow.coupling.forces import SurfaceForces, volume_force_functional
+    from fbmflow.coupling.indicator import node_owner
+    from fbmflow.coupling.sharp import reach_layers, sharp_boundary
+    from fbmflow.particles import Ball
+
+    mesh = StructuredMesh.box((6,) * (dim - 1) + (18,), upper=(1.0,) * (dim - 1) + (3.0,))
+    rng = np.random.default_rng(7)
+    n = 4
+    centres = np.column_stack([rng.uniform(0.3, 0.7, (n, dim - 1)), np.linspace(0.6, 2.4, n)])
+    shapes = [Ball(r, dim=dim) for r in rng.uniform(0.17, 0.26, n)]
+    whole = FlowSpace(mesh)
+    ref = sharp_boundary(whole, node_owner(whole.V, centres, shapes), centres, shapes)
+    ghost_row = {int(g): k for k, g in enumerate(ref.ghosts.nodes)}
+    u = rng.standard_normal(whole.n_u)
+    p = rng.standard_normal(whole.n_p)
+    want = [SurfaceForces(whole, centres, shapes)(u, p, 0.3),
+            volume_force_functional(whole, node_owner(whole.V, centres, shapes), centres)(u, p, 0.3)]
+    got = [np.zeros_like(w[0]) for w in want], [np.zeros_like(w[1]) for w in want]
+    halo = reach_layers(mesh)
+    npl = dim + 1
+    for r in range(size):
+        part = SlabPartition(mesh, size, r, halo=halo)
+        local = FlowSpace(part.mesh)
+        owner = node_owner(local.V, centres, shapes)
+        sb = sharp_boundary(local, owner, centres, shapes, domain=mesh)
+        inner = np.unique(local.V.cell_dofs[part.owned_cells])
+        assert not np.isin(sb.ghosts.beyond, inner).any()
+        mine = np.flatnonzero(np.isin(sb.ghosts.nodes, inner))
+        assert mine.size > 0
+        for k in mine:
+            row = sb.ghosts.matrix.getrow(k)
+            want_row = ref.ghosts.matrix.getrow(ghost_row[int(part.nodes[sb.ghosts.nodes[k]])])
+            assert np.array_equal(np.sort(part.nodes[row.indices]), np.sort(want_row.indices))
+            assert np.allclose(row.data[np.argsort(part.nodes[row.indices])],
+                               want_row.data[np.argsort(want_row.indices)], rtol=0, atol=1e-14)
+        cut = part.owned_cells[sb.continuity.cells]
+        cells = part.cells[sb.continuity.cells[cut]]
+        at = np.searchsorted(ref.continuity.cells, cells)
+        assert np.array_equal(ref.continuity.cells[at], cells)
+        assert cells.size == np.isin(ref.continuity.cells, part.cells[part.owned_cells]).sum() > 0
+        assert np.allclose(sb.continuity.data[cut], ref.continuity.data[at], rtol=0, atol=1e-14)
+        rows = sb.extension.dofs[part.owned_cells[sb.extension.dofs // npl]]
+        E = sb.extension.matrix[rows].tocoo()
+        W = ref.extension.matrix[part.cells[rows // npl] * npl + rows % npl].tocoo()
+        assert rows.size > 0 and E.nnz == W.nnz
+        assert sorted(zip(E.row, part.cells[E.col // npl] * npl + E.col % npl, np.round(E.data, 12))) == \
+            sorted(zip(W.row, W.col, np.round(W.data, 12)))
+        lu = u.reshape(dim, -1)[:, part.nodes].ravel()
+        lp = p[(part.cells[:, None] * npl + np.arange(npl)).ravel()]
+        spacing = float(mesh.finest_spacing.min())
+        rules = [SurfaceForces(local, centres, shapes, cells=part.owned_cells, spacing=spacing),
+                 volume_force_functional(local, owner, centres, part.owned_cells)]
+        for i, rule in enumerate(rules):
+            f, t = rule(lu, lp, 0.3)
+            got[0][i] += f
+            got[1][i] += t
+    for i, (f, t) in enumerate(want):
+        assert np.allclose(got[0][i], f, rtol=1e-12, atol=1e-14 * np.abs(f).max())
+        assert np.allclose(got[1][i], t, rtol=1e-12, atol=1e-14 * np.abs(t).max() + 1e-300)
+    if dim == 2:  # a halo of one layer: some owned ghost node's image lies beyond it, and the run stops
+        from fbmflow.coupling.estimators import VolumeForce
+        from fbmflow.coupling.system import ParticleGeometry
+        from fbmflow.particles import Particles
+        from fbmflow.solvers import ConvergenceError
+
+        part = SlabPartition(mesh, size, 1, halo=1)
+        geometry = ParticleGeometry(FlowSpace(part.mesh), Particles.at_rest(shapes, 2.0, centres), True,
+                                    VolumeForce(), np.zeros(0, dtype=np.int64), part.owned_cells, mesh,
+                                    SerialComm())
+        with pytest.raises(ConvergenceError, match="beyond the halo") as err:
+            geometry.sharp(geometry.space.V)
+        assert "fbm.boundary = 'nodes'" in err.value.remedy

@@ -7,6 +7,9 @@ import os
 
 import numpy as np
 
+from .._jit import max_threads, set_threads
+from ..cores import usable_cpus
+
 #: the environment variables of the world size and rank that MPI launchers set in every process
 #: (Open MPI's mpiexec; MPICH's and Intel MPI's Hydra, and Slurm's srun with PMI-2)
 LAUNCHER_VARIABLES = (("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK"), ("PMI_SIZE", "PMI_RANK"))
@@ -65,7 +68,26 @@ def world():
         raise LaunchError(f"the launcher started {size} processes but MPI sees {MPI.COMM_WORLD.Get_size()}: "
                            "mpi4py was built against another MPI than this mpiexec's; use the mpiexec of "
                            "the MPI that mpi4py uses (mpi4py.get_config())")
+    _share_cores(MPI.COMM_WORLD, MPI.COMM_TYPE_SHARED)
     return MPI.COMM_WORLD
+
+
+_shared = False  # whether this process's Numba threads were set for its machine's processes
+
+
+def _share_cores(comm, shared_type) -> None:
+    """Numba's threads in this process: the CPUs it may run on shared evenly among the processes
+    on its machine (MPI's shared-memory split, one collective on the first call), at least one,
+    unless ``NUMBA_NUM_THREADS`` chose them. Each process's default would be every core: on two
+    cores ``mpiexec -n 2`` ran 4 threads, and a ten Cate level-0 step took 3.9 times one
+    process's time (docs/validation/several-processes.md)."""
+    global _shared
+    if _shared:
+        return
+    _shared = True
+    local = comm.Split_type(shared_type).Get_size()
+    if "NUMBA_NUM_THREADS" not in os.environ:
+        set_threads(max(1, min(max_threads(), len(usable_cpus()) // local)))
 
 
 def sum_over(v, comm):
