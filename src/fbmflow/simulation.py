@@ -139,7 +139,6 @@ class Simulation:
         self.control = StepControl(time, particles, bool(contact)) if time.adaptive else None
         #: the processes that run this simulation together
         self.comm = world() if comm is None else comm
-        self._whole_space = None  # the whole mesh's FlowSpace for output on several processes
         if self.comm.size > 1:
             if solver.linear == "direct":
                 raise ValueError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
@@ -256,18 +255,12 @@ class Simulation:
     def _whole_flow(self) -> tuple[FlowSpace, np.ndarray]:
         """The whole mesh's space and flow on every process (one gather and one broadcast on
         several)."""
-        if self.comm.size == 1:
-            return self.flow.space, self.x
-        return self.field_space(), self.comm.bcast(self.whole(self.x))
+        return self.flow.whole_flow(self.x)
 
     def field_space(self) -> FlowSpace:
         """The whole mesh's FlowSpace (:attr:`flow`'s on one process; on several made once, on a
         process that asks: the first, which writes the fields)."""
-        if self.comm.size == 1:
-            return self.flow.space
-        if self._whole_space is None:
-            self._whole_space = FlowSpace(self.mesh)
-        return self._whole_space
+        return self.flow.whole_space
 
     def field_data(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The whole mesh's flow ``x (n_dofs,)`` and node owner ``(n_v,)`` for output: on the

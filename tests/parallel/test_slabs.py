@@ -198,8 +198,8 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     two cores: the disk's positions and velocities in ``run.h5`` are one process's to 1e-8
     relative, in at most 1.3 times the cycles (plus one) per step; the output is written once,
     the progress printed once. Its checkpoint at step 2, resumed on one process, ends where the
-    uninterrupted run ends. Under ``mpiexec -n 2`` a scene without particles and a setting that
-    does not run on several processes stop both processes with one line and status 2. Where the
+    uninterrupted run ends. Under ``mpiexec -n 2`` a scene that runs on one process and a setting
+    that does not run on several stop both processes with one line and status 2. Where the
     ``mpi`` extra is installed."""
     import h5py
 
@@ -226,12 +226,33 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     assert resumed.returncode == 0, resumed.stderr
     with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
         assert np.abs(g["velocity"][:] - f["velocity"][:]).max() <= 1e-8 * np.abs(f["velocity"][:]).max()
-    for args, what in ((["run", "cavity-2d", "--out", str(tmp_path / "c")], "runs on one process"),
+    for args, what in ((["run", "taylor-green-2d", "--out", str(tmp_path / "c")], "runs on one process"),
                        (run[:2] + ["--set", "solver.linear=direct", "--out", str(tmp_path / "s")],
                         "solver.linear = 'multigrid'")):
         refused = _fbmflow(mpiexec, *args)
         assert refused.returncode == 2 and refused.stderr.count("fbmflow: error") == 1, refused.stderr
         assert what in refused.stderr and "Traceback" not in refused.stderr
+
+
+def test_under_mpiexec_fbmflow_run_divides_a_steady_flow_scene(tmp_path):
+    """``mpiexec -n 2 fbmflow run channel-3d`` (a steady 3D flow without particles, multigrid,
+    Newton to 1e-10): the quantities measured on the gathered flow are one process's to 1e-8,
+    the summary names the whole mesh's cells and unknowns and the two processes; a mesh too
+    thin for the processes stops both with one line and status 2. Where the ``mpi`` extra is
+    installed."""
+    run = ["run", "channel-3d", "--no-plot", "--set", "solver.linear=multigrid",
+           "--set", "solver.newton_rtol=1e-10"]
+    one = _fbmflow([], *run, "--out", str(tmp_path / "one"))
+    assert one.returncode == 0, one.stderr
+    two = _fbmflow([_mpiexec(), "-n", "2"], *run, "--out", str(tmp_path / "two"))
+    assert two.returncode == 0, two.stderr
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("one", "two"))
+    assert b["processes"] == 2 and (b["n_cells"], b["n_dofs"]) == (a["n_cells"], a["n_dofs"])
+    for key, value in a["quantities"].items():
+        assert abs(b["quantities"][key] - value) <= 1e-8 * abs(value), key
+    thin = _fbmflow([_mpiexec(), "-n", "2"], *run, "--level", "1", "--out", str(tmp_path / "thin"))
+    assert thin.returncode == 2 and thin.stderr.count("fbmflow: error") == 1, thin.stderr
+    assert "use at most 1 process(es)" in thin.stderr and "Traceback" not in thin.stderr
 
 
 def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):

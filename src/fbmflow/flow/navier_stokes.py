@@ -176,6 +176,16 @@ class NavierStokesProblem:
         """``max |x_i|`` over the whole mesh's unknowns of a vector (or its velocity)."""
         return float(np.abs(x).max(initial=0.0))
 
+    @property
+    def whole_space(self) -> FlowSpace:
+        """The whole mesh's FlowSpace (this problem's own where it holds the whole mesh)."""
+        return self.space
+
+    def whole_flow(self, x: np.ndarray) -> tuple[FlowSpace, np.ndarray]:
+        """The whole mesh's space and flow of this problem's vector ``x`` on every process (every
+        process calls it; one process: as they are), for measuring a solution."""
+        return self.space, x
+
     def make_consistent(self, x: np.ndarray) -> np.ndarray:
         """``x`` (unknowns or velocities, in place) after a change that this process made by its
         own constraints, with every copy holding its owner's value (one process: as it is);

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..fem import FlowSpace
 from ..fem.dofmap import DofMap, PressureDofMap
 from ..mesh import StructuredMesh
 from ..parallel import SlabPartition, max_over, sum_over
@@ -72,7 +73,7 @@ class SlabFlowLevels:
             need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
             raise ValueError(f"{size} processes need {need} on a level above the coarsest; the mesh has "
                              f"{n_last} along its last axis and {len(meshes)} level(s): use at most "
-                             f"{max(n_last // (2 * least), 1)} processes or a finer mesh")
+                             f"{max(n_last // (2 * least), 1)} process(es) or a finer mesh")
         J = deepest[-1]
         bounds = split_layers(n_last, size, 2**J)
         self.comm = comm
@@ -250,6 +251,7 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
                          convection, solver, newton, extra_constraints=extra_constraints)
         self.whole_mesh = mesh
+        self._whole_space = None
         self._pressure_fixed = not pressure_is_determined(boundary)
         self._pressure_dot = part.pressure_dot
 
@@ -268,6 +270,19 @@ class SlabNavierStokesProblem(NavierStokesProblem):
 
     def _close_pockets(self, con):
         return self.fine.close_pockets(con, self.partition)
+
+    @property
+    def whole_space(self) -> FlowSpace:
+        """The whole mesh's FlowSpace, made once on a process that asks (for output and
+        measurements; its arrays grow with the whole mesh)."""
+        if self._whole_space is None:
+            self._whole_space = FlowSpace(self.whole_mesh)
+        return self._whole_space
+
+    def whole_flow(self, x: np.ndarray) -> tuple[FlowSpace, np.ndarray]:
+        part = self.partition
+        space = self.whole_space
+        return space, part.comm.bcast(part.gather(x, space.n_dofs))
 
     def make_consistent(self, x: np.ndarray) -> np.ndarray:
         self.partition.update_ghosts(x)

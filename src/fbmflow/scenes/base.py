@@ -67,6 +67,8 @@ class Scene:
     Params: type = object
     default_level: int = 0
     max_level: int = 8
+    #: whether the scene runs divided among the processes of an MPI launcher
+    distributed: bool = False
 
     def run(self, params, level: int, progress: Progress | None = None) -> SceneResult:
         raise NotImplementedError
@@ -94,6 +96,8 @@ class SimulationScene(Scene):
     takes (:func:`~fbmflow.run.run_loop`: ``run.h5``, fields, checkpoints, resume, signals); the
     scene's series travel in its checkpoints.
     """
+
+    distributed = True
 
     def build(self, params, level: int) -> Setup:
         raise NotImplementedError

@@ -23,6 +23,8 @@ from ..contact.settings import ContactParams, ContactRepulsionParams, RepulsionP
 from ..coupling.settings import CouplingParams, FictitiousBoundaryParams, NodalBoundaryParams
 from ..fem import FlowSpace
 from ..flow import NavierStokesProblem
+from ..flow.slabs import SlabNavierStokesProblem
+from ..parallel import world
 from ..params import FluidParams, TimeParams
 from ..simulation import Simulation
 from ..solvers.choice import check_memory
@@ -186,16 +188,34 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     """The flow problem of a scene without particles, with the Newton and linear solver settings
     of ``solver`` (:meth:`~fbmflow.solvers.settings.SolverParams.linear_solver`) and its memory
     checked before the first solve (:func:`~fbmflow.solvers.choice.check_memory`); ``kwargs`` go to
-    :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`."""
-    linear = solver.linear_solver(mesh.dim, FlowSpace.estimate_dofs(mesh))
-    problem = NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,
-                                  newton=solver.newton_settings(), **kwargs)
-    check_memory(problem.n_dofs, mesh.dim, problem.linear_solver)
-    return problem
+    :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`. Where a launcher started several
+    processes, each holds a slab of the mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`,
+    multigrid; ParamError for the direct solver or a mesh too small to divide), and the memory
+    check takes its share."""
+    comm = world()
+    n_unknowns = FlowSpace.estimate_dofs(mesh)
+    if comm.size > 1:
+        if solver.linear == "direct":
+            raise ParamError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
+                             "'auto') to run on several")
+        solver = dataclasses.replace(solver, linear="multigrid")
+    linear = solver.linear_solver(mesh.dim, n_unknowns)
+    check_memory(n_unknowns // comm.size, mesh.dim, linear)
+    if comm.size > 1:
+        try:
+            return SlabNavierStokesProblem(mesh, viscosity, boundary, comm, density=density,
+                                           newton=solver.newton_settings(), multigrid=linear.settings,
+                                           **kwargs)
+        except ValueError as err:  # a mesh too small for the processes
+            raise ParamError(str(err)) from None
+    return NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,
+                               newton=solver.newton_settings(), **kwargs)
 
 
 def steady_result(problem: NavierStokesProblem, quantities: dict, newton_iterations: int,
                   steps: int = 0) -> SceneResult:
-    """The :class:`~fbmflow.scenes.base.SceneResult` of a scene that solved ``problem``."""
-    return SceneResult(quantities, problem.mesh.n_cells, problem.n_dofs, steps=steps,
+    """The :class:`~fbmflow.scenes.base.SceneResult` of a scene that solved ``problem`` (the whole
+    mesh's cells and unknowns on several processes)."""
+    space = problem.whole_space
+    return SceneResult(quantities, space.mesh.n_cells, space.n_dofs, steps=steps,
                        newton_iterations=newton_iterations, linear_solver=problem.linear_solver_description)

@@ -52,6 +52,7 @@ class Cavity2D(Scene):
     Params = CavityParams
     default_level = 3  # 64 x 64 cells: Q2 nodes coincide with the 129 sample points
     max_level = 6
+    distributed = True
 
     @staticmethod
     def mesh(level: int) -> StructuredMesh:
@@ -77,7 +78,7 @@ class Cavity2D(Scene):
             if progress and len(re_path) > 1:
                 progress(k + 1, len(re_path), None)
         s = np.linspace(0.0, 1.0, 129)
-        space = problem.space
+        space, x = problem.whole_flow(x)
         u_vert = sample_velocity(space, x[:space.n_u], np.stack([np.full_like(s, 0.5), s], axis=1))[:, 0]
         v_horiz = sample_velocity(space, x[:space.n_u], np.stack([s, np.full_like(s, 0.5)], axis=1))[:, 1]
         q = {"u_vertical_centerline": u_vert.tolist(), "v_horizontal_centerline": v_horiz.tolist(),
