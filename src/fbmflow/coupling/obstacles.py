@@ -14,7 +14,10 @@ class FixedObstacles:
     """The ``extra_constraints`` of a :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` for bodies held
     at their positions: the rigid velocity ``U_i`` (zero: at rest) on their nodes, and with
     ``boundary = "sharp"`` the sharp boundary's changes (:mod:`fbmflow.coupling.sharp`) on the
-    finest mesh asked for (coarser multigrid levels get the nodal constraints). A non-zero
+    finest mesh asked for, told by its first axis's cells (never the axis divided among
+    processes; coarser multigrid levels get the nodal constraints). On one process's slab the
+    halo must hold the rows' reach (:func:`~fbmflow.coupling.sharp.reach_layers` where the
+    bodies lie in the mesh's finest cells). A non-zero
     ``U_i`` gives the quasi-steady flow of bodies passing through these positions (e.g. the
     Stokes drag of a sphere approaching a wall).
 
@@ -48,7 +51,7 @@ class FixedObstacles:
         if self.angular_velocities.shape != spin:
             raise ValueError(f"angular_velocities must have shape {spin}, "
                              f"got {self.angular_velocities.shape}")
-        self._finest: tuple | None = None  # (DOF map, its FlowSpace, the sharp boundary there)
+        self._finest: tuple | None = None  # (DOF map, its first axis's cell size, the sharp boundary there)
 
     def __call__(self, V: DofMap, t: float) -> DirichletConstraints:
         motion = (self.velocities, self.angular_velocities)
@@ -56,10 +59,11 @@ class FixedObstacles:
         rigid = rigid_body_constraints(V, owner, self.centres, *motion)
         if self.boundary == "nodes":
             return rigid
-        if self._finest is None or V.n_dofs > self._finest[0].n_dofs:
+        h = float(V.mesh.spacing[0])
+        if self._finest is None or h < self._finest[1] or (h == self._finest[1] and V is not self._finest[0]):
             space = FlowSpace(V.mesh)
-            self._finest = (V, space, sharp_boundary(space, node_owner(space.V, self.centres, self.shapes),
-                                                     self.centres, self.shapes))
-        if V.n_dofs < self._finest[0].n_dofs:
+            self._finest = (V, h, sharp_boundary(space, node_owner(space.V, self.centres, self.shapes),
+                                                 self.centres, self.shapes))
+        if h > self._finest[1]:
             return rigid
         return self._finest[2].constraints(rigid, *motion)

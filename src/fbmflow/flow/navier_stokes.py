@@ -186,6 +186,12 @@ class NavierStokesProblem:
         process calls it; one process: as they are), for measuring a solution."""
         return self.space, x
 
+    def whole_indices(self, unknowns: np.ndarray) -> np.ndarray:
+        """The whole mesh's numbers of a set of this problem's ``unknowns`` (e.g. the fixed ones
+        of :meth:`constraints`), sorted, from every process (every process calls it; one process:
+        as they are)."""
+        return np.sort(unknowns)
+
     def make_consistent(self, x: np.ndarray) -> np.ndarray:
         """``x`` (unknowns or velocities, in place) after a change that this process made by its
         own constraints, with every copy holding its owner's value (one process: as it is);

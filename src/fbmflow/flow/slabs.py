@@ -71,9 +71,11 @@ class SlabFlowLevels:
         if not deepest:
             least = max(2, halo + 1)
             need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
+            most = n_last // (2 * least)
+            fix = f"use at most {most} processes or a finer mesh" if most > 1 else \
+                "run it on one process or a finer mesh"
             raise ValueError(f"{size} processes need {need} on a level above the coarsest; the mesh has "
-                             f"{n_last} along its last axis and {len(meshes)} level(s): use at most "
-                             f"{max(n_last // (2 * least), 1)} process(es) or a finer mesh")
+                             f"{n_last} along its last axis and {len(meshes)} level(s): {fix}")
         J = deepest[-1]
         bounds = split_layers(n_last, size, 2**J)
         self.comm = comm
@@ -229,6 +231,8 @@ class SlabNavierStokesProblem(NavierStokesProblem):
     extra_constraints : as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (particles),
         evaluated on every slab's and the whole coarsest mesh's DOF map; the fine level's fluid
         pockets are closed over the whole mesh (:meth:`~fbmflow.parallel.slabs.SlabPartition.join_components`)
+    coarse_cells : int or None, the coarsest level keeps at least so many cells (None: as few as
+        the slabs allow)
     halo : int, the fine slab's halo layers: as far as a constraint row of an owned unknown
         reaches (the sharp boundary's, :func:`~fbmflow.coupling.sharp.reach_layers`). Constraints
         of the outer halo may then differ from their owners' (an image point off the slab mesh):
@@ -238,14 +242,16 @@ class SlabNavierStokesProblem(NavierStokesProblem):
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict, comm, density: float = 1.0,
                  body_force=None, convection: bool = True, newton: NewtonSettings = NewtonSettings(),
-                 multigrid: MultigridSettings | None = None, extra_constraints=None, halo: int = 1):
+                 multigrid: MultigridSettings | None = None, extra_constraints=None,
+                 coarse_cells: int | None = None, halo: int = 1):
         check_boundary(mesh.tags, boundary)
         multigrid = multigrid or MultigridSettings()
         if extra_constraints is not None and multigrid.coarse_obstacle != "nodes":
             raise ValueError("on several processes the coarse levels see particles by their own nodes: set "
                              "solver.multigrid.coarse_obstacle = 'nodes'")
         self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm,
-                                    extra_constraints=extra_constraints, halo=halo)
+                                    min_cells=coarse_cells or 1, extra_constraints=extra_constraints,
+                                    halo=halo)
         self.partition = part = self.slabs.partitions[0]
         solver = MultigridSolver(multigrid, rtol=newton.linear_rtol or 1e-8)
         super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
@@ -283,6 +289,11 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         part = self.partition
         space = self.whole_space
         return space, part.comm.bcast(part.gather(x, space.n_dofs))
+
+    def whole_indices(self, unknowns: np.ndarray) -> np.ndarray:
+        part = self.partition
+        mine = part.unknowns_of_whole[unknowns[part.owned[unknowns]]]
+        return np.sort(np.concatenate(part.comm.allgather(mine)))
 
     def make_consistent(self, x: np.ndarray) -> np.ndarray:
         self.partition.update_ghosts(x)

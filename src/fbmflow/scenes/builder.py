@@ -184,14 +184,15 @@ def check_mesh_size(shape, periodic, dim: int, cause: str) -> None:
 
 
 def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, density: float = 1.0,
-                 **kwargs) -> NavierStokesProblem:
+                 halo: int = 1, **kwargs) -> NavierStokesProblem:
     """The flow problem of a scene without particles, with the Newton and linear solver settings
     of ``solver`` (:meth:`~fbmflow.solvers.settings.SolverParams.linear_solver`) and its memory
     checked before the first solve (:func:`~fbmflow.solvers.choice.check_memory`); ``kwargs`` go to
     :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`. Where a launcher started several
     processes, each holds a slab of the mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`,
-    multigrid; ParamError for the direct solver or a mesh too small to divide), and the memory
-    check takes its share."""
+    multigrid, ``halo`` cell layers of halo on the finest level: the sharp boundary's
+    :func:`~fbmflow.coupling.sharp.reach_layers`; ParamError for the direct solver or a mesh too
+    small to divide), and the memory check takes its share."""
     comm = world()
     n_unknowns = FlowSpace.estimate_dofs(mesh)
     if comm.size > 1:
@@ -205,7 +206,7 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
         try:
             return SlabNavierStokesProblem(mesh, viscosity, boundary, comm, density=density,
                                            newton=solver.newton_settings(), multigrid=linear.settings,
-                                           **kwargs)
+                                           halo=halo, **kwargs)
         except ValueError as err:  # a mesh too small for the processes
             raise ParamError(str(err)) from None
     return NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..config import Section, derive, param, tree
 from ..coupling import FixedObstacles, TestFunctionForces, hydrodynamic_forces, node_owner
+from ..coupling.sharp import reach_layers
 from ..fem.functions import sample_pressure
 from ..flow import Dirichlet, DoNothing, NoSlip
 from ..mesh import StructuredMesh, graded_axis
@@ -103,6 +104,8 @@ class _DFGScene(Scene):
     the depth that enters the force coefficients (1 in 2D, H in 3D) and the reference values.
     """
 
+    distributed = True
+
     dim = 2
     centre: np.ndarray
     reference: dict
@@ -133,13 +136,14 @@ class _DFGScene(Scene):
         # coarser levels see no obstacle worth the name and spoil the coarse-grid correction
         coarse_cells = mesh.n_cells // 2**(dim * max(level - 2, 0))
         problem = flow_problem(mesh, f.viscosity, bcs, params.solver, density=f.density,
-                               extra_constraints=obstacle, coarse_cells=coarse_cells)
+                               halo=reach_layers(mesh) if sharp else 1, extra_constraints=obstacle,
+                               coarse_cells=coarse_cells)
         x, report = problem.solve_steady()
-        space = problem.space
+        walls = problem.whole_indices(problem.constraints().fixed) if sharp else None
+        space, x = problem.whole_flow(x)  # (measured on the whole mesh on every process)
         u, p = x[:space.n_u], x[space.n_u:]
         owner = node_owner(space.V, centres, [cylinder])
         if sharp:  # the cut-cell volume force converges to first order only with the sharp boundary
-            walls = problem.constraints().fixed
             tested = TestFunctionForces(space, owner, centres, [cylinder], walls=walls[walls < space.n_v])
             force, _ = tested(u, p, f.viscosity, f.density)
         else:
