@@ -1,20 +1,21 @@
 """Particle scenes over several processes: the same trajectory, the cycles, the time per step.
 
 Question: do ``mpiexec -n P`` runs of a particle scene (fbmflow.simulation.Simulation on slabs,
-the nodal boundary and multigrid) give one process's particle trajectory, in how many cycles, and
-is a step of ten Cate's level 1 faster on two processes than on one process of one or two
-threads?
-Answer: at level 0 with the nodal boundary and tolerances of 1e-10, 10 steps on 2 and 4 processes
-follow one process's trajectory to 2.0e-14 / 1.9e-12 (glowinski-free-fall's velocities) and
-2.7e-10 / 2.2e-10 (ten-cate's), in 1.00-1.08 times the cycles per step. A ten Cate level-1 step
-(quarter box, 278 739 unknowns) takes 13.8 / 15.2 s on two processes of one thread, 14.7 / 14.8 s
-on one process of two threads and 21.9 / 22.2 s on one of one thread (two runs in turn):
-1.46-1.59x, short of the 1.8x asked for; 0.48 GB per process against 0.69 GB.
-Measured: 2026-11-29, commit 59e90f9 (tags same, speed) and 84a4a58 (same-2d, speed2); quoted in
-docs/validation/several-processes.md, "Particles"
+multigrid) give one process's particle trajectory, in how many cycles, and is a step of ten
+Cate's level 1 faster on two processes than on one process of one or two threads?
+Answer: at level 0 with tolerances of 1e-10, 10 steps on 2 and 4 processes follow one process's
+trajectory to 5.0e-13 / 2.0e-12 (glowinski-free-fall's velocities, its default sharp boundary)
+and 2.2e-10 / 4.3e-10 (ten-cate's, the sharp boundary and the surface force), in 1.00-1.12 times
+the cycles per step; with the nodal boundary to 2.0e-14 / 1.9e-12 and 2.7e-10 / 2.2e-10. A ten
+Cate level-1 step (quarter box, 278 739 unknowns) at its defaults takes 13.1 s on two processes
+of one thread, 13.5 s on one process of two threads and 18.8 s on one of one thread: 1.43x,
+short of the 1.8x asked for (nodal boundary: 1.46-1.59x); 0.52 GB per process against 0.71 GB.
+Measured: 2026-11-29, commit 585120f (tags sharp-2d, sharp, speed-sharp), 59e90f9 (same, speed)
+and 84a4a58 (same-2d, speed2); quoted in docs/validation/several-processes.md, "The sharp
+boundary" and "Particles"
 Run: python -m fbmbench distributed_particles --rows 1x1 2x1 4x1 --scene ten-cate --level 0 --steps 10
---settings fbm.boundary=nodes solver.linear=multigrid solver.newton_rtol=1e-10
-solver.linear_rtol=1e-10 coupling.tol=1e-10
+--settings solver.linear=multigrid solver.newton_rtol=1e-10 solver.linear_rtol=1e-10
+coupling.tol=1e-10
 
 Every row is one ``mpiexec -n P`` run (``P x T``: P processes of T Numba threads each), one after
 the other: the scene at ``level`` with the ``settings`` (``KEY=VALUE``, as ``fbmflow run

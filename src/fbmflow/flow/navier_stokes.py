@@ -188,8 +188,8 @@ class NavierStokesProblem:
 
     def whole_indices(self, unknowns: np.ndarray) -> np.ndarray:
         """The whole mesh's numbers of a set of this problem's ``unknowns`` (e.g. the fixed ones
-        of :meth:`constraints`), sorted, from every process (every process calls it; one process:
-        as they are)."""
+        of :meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.constraints`), sorted, from
+        every process (every process calls it; one process: as they are)."""
         return np.sort(unknowns)
 
     def make_consistent(self, x: np.ndarray) -> np.ndarray:
