@@ -166,7 +166,7 @@ def _check_distributed(estimator, linear_solver: LinearSolver) -> None:
     processes."""
     if not estimator.distributed:
         raise ValueError(f"force {estimator.name!r} does not run on several processes yet: set fbm.force = "
-                         "'volume'")
+                         "'auto', 'volume' or (balls with the sharp boundary) 'surface'")
     if not isinstance(linear_solver, MultigridSolver):
         raise ValueError("several processes solve with multigrid: set solver.linear = 'multigrid'")
 
