@@ -76,18 +76,22 @@ _shared = False  # whether this process's Numba threads were set for its machine
 
 
 def _share_cores(comm, shared_type) -> None:
-    """Numba's threads in this process: the CPUs it may run on shared evenly among the processes
-    on its machine (MPI's shared-memory split, one collective on the first call), at least one,
-    unless ``NUMBA_NUM_THREADS`` chose them. Each process's default would be every core: on two
-    cores ``mpiexec -n 2`` ran 4 threads, and a ten Cate level-0 step took 3.9 times one
-    process's time (docs/validation/several-processes.md)."""
+    """Numba's threads in this process: the CPUs it may run on (its affinity) shared evenly among
+    the processes on its machine that may run on the same CPUs (MPI's shared-memory split and one
+    ``allgather`` of the affinities, on the first call), at least one, unless
+    ``NUMBA_NUM_THREADS`` chose them. A launcher that binds each process to its own CPUs (Slurm's
+    ``--cpus-per-task``, Open MPI's binding) leaves each its own; MPICH's ``mpiexec`` binds none,
+    and each process's default would be every core: on two cores ``mpiexec -n 2`` ran 4 threads,
+    and a ten Cate level-0 step took 2.9 times as long as with one thread each
+    (docs/validation/several-processes.md)."""
     global _shared
     if _shared:
         return
     _shared = True
-    local = comm.Split_type(shared_type).Get_size()
+    cpus = tuple(usable_cpus())
+    sharing = sum(other == cpus for other in comm.Split_type(shared_type).allgather(cpus))
     if "NUMBA_NUM_THREADS" not in os.environ:
-        set_threads(max(1, min(max_threads(), len(usable_cpus()) // local)))
+        set_threads(max(1, min(max_threads(), len(cpus) // sharing)))
 
 
 def sum_over(v, comm):
