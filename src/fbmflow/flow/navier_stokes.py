@@ -453,7 +453,7 @@ class NavierStokesProblem:
         else:
             self._linearisation = (m, a, con) + last[3:]
             if isinstance(last[4].A, NewtonBlock):
-                last[4].A.relinearise(x[:self.space.n_u])
+                last[4].A.relinearise(x[:self.space.n_u], self.max_abs)
         return self._linearisation[3]
 
     def _linear_solve(self, solve: Factorization, f, g, rtol=None):
