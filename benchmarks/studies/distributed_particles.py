@@ -7,12 +7,13 @@ Answer: at level 0 with tolerances of 1e-10, 10 steps on 2 and 4 processes follo
 trajectory to 5.0e-13 / 2.0e-12 (glowinski-free-fall's velocities, its default sharp boundary)
 and 2.2e-10 / 4.3e-10 (ten-cate's, the sharp boundary and the surface force), in 1.00-1.12 times
 the cycles per step; with the nodal boundary to 2.0e-14 / 1.9e-12 and 2.7e-10 / 2.2e-10. A ten
-Cate level-1 step (quarter box, 278 739 unknowns) at its defaults takes 13.1 s on two processes
-of one thread, 13.5 s on one process of two threads and 18.8 s on one of one thread: 1.43x,
-short of the 1.8x asked for (nodal boundary: 1.46-1.59x); 0.52 GB per process against 0.71 GB.
-Measured: 2026-11-29, commit 585120f (tags sharp-2d, sharp, speed-sharp), 59e90f9 (same, speed)
-and 84a4a58 (same-2d, speed2); quoted in docs/validation/several-processes.md, "The sharp
-boundary" and "Particles"
+Cate level-1 step (quarter box, 278 739 unknowns) at its defaults takes 12.6 s on two processes
+of one thread, 12.5 s on one process of two threads and 19.1 s on one of one thread: 1.51x,
+short of the 1.8x asked for (13.1 / 13.5 / 18.8 s, 1.43x, before the Newton drift fix; nodal
+boundary: 1.46-1.59x); 0.50 GB per process against 0.69 GB.
+Measured: 2026-11-29, commit 1c96a0a (tag speed-sharp-2), 585120f (sharp-2d, sharp, speed-sharp),
+59e90f9 (same, speed) and 84a4a58 (same-2d, speed2); quoted in
+docs/validation/several-processes.md, "The sharp boundary" and "Particles"
 Run: python -m fbmbench distributed_particles --rows 1x1 2x1 4x1 --scene ten-cate --level 0 --steps 10
 --settings solver.linear=multigrid solver.newton_rtol=1e-10 solver.linear_rtol=1e-10
 coupling.tol=1e-10
