@@ -139,11 +139,7 @@ class Simulation:
         self.control = StepControl(time, particles, bool(contact)) if time.adaptive else None
         #: the processes that run this simulation together
         self.comm = world() if comm is None else comm
-        if self.comm.size > 1:
-            if solver.linear == "direct":
-                raise ValueError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
-                                 "'auto') to run on several")
-            solver = dataclasses.replace(solver, linear="multigrid")
+        solver = solver.on_processes(self.comm.size)
         n_unknowns = FlowSpace.estimate_dofs(mesh)
         if coupling.scheme == "auto":
             coupling = dataclasses.replace(coupling, scheme=auto_coupling(n_unknowns, particles, symmetry))

@@ -369,3 +369,15 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
         with pytest.raises(ConvergenceError, match="beyond the halo") as err:
             geometry.sharp(geometry.space.V)
         assert "fbm.boundary = 'nodes'" in err.value.remedy
+
+
+def test_solver_settings_on_several_processes_take_multigrid_and_refuse_the_direct_solver():
+    from fbmflow.config import ParamError
+    from fbmflow.solvers.settings import SolverParams
+
+    auto = SolverParams()
+    assert auto.on_processes(1) is auto
+    assert auto.on_processes(4).linear == "multigrid"
+    assert SolverParams(linear="direct").on_processes(1).linear == "direct"
+    with pytest.raises(ParamError, match="direct solver runs on one process"):
+        SolverParams(linear="direct").on_processes(2)

@@ -195,11 +195,7 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     small to divide), and the memory check takes its share."""
     comm = world()
     n_unknowns = FlowSpace.estimate_dofs(mesh)
-    if comm.size > 1:
-        if solver.linear == "direct":
-            raise ParamError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
-                             "'auto') to run on several")
-        solver = dataclasses.replace(solver, linear="multigrid")
+    solver = solver.on_processes(comm.size)
     linear = solver.linear_solver(mesh.dim, n_unknowns)
     check_memory(n_unknowns // comm.size, mesh.dim, linear)
     if comm.size > 1:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..config import Section, param, section
+from ..config import ParamError, Section, param, section
 from .base import LinearSolver
 from .choice import choose_linear_solver
 from .multigrid import MultigridSettings
@@ -33,6 +33,16 @@ class SolverParams(Section):
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
     newton_reuse_jacobian: bool = param(True, "keep a factorised Jacobian while it contracts the "
                                         "residual 10x per iteration (same solution, less work)")
+
+    def on_processes(self, size: int) -> "SolverParams":
+        """These settings for a run on ``size`` processes: multigrid on several (the one solver
+        that divides among them), ParamError where the direct solver is asked for there."""
+        if size == 1:
+            return self
+        if self.linear == "direct":
+            raise ParamError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
+                             "'auto') to run on several")
+        return dataclasses.replace(self, linear="multigrid")
 
     def linear_solver(self, dim: int, n_unknowns: int, responses: int = 0) -> LinearSolver:
         """The linear solver for a ``dim``-dimensional flow of ``n_unknowns``, ``"auto"`` resolved
