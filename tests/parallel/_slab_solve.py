@@ -3,8 +3,9 @@ step's saddle-point system on its slabs with the distributed multigrid and compa
 unknowns with the whole mesh's direct solution; it also solves the same system alone (one slab)
 for the cycles per solve. Prints one line per process and exits 1 on a mismatch.
 
-CASE: ``channel`` (inflow at the last axis's lower face, outflow at its upper face) or
-``cavity`` (a closed box: the mean pressure fixed, the continuity data balanced)."""
+CASE: ``channel`` (inflow at the last axis's lower face, outflow at its upper face),
+``cavity`` (a closed box: the mean pressure fixed, the continuity data balanced) or ``periodic``
+(periodic along every axis: the slabs form a ring, the mean pressure fixed)."""
 import sys
 
 import numpy as np
@@ -20,20 +21,24 @@ from fbmflow.solvers.distributed import DistributedMultigrid
 comm = world()
 dim, case = int(sys.argv[1]), sys.argv[2]
 shape = (8, 16) if dim == 2 else (4, 4, 16)
-mesh = StructuredMesh.box(shape, upper=(1.0, 2.0) if dim == 2 else (1.0, 1.0, 2.0))
+mesh = StructuredMesh.box(shape, upper=(1.0, 2.0) if dim == 2 else (1.0, 1.0, 2.0),
+                          periodic=(case == "periodic",) * dim)
 tags = mesh.tags
 boundary = {t: NoSlip() for t in tags}
 if case == "channel":
     boundary[tags[-2]] = Dirichlet((0.0,) * (dim - 1) + (1.0,))
     boundary[tags[-1]] = DoNothing()
-else:
+elif case == "cavity":
     boundary[tags[-1]] = Dirichlet((1.0,) + (0.0,) * (dim - 1))
-closed = case == "cavity"
+closed = case in ("cavity", "periodic")
 coefficients = dict(m=50.0, a=1.0, rho=1.0, mu=0.01, convection=True)
 
 
 def velocity(coordinates):
     x = coordinates
+    if case == "periodic":  # periodic itself: a ring's halo nodes lie a period away
+        s, c = np.sin(np.pi * x[:, -1]), np.cos(2 * np.pi * x[:, 0])
+        return np.stack([s + c] + [s * c] * (dim - 1)).ravel()
     return np.stack([np.sin(3 * x[:, -1]) + x[:, 0]] + [x[:, 0] * x[:, -1]] * (dim - 1)).ravel()
 
 

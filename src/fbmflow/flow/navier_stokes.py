@@ -128,10 +128,15 @@ class NavierStokesProblem:
         """The fine level's operators (a subclass holding them already returns its own)."""
         return FlowLevel(mesh, boundary, pressure_fixed, extra_constraints)
 
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        """The Euclidean inner product of two vectors of this problem's unknowns (or velocities)
+        over the whole mesh, each unknown once."""
+        return float(x @ y)
+
     def norm(self, x: np.ndarray) -> float:
         """The Euclidean norm of a vector of this problem's unknowns (or velocities) over the
         whole mesh."""
-        return float(np.linalg.norm(x))
+        return float(np.sqrt(self.dot(x, x)))
 
     # -- data ---------------------------------------------------------------------------------
     @property

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 from ..fem import FlowSpace
 from ..fem.dofmap import DofMap, PressureDofMap
-from ..mesh import StructuredMesh
+from ..mesh import StructuredMesh, face_tags
 from ..parallel import SlabPartition, max_over, sum_over
 from ..parallel.slabs import cut_layers, split_layers
 from ..solvers import NewtonSettings
@@ -34,7 +34,7 @@ class SlabFlowLevels:
 
     Parameters
     ----------
-    mesh : StructuredMesh, the fine mesh (its last axis not periodic: the slabs' axis)
+    mesh : StructuredMesh, the fine mesh (its last axis is the slabs', a ring where periodic)
     boundary : dict, the whole mesh's boundary conditions (:mod:`fbmflow.flow.boundary`)
     pressure_fixed : bool, whether ``int p = 0`` closes the system (a closed domain)
     comm : the processes' communicator
@@ -63,9 +63,13 @@ class SlabFlowLevels:
         n_last = mesh.shape[-1]
         halos = [max(1, -(-halo // 2**j)) for j in range(len(meshes))]
 
+        ring = mesh.periodic[-1] and size > 1
+
         def fits(J):  # slabs in multiples of 2^J layers: each holds halo + 1 layers on levels 0..J
-            bounds = split_layers(n_last, size, 2**J)
-            return all(np.diff(bounds // 2**j).min() > halos[j] for j in range(J + 1))
+            bounds = split_layers(n_last, size, 2**J)  # (and on a ring wraps not onto itself)
+            return all(np.diff(bounds // 2**j).min() > halos[j] and not
+                       (ring and np.diff(bounds // 2**j).max() + 2 * halos[j] >= n_last // 2**j)
+                       for j in range(J + 1))
 
         deepest = [J for J in range(len(meshes) - 1) if fits(J)]
         if not deepest:
@@ -74,6 +78,10 @@ class SlabFlowLevels:
             most = n_last // (2 * least)
             fix = f"use at most {most} processes or a finer mesh" if most > 1 else \
                 "run it on one process or a finer mesh"
+            if ring and size * least <= n_last:
+                need = f"{least} cell layers each and, the axis being periodic, a slab and its two halos " \
+                       "shorter than the axis"
+                fix = "use more processes, a finer mesh or one process"
             raise ValueError(f"{size} processes need {need} on a level above the coarsest; the mesh has "
                              f"{n_last} along its last axis and {len(meshes)} level(s): {fix}")
         J = deepest[-1]
@@ -140,12 +148,12 @@ class SlabFlowLevels:
 def _slab_boundary(boundary: dict, part: SlabPartition) -> dict:
     """The conditions on a slab mesh's faces: the whole mesh's, the faces cut between slabs
     unconstrained (their rows are the neighbours')."""
-    tags = part.whole.tags
+    lower, upper = face_tags(part.dim)[-2:]  # the slab mesh's faces across its last axis
     local = dict(boundary)
-    if part.rank > 0:
-        local[tags[-2]] = DoNothing()
-    if part.rank < part.size - 1:
-        local[tags[-1]] = DoNothing()
+    if part.held[0] < part.layers[0]:
+        local[lower] = DoNothing()
+    if part.held[1] > part.layers[1]:
+        local[upper] = DoNothing()
     return local
 
 
@@ -172,9 +180,9 @@ def _injection(fine: SlabPartition, coarse: SlabPartition | None, coarsest: Flow
     the local node of ``fine``'s slab at those of them that ``fine`` owns, and a mask of which
     they are."""
     coarse_mesh = coarse.whole if coarse is not None else coarsest.mesh
-    first, n_c = (coarse.nodes[0], coarse.n_v) if coarse is not None else (0, coarsest.space.n_v)
-    fine_nodes = _fine_node(coarse_mesh, np.arange(first, first + n_c)) - fine.nodes[0]
-    inside = (fine_nodes >= 0) & (fine_nodes < fine.n_v)
+    nodes = coarse.nodes if coarse is not None else np.arange(coarsest.space.n_v)
+    fine_nodes = fine.local_nodes(_fine_node(coarse_mesh, nodes))
+    inside = fine_nodes >= 0
     inside[inside] &= fine.owned_nodes[fine_nodes[inside]]
     return fine_nodes[inside], inside
 
@@ -186,24 +194,34 @@ def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse:
     the fine slab's nodes and cells taken."""
     fa, fb = fine.held
     sa, sb = fa // 2, (fb + 1) // 2
-    ca, cb = coarse.held if coarse is not None else (0, coarse_mesh.shape[-1])
     sub = cut_layers(coarse_mesh, sa, sb)
     refined = cut_layers(fine.whole, 2 * sa, 2 * sb)
     P_v = prolongation_q2(DofMap(sub), DofMap(refined))
     P_p = prolongation_p1disc(PressureDofMap(sub), PressureDofMap(refined))
     npl = fine.dim + 1
-    fine_plane, coarse_plane = fine.plane, int(np.prod(_node_counts(coarse_mesh)[:-1]))
+    n_c = coarse_mesh.shape[-1]
+    coarse_plane = int(np.prod(_node_counts(coarse_mesh)[:-1]))
     fine_layer, coarse_layer = int(np.prod(fine.whole.shape[:-1])), int(np.prod(coarse_mesh.shape[:-1]))
-    n_v_c = (2 * (cb - ca) + 1) * coarse_plane
-    n_p_c = (cb - ca) * coarse_layer * npl
+    # the coarse level's local node and cell of every node and cell of ``sub`` (a ring's wrap round)
+    n_planes = 2 * n_c if coarse_mesh.periodic[-1] else 2 * n_c + 1
+    k = np.arange(DofMap(sub).n_dofs)
+    nodes = ((2 * sa + k // coarse_plane) % n_planes) * coarse_plane + k % coarse_plane
+    c = np.arange(sub.n_cells)
+    cells = ((sa + c // coarse_layer) % n_c) * coarse_layer + c % coarse_layer
+    if coarse is not None:
+        nodes, cells = coarse.local_nodes(nodes), coarse.local_cells(cells)
+        n_v_c, n_cells_c = coarse.n_v, coarse.n_cells
+    else:
+        n_v_c, n_cells_c = int(np.prod(_node_counts(coarse_mesh))), coarse_mesh.n_cells
+    pressures = (cells[:, None] * npl + np.arange(npl)).ravel()
 
-    def cut(P, row0, n_rows, col0, n_cols):
+    def cut(P, row0, n_rows, columns, n_cols):
         P = P.tocsr()[row0:row0 + n_rows]
-        return sp.csr_matrix((P.data, P.indices + col0, P.indptr), shape=(n_rows, n_cols))
+        P.sum_duplicates()
+        return sp.csr_matrix((P.data, columns[P.indices], P.indptr), shape=(n_rows, n_cols))
 
-    return (cut(P_v, 2 * (fa - 2 * sa) * fine_plane, fine.n_v, 2 * (sa - ca) * coarse_plane, n_v_c),
-            cut(P_p, (fa - 2 * sa) * fine_layer * npl, fine.n_cells * npl, (sa - ca) * coarse_layer * npl,
-                n_p_c))
+    return (cut(P_v, 2 * (fa - 2 * sa) * fine.plane, fine.n_v, nodes, n_v_c),
+            cut(P_p, (fa - 2 * sa) * fine_layer * npl, fine.n_cells * npl, pressures, n_cells_c * npl))
 
 
 
@@ -264,8 +282,8 @@ class SlabNavierStokesProblem(NavierStokesProblem):
     def _fine_level(self, mesh, boundary, pressure_fixed, extra_constraints) -> FlowLevel:
         return self.slabs.levels[0]
 
-    def norm(self, x: np.ndarray) -> float:
-        return float(np.sqrt(self.partition.dot(x, x)))
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
+        return self.partition.dot(x, y)
 
     def _any(self, flag: bool) -> bool:
         return max_over(float(bool(flag)), self.partition.comm) > 0.0

@@ -10,6 +10,13 @@ the node planes ``2 a_r + 1`` to ``2 b_r`` (from plane 0 on process 0), and the 
 of its owned cells; everything else on its slab mesh is a *ghost*, a copy of what a neighbour
 owns.
 
+Along a periodic last axis the slabs form a ring: the first and the last process are neighbours,
+every slab holds ``w`` halo layers on both sides, those beyond an end of the mesh being the
+layers at its other end (their node planes and cells taken modulo the axis's ``2 n`` planes and
+``n`` layers, their coordinates moved by the period, so that the slab mesh is one piece and not
+periodic along the axis), and process ``r`` owns the node planes ``2 a_r + 1`` to ``2 b_r``,
+plane ``2 n`` being plane 0. A slab and its two halos must then stay shorter than the axis.
+
 An operator assembled or applied cell by cell on the slab mesh gives the whole mesh's rows at
 every node of the owned cells (the planes ``2 a_r`` to ``2 b_r``: their cells are all on the
 slab mesh) and at the owned cells' pressures; only the rows of the outer halo planes miss cells.
@@ -30,12 +37,25 @@ from .comm import SerialComm
 
 def cut_layers(mesh: StructuredMesh, a: int, b: int) -> StructuredMesh:
     """The cells of ``mesh`` in the layers ``[a, b)`` along its last axis as a mesh of their own
-    (its cells and vertices the global ones, in order)."""
-    vertex_plane = int(np.prod([n + 1 for n in mesh.shape[:-1]]))
-    vertices = mesh.vertices[a * vertex_plane:(b + 1) * vertex_plane]
+    (its cells and vertices the global ones, in order). Along a periodic last axis ``a`` may be
+    negative and ``b`` beyond the axis's ``n`` layers: layer ``k`` is layer ``k mod n``, its
+    vertices moved by the period times ``floor(k / n)``; the piece is periodic along the axis
+    only where it is the whole ring (``[0, n)``)."""
+    n = mesh.shape[-1]
+    vertex_plane = int(np.prod([m + 1 for m in mesh.shape[:-1]]))
+    planes = np.arange(a, b + 1)
+    if (planes.min() < 0 or planes.max() > n) and not mesh.periodic[-1]:
+        raise ValueError(f"layers [{a}, {b}) leave the mesh's {n} layers along its last axis, which is "
+                         "not periodic")
+    shift = np.floor_divide(planes, n) * mesh.periods[-1] if mesh.periodic[-1] else np.zeros(planes.size)
+    source = np.where(planes == n, n, planes % n) if mesh.periodic[-1] else planes
+    vertices = mesh.vertices.reshape(-1, vertex_plane, mesh.dim)[source].copy()
+    vertices[..., -1] += np.where(planes == n, 0.0, shift)[:, None]
+    vertices = vertices.reshape(-1, mesh.dim)
     lower = mesh.lower[:-1] + (float(vertices[:, -1].min()),)
     upper = mesh.upper[:-1] + (float(vertices[:, -1].max()),)
-    return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, mesh.periodic, vertices.copy())
+    periodic = mesh.periodic if (a, b) == (0, n) else mesh.periodic[:-1] + (False,)
+    return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, periodic, vertices)
 
 
 def split_layers(n_layers: int, size: int, multiple: int = 1) -> np.ndarray:
@@ -51,7 +71,7 @@ class SlabPartition:
 
     Parameters
     ----------
-    mesh : StructuredMesh, 2D or 3D, not periodic along its last axis
+    mesh : StructuredMesh, 2D or 3D (periodic along its last axis: the slabs form a ring)
     size, rank : int, the number of processes and this one's rank (0-based)
     bounds : (size + 1,) int or None, the slabs' first cell layers and the last one's end
         (:func:`split_layers` where None); every slab needs ``halo + 1`` layers at least,
@@ -64,10 +84,12 @@ class SlabPartition:
     Attributes
     ----------
     layers : (int, int), the owned cell layers ``[a, b)`` along the last axis
-    held : (int, int), the slab mesh's layers ``[a - halo, b + halo)`` (clipped to the mesh)
+    held : (int, int), the slab mesh's layers ``[a - halo, b + halo)`` (clipped to the mesh, or
+        past its ends on a ring)
     mesh : StructuredMesh, the slab mesh
     cells : (n_cells,) int64, the slab mesh's global cells
-    nodes : (n_nodes,) int64, the global Q2 node of every slab node (one run of numbers)
+    nodes : (n_nodes,) int64, the global Q2 node of every slab node (one run of numbers, or two
+        on a ring's first and last slab)
     owned_nodes, owned_cells : bool masks over the slab's nodes and cells
     owned : (dim n_nodes + (dim + 1) n_cells,) bool, the owned unknowns of a local vector
     """
@@ -78,8 +100,8 @@ class SlabPartition:
         if w < 1:
             raise ValueError(f"a slab's halo needs one cell layer at least, not {halo}")
         least = w + 1  # the halo's last node plane is the neighbour's own
-        if mesh.periodic[-1]:
-            raise ValueError("slabs need a last axis that is not periodic; periodic axes may come first")
+        #: whether the slabs form a ring (a periodic last axis divided among processes)
+        self.ring = ring = bool(mesh.periodic[-1]) and size > 1
         if not 0 <= rank < size:
             raise ValueError(f"rank {rank} is not one of {size} processes")
         bounds = split_layers(n_last, size) if bounds is None else np.asarray(bounds, dtype=np.int64)
@@ -88,26 +110,34 @@ class SlabPartition:
             need = "two cell layers each" if w == 1 else f"{least} cell layers each (a halo of {w})"
             raise ValueError(f"{size} processes need {need} along the last axis, the mesh has "
                              f"{n_last}: use at most {n_last // least} processes or a finer mesh")
+        if ring and np.diff(bounds).max() + 2 * w >= n_last:
+            raise ValueError(f"{size} processes on a periodic last axis of {n_last} cell layers: a slab and "
+                             f"its two halos would wrap onto itself (a halo of {w}); use more processes or a "
+                             "finer mesh")
         self.size, self.rank, self.bounds, self.halo = size, rank, bounds, w
         self.comm = comm if comm is not None else SerialComm()
         a, b = int(bounds[rank]), int(bounds[rank + 1])
-        ha, hb = (a - w if rank > 0 else a), (b + w if rank < size - 1 else b)
+        ha, hb = (a - w if rank > 0 or ring else a), (b + w if rank < size - 1 or ring else b)
         self.layers, self.held = (a, b), (ha, hb)
         self.whole = mesh
         self.mesh = cut_layers(mesh, ha, hb)
         per_layer = int(np.prod(mesh.shape[:-1]))
-        self.cells = np.arange(ha * per_layer, hb * per_layer, dtype=np.int64)
         plane = int(np.prod([2 * n if p else 2 * n + 1 for n, p in zip(mesh.shape[:-1], mesh.periodic[:-1])]))
         self.plane = plane
-        self.nodes = np.arange(2 * ha * plane, (2 * hb + 1) * plane, dtype=np.int64)
-        node_plane = np.arange(2 * ha, 2 * hb + 1).repeat(plane)  # global plane of every slab node
+        #: node planes and cell layers of the whole mesh (a ring's wrap round)
+        self.n_planes = 2 * n_last if mesh.periodic[-1] else 2 * n_last + 1
+        last = 2 * hb if self.mesh.periodic[-1] else 2 * hb + 1  # one process: the whole ring
+        node_plane = np.arange(2 * ha, last).repeat(plane)  # the whole mesh's plane, unwrapped
         cell_layer = np.arange(ha, hb).repeat(per_layer)
-        self.owned_nodes = (node_plane > 2 * a if rank > 0 else node_plane >= 0) & (node_plane <= 2 * b)
+        self.nodes = (node_plane % self.n_planes) * plane + np.tile(np.arange(plane), last - 2 * ha)
+        self.cells = (cell_layer % n_last) * per_layer + np.tile(np.arange(per_layer), hb - ha)
+        first = node_plane > 2 * a if rank > 0 or ring else node_plane >= 0
+        self.owned_nodes = first & (node_plane <= 2 * b)
         self.owned_cells = (cell_layer >= a) & (cell_layer < b)
         dim, npl = mesh.dim, mesh.dim + 1
         self.dim, self.n_v, self.n_cells = dim, self.nodes.size, self.cells.size
         self.owned = np.concatenate([np.tile(self.owned_nodes, dim), np.repeat(self.owned_cells, npl)])
-        n_v_whole = plane * (2 * n_last + 1)
+        n_v_whole = plane * self.n_planes
         #: the whole mesh's unknown of every local one
         self.unknowns_of_whole = np.concatenate([self.nodes + k * n_v_whole for k in range(dim)]
                                                 + [dim * n_v_whole + (self.cells[:, None] * npl
@@ -122,16 +152,38 @@ class SlabPartition:
         #: per neighbour ``(rank, send, receive)``: the local unknowns this process owns that are
         #: the neighbour's ghosts, and its ghosts that the neighbour owns, in global order
         self.neighbours = []
-        if rank > 0:  # the lower neighbour's ghosts: planes 2a+1 .. 2(a+w), layers a .. a+w-1
-            self.neighbours.append((rank - 1,
+        if ha < a:  # the lower neighbour's ghosts: planes 2a+1 .. 2(a+w), layers a .. a+w-1
+            self.neighbours.append(((rank - 1) % size,
                                     unknowns(np.arange(2 * a + 1, 2 * (a + w) + 1), np.arange(a, a + w)),
                                     unknowns(np.arange(2 * ha, 2 * a + 1), np.arange(ha, a))))
-        if rank < size - 1:  # the upper neighbour's: planes 2(b-w) .. 2b, layers b-w .. b-1
-            self.neighbours.append((rank + 1,
+        if hb > b:  # the upper neighbour's: planes 2(b-w) .. 2b, layers b-w .. b-1
+            self.neighbours.append(((rank + 1) % size,
                                     unknowns(np.arange(2 * (b - w), 2 * b + 1), np.arange(b - w, b)),
                                     unknowns(np.arange(2 * b + 1, 2 * hb + 1), np.arange(b, hb))))
-        if rank % 2:  # odd ranks talk to the lower neighbour first, even ones to the upper one
+        if rank % 2:  # odd ranks talk to the upper neighbour first, even ones to the lower one
             self.neighbours.reverse()
+
+    def local_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The slab's local node at each of the whole mesh's Q2 ``nodes`` (int array), -1 where
+        the slab mesh does not hold it."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        first = 2 * self.held[0]
+        offset = nodes // self.plane - first
+        if self.ring:
+            offset %= self.n_planes
+        inside = (offset >= 0) & (offset <= 2 * (self.held[1] - self.held[0]))
+        return np.where(inside, offset * self.plane + nodes % self.plane, -1)
+
+    def local_cells(self, cells: np.ndarray) -> np.ndarray:
+        """The slab's local cell at each of the whole mesh's ``cells`` (int array), -1 where the
+        slab mesh does not hold it."""
+        cells = np.asarray(cells, dtype=np.int64)
+        per_layer = int(np.prod(self.whole.shape[:-1]))
+        offset = cells // per_layer - self.held[0]
+        if self.ring:
+            offset %= self.whole.shape[-1]
+        inside = (offset >= 0) & (offset < self.held[1] - self.held[0])
+        return np.where(inside, offset * per_layer + cells % per_layer, -1)
 
     def update_ghosts(self, x: np.ndarray, comm=None) -> None:
         """Copy the owners' values into the ghosts of the local vector ``x`` in place (``comm``:
@@ -185,7 +237,9 @@ class SlabPartition:
         components' owned node counts)."""
         comm = comm or self.comm
         inside = labels >= 0
-        ids = np.where(inside, self.nodes[np.maximum(labels, 0)], -1)  # a slab component's smallest node
+        smallest = np.full(self.n_v, np.iinfo(np.int64).max)  # a slab component's smallest global node
+        np.minimum.at(smallest, labels[inside], self.nodes[inside])  # (a ring's: not its first local one)
+        ids = np.where(inside, smallest[np.maximum(labels, 0)], -1)
         shared = np.unique(np.concatenate([np.zeros(0, np.int64)] + [
             np.concatenate([send[send < self.n_v], receive[receive < self.n_v]])
             for _, send, receive in self.neighbours]))

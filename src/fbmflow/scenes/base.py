@@ -67,8 +67,6 @@ class Scene:
     Params: type = object
     default_level: int = 0
     max_level: int = 8
-    #: whether the scene runs divided among the processes of an MPI launcher
-    distributed: bool = False
 
     def run(self, params, level: int, progress: Progress | None = None) -> SceneResult:
         raise NotImplementedError
@@ -97,7 +95,6 @@ class SimulationScene(Scene):
     scene's series travel in its checkpoints.
     """
 
-    distributed = True
 
     def build(self, params, level: int) -> Setup:
         raise NotImplementedError

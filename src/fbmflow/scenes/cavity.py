@@ -52,7 +52,6 @@ class Cavity2D(Scene):
     Params = CavityParams
     default_level = 3  # 64 x 64 cells: Q2 nodes coincide with the 129 sample points
     max_level = 6
-    distributed = True
 
     @staticmethod
     def mesh(level: int) -> StructuredMesh:

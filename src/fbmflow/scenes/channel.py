@@ -46,7 +46,6 @@ class _Channel(Scene):
     Params = ChannelParams
     dim = 2
     default_level = 2
-    distributed = True
 
     def mesh(self, level: int) -> StructuredMesh:
         n = 2**level

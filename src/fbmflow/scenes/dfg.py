@@ -104,7 +104,6 @@ class _DFGScene(Scene):
     the depth that enters the force coefficients (1 in 2D, H in 3D) and the reference values.
     """
 
-    distributed = True
 
     dim = 2
     centre: np.ndarray

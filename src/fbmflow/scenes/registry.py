@@ -131,11 +131,6 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     if estimate_error:
         check_estimate(scene, level)
     comm = world()  # the processes an MPI launcher started: the first writes, all compute
-    if comm.size > 1 and not scene.distributed:
-        flows = [s.name for s in SCENES.values() if s.distributed and not isinstance(s, SimulationScene)]
-        divided = ", ".join(["the particle scenes"] + flows)
-        raise ParamError(f"scene {scene.name} runs on one process (divided among processes: {divided}): run "
-                         "it without mpiexec")
     out = on_first(lambda: output_folder(out), comm) or Path(out)
     if not isinstance(scene, SimulationScene) and (checkpoint_every or resume or fields_every):
         raise ParamError(f"scene {scene.name} has no time loop to checkpoint, resume or write fields of")
