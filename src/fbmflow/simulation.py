@@ -185,6 +185,11 @@ class Simulation:
         """The particles' current state."""
         return self.system.particles
 
+    def mixture_velocity(self) -> np.ndarray:
+        """The mean velocity of fluid and particles over the whole mesh (their volume flux per
+        unit area), (dim,) float64 [m/s]; every process calls it on several."""
+        return self.system.mixture_velocity()
+
     @property
     def x(self) -> np.ndarray:
         """The flow's current state, (n_dofs,) float64: velocity (component-blocked), pressure."""

@@ -213,9 +213,9 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     two cores: the disk's positions and velocities in ``run.h5`` are one process's to 1e-8
     relative, in at most 1.3 times the cycles (plus one) per step; the output is written once,
     the progress printed once. Its checkpoint at step 2, resumed on one process, ends where the
-    uninterrupted run ends. Under ``mpiexec -n 2`` a scene that runs on one process (particles in
-    a periodic box) and a setting that does not run on several stop both processes with one line
-    and status 2. Where the ``mpi`` extra is installed."""
+    uninterrupted run ends. Under ``mpiexec -n 2`` settings that do not run on several processes
+    (the sharp boundary in a box periodic along the slabs' axis, the direct solver) stop both
+    processes with one line and status 2. Where the ``mpi`` extra is installed."""
     import h5py
 
     mpiexec = [_mpiexec(), "-n", "2"]
@@ -242,7 +242,7 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
         assert np.abs(g["velocity"][:] - f["velocity"][:]).max() <= 1e-8 * np.abs(f["velocity"][:]).max()
     periodic = ["run", "suspension-2d", "--set", "solver.linear=multigrid", "--out", str(tmp_path / "c")]
-    for args, what in ((periodic, "periodic suspension) run on one process"),
+    for args, what in ((periodic, "take the nodal boundary on several processes"),
                        (run[:2] + ["--set", "solver.linear=direct", "--out", str(tmp_path / "s")],
                         "solver.linear = 'multigrid'")):
         refused = _fbmflow(mpiexec, *args)
@@ -285,6 +285,29 @@ def test_under_mpiexec_taylor_green_on_a_ring_of_slabs_is_one_processs(tmp_path)
     assert np.allclose(b["kinetic_energy"], a["kinetic_energy"], rtol=1e-8, atol=0.0)
 
 
+def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp_path):
+    """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes, one
+    across the periodic sides (on the first and the last slab of the ring, through its images),
+    the mixture's mean flux removed (summed over the processes): two steps' positions and
+    velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one).
+    Where the ``mpi`` extra is installed."""
+    script = Path(__file__).with_name("_slab_ring.py")
+    runs = {}
+    for size in (1, 2):
+        launcher = [_mpiexec(), "-n", "2"] if size == 2 else []
+        out = subprocess.run(launcher + [sys.executable, str(script), "2", str(tmp_path / f"{size}.npz")],
+                             capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stdout + out.stderr
+        runs[size] = np.load(tmp_path / f"{size}.npz")
+    one, two = runs[1], runs[2]
+    assert int(two["processes"]) == 2
+    for key in ("position", "velocity"):
+        assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
+    assert np.abs(one["velocity"]).max() > 0.0
+    assert np.abs(two["mixture"]).max() <= 1e-12 * np.abs(one["velocity"]).max()  # the flux removed
+    assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
+
+
 def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
     """``mpiexec -n 2``: a step of ``ten-cate`` at level 0 at its defaults (3D, the sharp boundary
     with the surface force, multigrid, the implicit coupling; tolerances 1e-10), the sphere's
@@ -318,8 +341,8 @@ def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
     assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
 
 
-@pytest.mark.parametrize("dim, size", [(2, 3), (3, 2)])
-def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size):
+@pytest.mark.parametrize("dim, size, ring", [(2, 3, False), (3, 2, False), (2, 3, True), (3, 2, True)])
+def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size, ring):
     """The sharp boundary built on every slab with a halo of
     :func:`~fbmflow.coupling.sharp.reach_layers` layers, balls across the slabs' boundaries: the
     ghost rows of the owned cells' nodes, the owned cut cells' continuity rows and pressure
@@ -331,10 +354,12 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
     from fbmflow.coupling.sharp import reach_layers, sharp_boundary
     from fbmflow.particles import Ball
 
-    mesh = StructuredMesh.box((6,) * (dim - 1) + (18,), upper=(1.0,) * (dim - 1) + (3.0,))
+    mesh = StructuredMesh.box((6,) * (dim - 1) + (18,), upper=(1.0,) * (dim - 1) + (3.0,),
+                              periodic=(False,) * (dim - 1) + (ring,))
     rng = np.random.default_rng(7)
     n = 4
-    centres = np.column_stack([rng.uniform(0.3, 0.7, (n, dim - 1)), np.linspace(0.6, 2.4, n)])
+    centres = np.column_stack([rng.uniform(0.3, 0.7, (n, dim - 1)),
+                               np.linspace(0.05, 1.9, n) if ring else np.linspace(0.6, 2.4, n)])
     shapes = [Ball(r, dim=dim) for r in rng.uniform(0.17, 0.26, n)]
     whole = FlowSpace(mesh)
     ref = sharp_boundary(whole, node_owner(whole.V, centres, shapes), centres, shapes)
@@ -366,7 +391,13 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
         at = np.searchsorted(ref.continuity.cells, cells)
         assert np.array_equal(ref.continuity.cells[at], cells)
         assert cells.size == np.isin(ref.continuity.cells, part.cells[part.owned_cells]).sum() > 0
-        assert np.allclose(sb.continuity.data[cut], ref.continuity.data[at], rtol=0, atol=1e-14)
+        # a row's columns: component-major, the cell's nodes in ascending order, local or global
+        # (which differ at a ring's wrap)
+        order = np.argsort(part.nodes[np.sort(local.V.cell_dofs[sb.continuity.cells[cut]], axis=1)], axis=1)
+        nl = order.shape[1]
+        data = sb.continuity.data[cut].reshape(cells.size, npl, dim, nl)
+        data = np.take_along_axis(data, order[:, None, None, :], axis=3).reshape(cells.size, npl, dim * nl)
+        assert np.allclose(data, ref.continuity.data[at], rtol=0, atol=1e-14)
         rows = sb.extension.dofs[part.owned_cells[sb.extension.dofs // npl]]
         E = sb.extension.matrix[rows].tocoo()
         W = ref.extension.matrix[part.cells[rows // npl] * npl + rows % npl].tocoo()

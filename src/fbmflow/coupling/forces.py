@@ -413,6 +413,9 @@ class SurfaceForces(ForceFunctional):
         lower, upper = np.array(mesh.lower), np.array(mesh.upper)
         for d in np.flatnonzero(mesh.periodic):
             x[:, d] = lower[d] + np.mod(x[:, d] - lower[d], upper[d] - lower[d])
+        L, middle = mesh.periods, (lower + upper) / 2
+        for d in np.flatnonzero((L > 0) & ~np.array(mesh.periodic)):  # a piece of a periodic mesh:
+            x[:, d] -= L[d] * np.round((x[:, d] - middle[d]) / L[d])  # the image nearest the piece
         keep = np.all((x >= lower) & (x <= upper), axis=1)
         x, particle, normal, arm, weight = x[keep], particle[keep], normal[keep], arm[keep], weight[keep]
         cells_at, xi = locate(mesh, x)

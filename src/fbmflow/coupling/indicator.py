@@ -19,13 +19,25 @@ def candidate_dofs(V: DofMap, centres: np.ndarray, radii: np.ndarray) -> tuple[n
     widened to the enclosing nodes. All boxes at once, no loop over particles.
 
     Periodic axes (uniform) wrap around (a particle crossing a periodic side finds its nodes on
-    both sides).
+    both sides). On a piece of a periodic mesh (:attr:`~fbmflow.mesh.structured.StructuredMesh.images`)
+    every particle's images one period either side are looked at too (a node may then come twice
+    for one particle, and a few nodes at the piece's ends that no image reaches come as well:
+    the inside test sorts them out).
     """
     mesh = V.mesh
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centres),))
     shape = np.array(V.lattice_shape)
     periodic = np.array(mesh.periodic)
+    index = np.arange(len(centres))  # the particle of every box
+    images = np.flatnonzero((mesh.periods > 0) & ~periodic)
+    if images.size:
+        shifts = np.stack(np.meshgrid(*[[-1.0, 0.0, 1.0]] * images.size, indexing="ij"), -1)
+        shifts = shifts.reshape(-1, images.size)
+        index = np.tile(index, len(shifts))
+        centres = centres[index]
+        centres[:, images] += np.repeat(shifts, len(radii), axis=0) * mesh.periods[images]
+        radii = radii[index]
     lo = np.empty(centres.shape, dtype=np.int64)
     hi = np.empty(centres.shape, dtype=np.int64)
     for d, nodes in enumerate(V.lattice_axes):  # per axis, all particles at once
@@ -47,7 +59,7 @@ def candidate_dofs(V: DofMap, centres: np.ndarray, radii: np.ndarray) -> tuple[n
         lat[:, d] = lo[part, d] + local % c
         local //= c
     lat = np.where(periodic, lat % shape, lat)
-    return part, V._lattice_to_dof(lat)
+    return index[part], V._lattice_to_dof(lat)
 
 
 def periodic_offset(V: DofMap, x: np.ndarray, centre: np.ndarray) -> np.ndarray:

@@ -247,9 +247,11 @@ def ghost_nodes(V: DofMap, owner: np.ndarray, cut: np.ndarray, centres: np.ndarr
     depth = np.linalg.norm(surf_b - body, axis=1)
     reach = np.maximum(depth, _node_spacing(V, nodes))
     image = centres[part] + surface + reach[:, None] * normal
+    x = V.coordinates[nodes]
+    image = x + periodic_offset(V, image, x)  # by its node (a piece of a periodic mesh: in its frame)
     lower, upper = np.array(domain.lower), np.array(domain.upper)
     image = np.where(np.array(mesh.periodic), lower + np.mod(image - lower, upper - lower), image)
-    keep = np.all((image >= lower) & (image <= upper), axis=1)
+    keep = np.all((image >= lower) & (image <= upper) | np.array(domain.periodic), axis=1)
     here = keep & np.all((image >= np.array(mesh.lower)) & (image <= np.array(mesh.upper)), axis=1)
     beyond = nodes[keep & ~here]
     nodes, part, surface, depth, reach, image = (a[here] for a in (nodes, part, surface, depth, reach, image))

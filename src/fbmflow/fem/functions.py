@@ -66,13 +66,20 @@ def sample_pressure(space: FlowSpace, p: np.ndarray, points: np.ndarray,
     return np.einsum("nm,nm->n", p.reshape(-1, space.dim + 1)[cells], psi)
 
 
+def node_integrals(space: FlowSpace) -> np.ndarray:
+    """``int phi_a dx`` of every Q2 basis function over the mesh's cells, (n_v,) float64 (exact:
+    the element's quadrature); on a slab of several processes' mesh, complete at the nodes of
+    its owned cells."""
+    weight = np.einsum("cq,qa->ca", space.detJw, space.phi)
+    return np.bincount(space.V.cell_dofs.ravel(), weights=weight.ravel(), minlength=space.n_v)
+
+
 def mean_velocity(space: FlowSpace, u: np.ndarray) -> np.ndarray:
     """Volume average of the velocity ``u (dim * n_v,)`` over the mesh, ``int u dx / |Omega|``,
-    (dim,) float64 (exact for the Q2 field: ``int phi_a`` from the element's quadrature). Inside
-    fictitious particles ``u`` is their rigid motion, so with particles this is the mean velocity of
-    the mixture: its volume flux per unit area."""
-    weight = np.einsum("cq,qa->ca", space.detJw, space.phi)
-    w = np.bincount(space.V.cell_dofs.ravel(), weights=weight.ravel(), minlength=space.n_v)
+    (dim,) float64 (exact for the Q2 field, :func:`node_integrals`). Inside fictitious particles
+    ``u`` is their rigid motion, so with particles this is the mean velocity of the mixture: its
+    volume flux per unit area."""
+    w = node_integrals(space)
     return u.reshape(space.dim, space.n_v) @ w / w.sum()
 
 

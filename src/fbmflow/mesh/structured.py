@@ -44,6 +44,11 @@ class StructuredMesh:
         Periodic directions; a periodic direction needs at least 2 cells.
     vertices : (n_vertices, dim) float64, optional
         Explicit vertex coordinates; uniform placement in the box when omitted.
+    images : tuple of float, length dim, or None
+        A piece cut from a periodic mesh that is not periodic itself (a slab of a ring of slabs,
+        :func:`~fbmflow.parallel.slabs.cut_layers`): the whole mesh's period of every axis (0
+        where it has none), by which points and particles repeat (:attr:`periods`); None: the
+        mesh's own periodic axes only.
     """
 
     shape: tuple[int, ...]
@@ -51,6 +56,7 @@ class StructuredMesh:
     upper: tuple[float, ...]
     periodic: tuple[bool, ...]
     vertices: np.ndarray
+    images: tuple[float, ...] | None = None
 
     @classmethod
     def box(cls, shape, lower=None, upper=None, periodic=None) -> "StructuredMesh":
@@ -144,8 +150,11 @@ class StructuredMesh:
 
     @property
     def periods(self) -> np.ndarray:
-        """Period of every axis, (dim,) float64: ``upper - lower`` on a periodic axis, 0 elsewhere."""
-        return np.where(self.periodic, np.array(self.upper) - np.array(self.lower), 0.0)
+        """Period of every axis, (dim,) float64: ``upper - lower`` on a periodic axis, the whole
+        mesh's period along an axis of a piece of it (:attr:`images`), 0 elsewhere: the period
+        of the minimum-image convention."""
+        own = np.where(self.periodic, np.array(self.upper) - np.array(self.lower), 0.0)
+        return own if self.images is None else np.where(self.periodic, own, np.array(self.images))
 
     @property
     def tags(self) -> tuple[str, ...]:
@@ -261,7 +270,7 @@ class StructuredMesh:
         basis = q1_basis(xi)  # (n_fine_vertices, 2**dim), row per point
         coords = self.vertices[self.cell_vertices[cell_id]]  # (n, 2**dim, dim)
         vertices = np.einsum("pv,pvd->pd", basis, coords)
-        return StructuredMesh(fine_shape, self.lower, self.upper, self.periodic, vertices)
+        return StructuredMesh(fine_shape, self.lower, self.upper, self.periodic, vertices, self.images)
 
     def coarsen(self) -> "StructuredMesh":
         """The mesh whose :meth:`refine` is this one: half the cells per axis, every other vertex.
@@ -277,7 +286,7 @@ class StructuredMesh:
         idx = np.indices(tuple(n + 1 for n in coarse_shape)).reshape(self.dim, -1, order="F").T
         strides = np.cumprod((1,) + self.vertex_shape[:-1])
         vertices = self.vertices[(2 * idx * strides).sum(axis=1)]
-        return StructuredMesh(coarse_shape, self.lower, self.upper, self.periodic, vertices)
+        return StructuredMesh(coarse_shape, self.lower, self.upper, self.periodic, vertices, self.images)
 
     def hierarchy(self, levels: int) -> list["StructuredMesh"]:
         """``[self, self.refine(), ...]`` with ``levels + 1`` nested meshes."""

@@ -40,7 +40,8 @@ def cut_layers(mesh: StructuredMesh, a: int, b: int) -> StructuredMesh:
     (its cells and vertices the global ones, in order). Along a periodic last axis ``a`` may be
     negative and ``b`` beyond the axis's ``n`` layers: layer ``k`` is layer ``k mod n``, its
     vertices moved by the period times ``floor(k / n)``; the piece is periodic along the axis
-    only where it is the whole ring (``[0, n)``)."""
+    only where it is the whole ring (``[0, n)``), and keeps the period otherwise as its
+    :attr:`~fbmflow.mesh.structured.StructuredMesh.images` (particles and points repeat by it)."""
     n = mesh.shape[-1]
     vertex_plane = int(np.prod([m + 1 for m in mesh.shape[:-1]]))
     planes = np.arange(a, b + 1)
@@ -54,8 +55,10 @@ def cut_layers(mesh: StructuredMesh, a: int, b: int) -> StructuredMesh:
     vertices = vertices.reshape(-1, mesh.dim)
     lower = mesh.lower[:-1] + (float(vertices[:, -1].min()),)
     upper = mesh.upper[:-1] + (float(vertices[:, -1].max()),)
-    periodic = mesh.periodic if (a, b) == (0, n) else mesh.periodic[:-1] + (False,)
-    return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, periodic, vertices)
+    if (a, b) == (0, n) or not mesh.periodic[-1]:
+        return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, mesh.periodic, vertices, mesh.images)
+    return StructuredMesh(mesh.shape[:-1] + (b - a,), lower, upper, mesh.periodic[:-1] + (False,), vertices,
+                          tuple(float(L) for L in mesh.periods))
 
 
 def split_layers(n_layers: int, size: int, multiple: int = 1) -> np.ndarray:

@@ -180,9 +180,7 @@ class _Suspension(ParticleScene):
         return Layout(mesh, particles, params.fluid)
 
     def observe(self, params, sim) -> dict:
-        from ..fem.functions import mean_velocity
-
-        mixture = float(mean_velocity(sim.flow.space, sim.x[:sim.flow.space.n_u])[-1])
+        mixture = float(sim.mixture_velocity()[-1])
         p, mesh = sim.particles, sim.mesh
         return {"t": sim.t, "settling_velocity": mixture - float(p.velocity[:, -1].mean()),
                 "mixture_velocity": mixture,
