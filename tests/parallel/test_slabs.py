@@ -214,8 +214,9 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     relative, in at most 1.3 times the cycles (plus one) per step; the output is written once,
     the progress printed once. Its checkpoint at step 2, resumed on one process, ends where the
     uninterrupted run ends. Under ``mpiexec -n 2`` settings that do not run on several processes
-    (the sharp boundary in a box periodic along the slabs' axis, the direct solver) stop both
-    processes with one line and status 2. Where the ``mpi`` extra is installed."""
+    (the sharp boundary in a box periodic along the slabs' axis, a suspension's default; the
+    direct solver) stop both processes with one line and status 2. Where the ``mpi`` extra is
+    installed."""
     import h5py
 
     mpiexec = [_mpiexec(), "-n", "2"]
@@ -286,16 +287,18 @@ def test_under_mpiexec_taylor_green_on_a_ring_of_slabs_is_one_processs(tmp_path)
 
 
 def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp_path):
-    """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes, one
-    across the periodic sides (on the first and the last slab of the ring, through its images),
-    the mixture's mean flux removed (summed over the processes): two steps' positions and
-    velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one).
-    Where the ``mpi`` extra is installed."""
+    """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes with the
+    nodal boundary, one across the periodic sides (on the first and the last slab of the ring,
+    through its images), both centred on mesh lines (nodes exactly on their surfaces), the
+    mixture's mean flux removed (summed over the processes): two steps' positions and velocities
+    those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one). Where the
+    ``mpi`` extra is installed."""
     script = Path(__file__).with_name("_slab_ring.py")
     runs = {}
     for size in (1, 2):
         launcher = [_mpiexec(), "-n", "2"] if size == 2 else []
-        out = subprocess.run(launcher + [sys.executable, str(script), "2", str(tmp_path / f"{size}.npz")],
+        out = subprocess.run(launcher + [sys.executable, str(script), "2", str(tmp_path / f"{size}.npz"),
+                                         "nodes"],
                              capture_output=True, text=True, timeout=600)
         assert out.returncode == 0, out.stdout + out.stderr
         runs[size] = np.load(tmp_path / f"{size}.npz")
@@ -445,7 +448,8 @@ def test_solver_settings_on_several_processes_take_multigrid_and_refuse_the_dire
 
 def test_slab_levels_refuse_a_mesh_too_thin_for_the_processes():
     """4 layers along the last axis cannot hold two slabs with the sharp boundary's halo of 4 on a
-    level above the coarsest (dfg-3d-1z at level 2): the message says to run on one process."""
+    level above the coarsest (dfg-3d-1z at level 2): the message says to run on one process. A
+    mesh that does not coarsen (a suspension's odd cell count) has no level to divide either."""
     from types import SimpleNamespace
 
     from fbmflow.flow.slabs import SlabFlowLevels
@@ -453,3 +457,6 @@ def test_slab_levels_refuse_a_mesh_too_thin_for_the_processes():
     mesh = StructuredMesh.box((8, 4, 4))
     with pytest.raises(ValueError, match="5 cell layers each \\(a halo of 4\\).*run it on one process"):
         SlabFlowLevels(mesh, {}, True, SimpleNamespace(size=2, rank=0), halo=4)
+    odd = StructuredMesh.box((45, 45), periodic=(True, True))
+    with pytest.raises(ValueError, match="does not coarsen.*run it on one process or on a mesh with even"):
+        SlabFlowLevels(odd, {}, True, SimpleNamespace(size=2, rank=0), halo=4)

@@ -72,6 +72,10 @@ class SlabFlowLevels:
                        for j in range(J + 1))
 
         deepest = [J for J in range(len(meshes) - 1) if fits(J)]
+        if len(meshes) == 1:
+            raise ValueError(f"the mesh {mesh.shape} does not coarsen (an odd number of cells along an "
+                             f"axis), so {size} processes have no multigrid level to divide: run it on one "
+                             "process or on a mesh with even cell counts")
         if not deepest:
             least = max(2, halo + 1)
             need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
