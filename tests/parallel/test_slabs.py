@@ -213,10 +213,10 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     two cores: the disk's positions and velocities in ``run.h5`` are one process's to 1e-8
     relative, in at most 1.3 times the cycles (plus one) per step; the output is written once,
     the progress printed once. Its checkpoint at step 2, resumed on one process, ends where the
-    uninterrupted run ends. Under ``mpiexec -n 2`` settings that do not run on several processes
-    (the sharp boundary in a box periodic along the slabs' axis, a suspension's default; the
-    direct solver) stop both processes with one line and status 2. Where the ``mpi`` extra is
-    installed."""
+    uninterrupted run ends. Under ``mpiexec -n 2`` a scene whose mesh cannot be divided (a
+    suspension's, which does not coarsen) and a setting that does not run on several processes
+    (the direct solver) stop both processes with one line and status 2. Where the ``mpi`` extra
+    is installed."""
     import h5py
 
     mpiexec = [_mpiexec(), "-n", "2"]
@@ -243,7 +243,7 @@ def test_under_mpiexec_fbmflow_run_divides_a_particle_scene_and_resumes_on_other
     with h5py.File(tmp_path / "one" / "run.h5") as f, h5py.File(tmp_path / "two" / "run.h5") as g:
         assert np.abs(g["velocity"][:] - f["velocity"][:]).max() <= 1e-8 * np.abs(f["velocity"][:]).max()
     periodic = ["run", "suspension-2d", "--set", "solver.linear=multigrid", "--out", str(tmp_path / "c")]
-    for args, what in ((periodic, "take the nodal boundary on several processes"),
+    for args, what in ((periodic, "does not coarsen"),
                        (run[:2] + ["--set", "solver.linear=direct", "--out", str(tmp_path / "s")],
                         "solver.linear = 'multigrid'")):
         refused = _fbmflow(mpiexec, *args)
@@ -286,19 +286,20 @@ def test_under_mpiexec_taylor_green_on_a_ring_of_slabs_is_one_processs(tmp_path)
     assert np.allclose(b["kinetic_energy"], a["kinetic_energy"], rtol=1e-8, atol=0.0)
 
 
-def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp_path):
-    """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes with the
-    nodal boundary, one across the periodic sides (on the first and the last slab of the ring,
-    through its images), both centred on mesh lines (nodes exactly on their surfaces), the
-    mixture's mean flux removed (summed over the processes): two steps' positions and velocities
-    those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus one). Where the
-    ``mpi`` extra is installed."""
+@pytest.mark.parametrize("boundary", ["nodes", "sharp"])
+def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp_path, boundary):
+    """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes with
+    either boundary, one across the periodic sides (on the first and the last slab of the ring,
+    through its images; with the nodal boundary centred on mesh lines, nodes exactly on their
+    surfaces), the mixture's mean flux removed (summed over the processes): two steps' positions
+    and velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus
+    one). Where the ``mpi`` extra is installed."""
     script = Path(__file__).with_name("_slab_ring.py")
     runs = {}
     for size in (1, 2):
         launcher = [_mpiexec(), "-n", "2"] if size == 2 else []
         out = subprocess.run(launcher + [sys.executable, str(script), "2", str(tmp_path / f"{size}.npz"),
-                                         "nodes"],
+                                         boundary],
                              capture_output=True, text=True, timeout=600)
         assert out.returncode == 0, out.stdout + out.stderr
         runs[size] = np.load(tmp_path / f"{size}.npz")
