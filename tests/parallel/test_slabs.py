@@ -286,6 +286,31 @@ def test_under_mpiexec_taylor_green_on_a_ring_of_slabs_is_one_processs(tmp_path)
     assert np.allclose(b["kinetic_energy"], a["kinetic_energy"], rtol=1e-8, atol=0.0)
 
 
+def _one_and_two(tmp_path, script: str, arguments) -> tuple:
+    """The ``.npz`` the test script ``script`` writes run alone and under ``mpiexec -n 2``
+    (``arguments(out)``: its arguments for the output file ``out``), and what the two processes
+    printed."""
+    runs, printed = {}, ""
+    for size in (1, 2):
+        launcher = [_mpiexec(), "-n", "2"] if size == 2 else []
+        out = subprocess.run(launcher + [sys.executable, str(Path(__file__).with_name(script)),
+                                         *arguments(str(tmp_path / f"{size}.npz"))],
+                             capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stdout + out.stderr
+        runs[size], printed = np.load(tmp_path / f"{size}.npz"), out.stdout
+    return runs[1], runs[2], printed
+
+
+def _assert_follows(one, two) -> None:
+    """Two processes' particle positions and velocities one process's to 1e-8 relative, in at
+    most 1.3 times its cycles per step (plus one)."""
+    assert int(two["processes"]) == 2
+    for key in ("position", "velocity"):
+        assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
+    assert np.abs(one["velocity"]).max() > 0.0
+    assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
+
+
 @pytest.mark.parametrize("boundary", ["nodes", "sharp"])
 def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp_path, boundary):
     """``mpiexec -n 2 python _slab_ring.py``: two disks in a box periodic along both axes with
@@ -294,22 +319,9 @@ def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp
     surfaces), the mixture's mean flux removed (summed over the processes): two steps' positions
     and velocities those of one process to 1e-8 relative, in at most 1.3 times the cycles (plus
     one). Where the ``mpi`` extra is installed."""
-    script = Path(__file__).with_name("_slab_ring.py")
-    runs = {}
-    for size in (1, 2):
-        launcher = [_mpiexec(), "-n", "2"] if size == 2 else []
-        out = subprocess.run(launcher + [sys.executable, str(script), "2", str(tmp_path / f"{size}.npz"),
-                                         boundary],
-                             capture_output=True, text=True, timeout=600)
-        assert out.returncode == 0, out.stdout + out.stderr
-        runs[size] = np.load(tmp_path / f"{size}.npz")
-    one, two = runs[1], runs[2]
-    assert int(two["processes"]) == 2
-    for key in ("position", "velocity"):
-        assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
-    assert np.abs(one["velocity"]).max() > 0.0
+    one, two, _ = _one_and_two(tmp_path, "_slab_ring.py", lambda out: ["2", out, boundary])
+    _assert_follows(one, two)
     assert np.abs(two["mixture"]).max() <= 1e-12 * np.abs(one["velocity"]).max()  # the flux removed
-    assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
 
 
 def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
@@ -321,28 +333,15 @@ def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
     from fbmflow._jit import max_threads
     from fbmflow.cores import usable_cpus
 
-    mpiexec = _mpiexec()
-    script = Path(__file__).with_name("_slab_particles.py")
     settings = ["solver.newton_rtol=1e-10", "solver.linear_rtol=1e-10", "coupling.tol=1e-10"]
-    runs = {}
-    for size in (1, 2):
-        launcher = [mpiexec, "-n", "2"] if size == 2 else []
-        out = subprocess.run(launcher + [sys.executable, str(script), "ten-cate", "0", "1",
-                                         str(tmp_path / f"{size}.npz"), *settings],
-                             capture_output=True, text=True, timeout=600)
-        assert out.returncode == 0, out.stdout + out.stderr
-        assert out.stdout.count(f" of {size}: ten-cate") == size
-        if size == 2 and "NUMBA_NUM_THREADS" not in os.environ:
-            share = max(1, min(max_threads(), len(usable_cpus()) // 2))
-            # the two processes' lines may interleave: count the figures, not the lines
-            assert re.findall(r"threads (\d+)", out.stdout) == [str(share)] * 2, out.stdout
-        runs[size] = np.load(tmp_path / f"{size}.npz")
-    one, two = runs[1], runs[2]
-    assert int(two["processes"]) == 2
-    for key in ("position", "velocity"):
-        assert np.abs(two[key] - one[key]).max() <= 1e-8 * np.abs(one[key]).max()
-    assert np.abs(one["velocity"]).max() > 0.0
-    assert np.all(two["cycles"] <= 1.3 * one["cycles"] + 1)
+    one, two, printed = _one_and_two(tmp_path, "_slab_particles.py",
+                                     lambda out: ["ten-cate", "0", "1", out, *settings])
+    assert printed.count(" of 2: ten-cate") == 2
+    if "NUMBA_NUM_THREADS" not in os.environ:
+        share = max(1, min(max_threads(), len(usable_cpus()) // 2))
+        # the two processes' lines may interleave: count the figures, not the lines
+        assert re.findall(r"threads (\d+)", printed) == [str(share)] * 2, printed
+    _assert_follows(one, two)
 
 
 @pytest.mark.parametrize("dim, size, ring", [(2, 3, False), (3, 2, False), (2, 3, True), (3, 2, True)])

@@ -221,7 +221,6 @@ def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse:
 
     def cut(P, row0, n_rows, columns, n_cols):
         P = P.tocsr()[row0:row0 + n_rows]
-        P.sum_duplicates()
         return sp.csr_matrix((P.data, columns[P.indices], P.indptr), shape=(n_rows, n_cols))
 
     return (cut(P_v, 2 * (fa - 2 * sa) * fine.plane, fine.n_v, nodes, n_v_c),
