@@ -145,6 +145,7 @@ class DistributedMultigrid(Factorization):
 
             augment = np.zeros_like(b)
             augment[n_u:] = expansion(system.mean_weights, system.orphans, system.extension)
+            part.update_ghosts(augment)  # a halo cell's extension may differ from its owner's
 
         def precondition(r):
             return self.cycle(r, np.zeros_like(r))
