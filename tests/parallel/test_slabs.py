@@ -181,6 +181,24 @@ def test_under_mpiexec_the_distributed_multigrid_solves_the_whole_system(dim, ca
     assert out.stdout.count(f" of {size}: {case}") == size
 
 
+def test_under_mpiexec_an_uncaught_exception_on_one_process_ends_every_process(tmp_path):
+    """``mpiexec -n 2``: a script whose second process raises an exception no code catches, while
+    the first waits for it in a barrier, ends with a non-zero status and the traceback (the
+    processes aborted together) instead of hanging. Where the ``mpi`` extra is installed."""
+    script = tmp_path / "bug.py"
+    script.write_text("from fbmflow.parallel import world\n"
+                      "comm = world()\n"
+                      "if comm.rank == 1:\n"
+                      "    raise ValueError('a bug on process 1')\n"
+                      "comm.Barrier()\n"
+                      "print('after the barrier')\n")
+    out = subprocess.run([_mpiexec(), "-n", "2", sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode != 0
+    assert "ValueError: a bug on process 1" in out.stderr
+    assert "after the barrier" not in out.stdout
+
+
 def test_world_is_one_process_without_a_launcher_and_refuses_a_mismatched_mpi(monkeypatch):
     """No launcher: the stand-in. A launcher's two processes: mpi4py missing, or an MPI that sees
     one process (mpi4py built against another MPI), each a RuntimeError naming the remedy."""
@@ -326,6 +344,18 @@ def test_under_mpiexec_particles_in_a_periodic_box_follow_one_processs_steps(tmp
     assert np.abs(two["mixture"]).max() <= 1e-12 * np.abs(one["velocity"]).max()  # the flux removed
 
 
+def test_under_mpiexec_the_test_function_force_follows_one_process(tmp_path):
+    """``mpiexec -n 2``: three steps of ``glowinski-free-fall`` at level 0 with the test-function
+    force (its test function spans the cells around the disk, which one process holds where the
+    other holds them as halo), positions and velocities those of one process to 1e-8 relative.
+    Where the ``mpi`` extra is installed."""
+    settings = ["fbm.force=test-function", "solver.linear=multigrid", "solver.newton_rtol=1e-10",
+                "solver.linear_rtol=1e-10", "coupling.tol=1e-10"]
+    one, two, _ = _one_and_two(tmp_path, "_slab_particles.py",
+                               lambda out: ["glowinski-free-fall", "0", "3", out, *settings])
+    _assert_follows(one, two)
+
+
 def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
     """``mpiexec -n 2``: a step of ``ten-cate`` at level 0 at its defaults (3D, the sharp boundary
     with the surface force, multigrid, the implicit coupling; tolerances 1e-10), the sphere's
@@ -352,9 +382,10 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
     :func:`~fbmflow.coupling.sharp.reach_layers` layers, balls across the slabs' boundaries: the
     ghost rows of the owned cells' nodes, the owned cut cells' continuity rows and pressure
     extensions are the whole mesh's (in global numbers), and no owned row reaches beyond the
-    slab (:attr:`~fbmflow.coupling.sharp.GhostNodes.beyond`). The surface and volume forces of
-    the owned cells summed over the slabs are the whole mesh's."""
-    from fbmflow.coupling.forces import SurfaceForces, volume_force_functional
+    slab (:attr:`~fbmflow.coupling.sharp.GhostNodes.beyond`). The surface, volume and
+    test-function forces of the owned cells (the last of a time step and of a change of a flow)
+    summed over the slabs are the whole mesh's."""
+    from fbmflow.coupling.forces import SurfaceForces, TestFunctionForces, volume_force_functional
     from fbmflow.coupling.indicator import node_owner
     from fbmflow.coupling.sharp import reach_layers, sharp_boundary
     from fbmflow.particles import Ball
@@ -369,10 +400,12 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
     whole = FlowSpace(mesh)
     ref = sharp_boundary(whole, node_owner(whole.V, centres, shapes), centres, shapes)
     ghost_row = {int(g): k for k, g in enumerate(ref.ghosts.nodes)}
-    u = rng.standard_normal(whole.n_u)
+    u, u_old, about = rng.standard_normal((3, whole.n_u))
     p = rng.standard_normal(whole.n_p)
+    tested = TestFunctionForces(whole, node_owner(whole.V, centres, shapes), centres, shapes)
     want = [SurfaceForces(whole, centres, shapes)(u, p, 0.3),
-            volume_force_functional(whole, node_owner(whole.V, centres, shapes), centres)(u, p, 0.3)]
+            volume_force_functional(whole, node_owner(whole.V, centres, shapes), centres)(u, p, 0.3),
+            tested(u, p, 0.3, 1.2, u_old=u_old, dt=0.01), tested(u, p, 0.3, 1.2, dt=0.01, about=about)]
     got = [np.zeros_like(w[0]) for w in want], [np.zeros_like(w[1]) for w in want]
     halo = reach_layers(mesh)
     npl = dim + 1
@@ -409,13 +442,15 @@ def test_sharp_boundary_rows_of_the_owned_unknowns_are_the_whole_meshs(dim, size
         assert rows.size > 0 and E.nnz == W.nnz
         assert sorted(zip(E.row, part.cells[E.col // npl] * npl + E.col % npl, np.round(E.data, 12))) == \
             sorted(zip(W.row, W.col, np.round(W.data, 12)))
-        lu = u.reshape(dim, -1)[:, part.nodes].ravel()
+        lu, lu_old, l_about = (v.reshape(dim, -1)[:, part.nodes].ravel() for v in (u, u_old, about))
         lp = p[(part.cells[:, None] * npl + np.arange(npl)).ravel()]
         spacing = float(mesh.finest_spacing.min())
-        rules = [SurfaceForces(local, centres, shapes, cells=part.owned_cells, spacing=spacing),
-                 volume_force_functional(local, owner, centres, part.owned_cells)]
-        for i, rule in enumerate(rules):
-            f, t = rule(lu, lp, 0.3)
+        tested = TestFunctionForces(local, owner, centres, shapes, cells=part.owned_cells)
+        parts = [SurfaceForces(local, centres, shapes, cells=part.owned_cells, spacing=spacing)(lu, lp, 0.3),
+                 volume_force_functional(local, owner, centres, part.owned_cells)(lu, lp, 0.3),
+                 tested(lu, lp, 0.3, 1.2, u_old=lu_old, dt=0.01),
+                 tested(lu, lp, 0.3, 1.2, dt=0.01, about=l_about)]
+        for i, (f, t) in enumerate(parts):
             got[0][i] += f
             got[1][i] += t
     for i, (f, t) in enumerate(want):

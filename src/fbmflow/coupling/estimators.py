@@ -15,7 +15,7 @@ An estimator has
   a mask ``(n_cells,)`` of the cells whose part of the integral the rule takes (one process's
   owned cells, its part of a sum over processes; None: all), ``spacing`` the whole mesh's
   finest cell length where ``space``'s mesh is a process's slab (None: its own; for a rule
-  whose points follow the resolution). Estimators with ``distributed`` False take no mask;
+  whose points follow the resolution);
 * ``evaluate(rule, u, p, mu, rho, u_old, dt, about)``: force ``(n, dim)`` and torque ``(n, 3)``
   of the flow ``u (dim * n_v,)``, ``p (n_p,)``; ``u_old`` is the velocity at the step's start
   and ``about`` the flow a response ``u`` is a change of (the estimators linear in the flow ignore
@@ -47,7 +47,6 @@ class ForceEstimator:
 
     name = ""
     lags_pressure = True
-    distributed = False  # whether prepare takes a cells mask (runs on several processes)
 
     def check(self, shapes: list, sharp: bool) -> None:
         return None
@@ -67,12 +66,6 @@ class ForceEstimator:
         rule is not linear in the flow override this)."""
         return rule.own_response(W, free, mu)
 
-    def _whole(self, cells) -> None:
-        """ValueError where a cells mask asks an estimator that is not distributed for a part."""
-        if cells is not None:
-            raise ValueError(f"force {self.name!r} does not run on several processes yet; use fbm.force = "
-                             "'volume' or 'surface' there")
-
     @staticmethod
     def _owner(space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                owner: np.ndarray | None) -> np.ndarray:
@@ -85,7 +78,6 @@ class VolumeForce(ForceEstimator):
     :class:`~fbmflow.coupling.forces.ForceFunctional` of all particles."""
 
     name = "volume"
-    distributed = True
 
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None,
@@ -114,9 +106,8 @@ class TestFunctionForce(ForceEstimator):
     def prepare(self, space: FlowSpace, centres: np.ndarray, shapes: list, rotations: np.ndarray,
                 owner: np.ndarray | None = None, walls: np.ndarray | None = None,
                 cells: np.ndarray | None = None, spacing: float | None = None):
-        self._whole(cells)
         owner = self._owner(space, centres, shapes, rotations, owner)
-        return TestFunctionForces(space, owner, centres, shapes, rotations, walls)
+        return TestFunctionForces(space, owner, centres, shapes, rotations, walls, cells=cells)
 
     def evaluate(self, rule, u, p, mu, rho, u_old=None, dt=None, about=None):
         return rule(u, p, mu, rho, u_old=u_old, dt=dt, about=about)
@@ -136,7 +127,6 @@ class SurfaceForce(ForceEstimator):
     surface)."""
 
     name = "surface"
-    distributed = True
 
     def check(self, shapes: list, sharp: bool) -> None:
         if not (sharp and supports_surface_force(shapes)):

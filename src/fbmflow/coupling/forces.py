@@ -207,10 +207,15 @@ class TestFunctionForces:
     rotations : (n, dim, dim) float64, body-to-world (identity if None)
     walls : (k,) int64, velocity nodes held by the domain's walls (zero in every ``psi_i``)
     n_1d : Gauss points per axis of the fluid-part rule
+    cells : (n_cells,) bool or None, the cells whose part of the integrals is taken (None: all):
+        a process's owned cells on its slab (:mod:`fbmflow.parallel.slabs`), the sums over all
+        processes' parts being the whole mesh's. ``psi_i`` at an owned cell's node needs the
+        owners of the nodes of the cells around it, which the slab's halo holds.
     """
 
     def __init__(self, space: FlowSpace, owner: np.ndarray, centres: np.ndarray, shapes: list,
-                 rotations: np.ndarray | None = None, walls: np.ndarray | None = None, n_1d: int = 8):
+                 rotations: np.ndarray | None = None, walls: np.ndarray | None = None, n_1d: int = 8,
+                 cells: np.ndarray | None = None):
         V = space.V
         cd, n_v, n_b = V.cell_dofs, V.n_dofs, len(shapes)
         n_cells, nl = cd.shape
@@ -226,9 +231,12 @@ class TestFunctionForces:
         keep = (owner[psi.row] == psi.col) | (~blocked[psi.row] & (owner[psi.row] < 0))
         psi_nodes = sp.csr_matrix((np.ones(keep.sum()), (psi.row[keep], psi.col[keep])), shape=(n_v, n_b))
         pairs = (cell_node @ psi_nodes).tocoo()                  # cells where psi_i is not zero
-        cells, body = pairs.row.astype(np.int64), pairs.col.astype(np.int64)
-        self._quadrature(space, cells, body, centres, shapes, rotations, n_1d)
-        pc = np.asarray(psi_nodes[self.nodes.ravel(), np.repeat(body, nl)]).reshape(self.nodes.shape)
+        taken = slice(None) if cells is None else np.asarray(cells, dtype=bool)[pairs.row]
+        self._quadrature(space, pairs.row[taken].astype(np.int64), pairs.col[taken].astype(np.int64), centres,
+                         shapes, rotations, n_1d)
+        pc = np.zeros(self.nodes.shape)
+        if pc.size:  # (a process's cells may hold no pair)
+            pc.flat[:] = np.asarray(psi_nodes[self.nodes.ravel(), np.repeat(self.body, nl)]).ravel()
         self.psi_q = pc @ self.phi.T                                            # (m, nq)
         self.grad_psi = np.einsum("ca,cqak->cqk", pc, self.grad_phi)
 

@@ -161,12 +161,9 @@ class ParticleGeometry:
         return rigid if sharp is None else sharp.constraints(rigid, velocity, angular_velocity)
 
 
-def _check_distributed(estimator, linear_solver: LinearSolver) -> None:
-    """ValueError naming the setting to change where a coupled system cannot yet run on several
+def _check_distributed(linear_solver: LinearSolver) -> None:
+    """ValueError naming the setting to change where a coupled system cannot run on several
     processes."""
-    if not estimator.distributed:
-        raise ValueError(f"force {estimator.name!r} does not run on several processes yet: set fbm.force = "
-                         "'auto', 'volume' or (balls with the sharp boundary) 'surface'")
     if not isinstance(linear_solver, MultigridSolver):
         raise ValueError("several processes solve with multigrid: set solver.linear = 'multigrid'")
 
@@ -216,7 +213,7 @@ class CoupledSystem:
                                               if fbm.force == "auto" else fbm.force)
         self.estimator.check(particles.shapes, sharp)
         if self.comm.size > 1:
-            _check_distributed(self.estimator, linear_solver)
+            _check_distributed(linear_solver)
         self.sharp = sharp
         self.symmetry, self.frozen, self.integrator = tuple(symmetry), bool(frozen), integrator
         self.gravity = np.asarray(fluid.gravity_vector(mesh.dim), dtype=float)

@@ -4,6 +4,7 @@ imports no MPI library."""
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 
@@ -69,10 +70,33 @@ def world():
                            "mpi4py was built against another MPI than this mpiexec's; use the mpiexec of "
                            "the MPI that mpi4py uses (mpi4py.get_config())")
     _share_cores(MPI.COMM_WORLD, MPI.COMM_TYPE_SHARED)
+    _abort_on_uncaught(MPI.COMM_WORLD)
     return MPI.COMM_WORLD
 
 
 _shared = False  # whether this process's Numba threads were set for its machine's processes
+_aborting = False  # whether an uncaught exception ends every process (_abort_on_uncaught)
+
+
+def _abort_on_uncaught(comm) -> None:
+    """From the first call on, an exception that no code catches (a bug, in a script or in
+    fbmflow) prints its traceback and then aborts every process (``comm.Abort(1)``): a process
+    that ended alone would leave the others waiting for it in their next exchange, for ever
+    (measured: a force rule that raised on one of two processes left the other in its next sum).
+    The errors fbmflow expects stop every process together without this (each decides from
+    reduced figures, docs/troubleshooting.md)."""
+    global _aborting
+    if _aborting:
+        return
+    _aborting = True
+    previous = sys.excepthook
+
+    def hook(kind, value, traceback):
+        previous(kind, value, traceback)
+        sys.stderr.flush()
+        comm.Abort(1)
+
+    sys.excepthook = hook
 
 
 def _share_cores(comm, shared_type) -> None:
