@@ -356,6 +356,18 @@ def test_under_mpiexec_the_test_function_force_follows_one_process(tmp_path):
     _assert_follows(one, two)
 
 
+def test_under_mpiexec_particles_in_hard_contact_follow_one_process(tmp_path):
+    """``mpiexec -n 2``: two steps of ``sedimentation-2d`` at level 0 with 12 disks, whose lattice
+    gaps lie within the contact skin so that hard contact pushes them apart from the first step
+    (the contact solver run alike on every process), positions and velocities those of one
+    process to 1e-8 relative. Where the ``mpi`` extra is installed."""
+    settings = ["particles.count=12", "solver.linear=multigrid", "solver.newton_rtol=1e-10",
+                "solver.linear_rtol=1e-10", "coupling.flow_rtol=1e-10", "coupling.tol=1e-10"]
+    one, two, _ = _one_and_two(tmp_path, "_slab_particles.py",
+                               lambda out: ["sedimentation-2d", "0", "2", out, *settings])
+    _assert_follows(one, two)
+
+
 def test_under_mpiexec_ten_cate_follows_one_processs_step(tmp_path):
     """``mpiexec -n 2``: a step of ``ten-cate`` at level 0 at its defaults (3D, the sharp boundary
     with the surface force, multigrid, the implicit coupling; tolerances 1e-10), the sphere's
