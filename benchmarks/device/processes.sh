@@ -41,8 +41,7 @@ rows() {  # TAG LEVEL STEPS ROWS...
     echo "$(date +%T) $tag level $level rows $* done at ${SECONDS}s" >> "$OUT/log.txt"
 }
 # every kernel compiled (about 50 s) before the timed rows: a kernel that first runs in a timed
-# step would count its compilation there (measured here: 29.8 s for a level-1 step on one
-# process against 19 s warm)
+# step would count its compilation there
 rows warm 0 3 2x1 1x1
 if [ "$QUICK" = 1 ]; then
     rows dry-L1 1 2 2x1 1x1
