@@ -41,20 +41,39 @@ CHILD = r"""
 import json, resource, sys, time
 import numpy as np
 import numba
+from fbmflow.parallel.slabs import SlabPartition
 from fbmflow.scenes.registry import load_scene
 args = json.loads(sys.argv[1])
+spent = [0.0]  # seconds in the partitions' exchanges and sums, the wait for a neighbour included
+
+
+def timed(method):
+    def wrapper(*a, **k):
+        t = time.perf_counter()
+        try:
+            return method(*a, **k)
+        finally:
+            spent[0] += time.perf_counter() - t
+    return wrapper
+
+
+for name in ("update_ghosts", "add_ghosts", "dot", "pressure_dot"):
+    setattr(SlabPartition, name, timed(getattr(SlabPartition, name)))
 scene, params, level = load_scene(args["scene"], args["level"], args["settings"])
 sim = scene.build(params, level).sim
 comm = sim.comm
-times, cycles, position, velocity = [], [], [], []
+times, exchanges, cycles, position, velocity = [], [], [], [], []
 for k in range(args["steps"]):
-    t0 = time.perf_counter()
+    t0, e0 = time.perf_counter(), spent[0]
     report = sim.step()
     times.append(time.perf_counter() - t0)
+    exchanges.append(spent[0] - e0)
     cycles.append(report.linear.iterations)
     position.append(report.position.tolist())
     velocity.append(report.velocity.tolist())
+exchange = float(np.mean(exchanges[1:] or exchanges))
 result = dict(unknowns=sim.n_dofs, s_per_step=float(np.mean(times[1:] or times)),
+              exchange_s_per_step=comm.allgather(exchange) if comm.size > 1 else [exchange],
               cycles_per_step=float(np.mean(cycles)), position=position, velocity=velocity)
 """ + CHILD_TAIL
 
@@ -62,7 +81,8 @@ result = dict(unknowns=sim.n_dofs, s_per_step=float(np.mean(times[1:] or times))
 def differences(rows: list[dict]) -> list[str]:
     """Per row, ``position / velocity``: the largest difference from the 1 x 1 row of its run
     (tag, scene, level), relative to that row's largest value ("" where there is none)."""
-    alone = {(r["tag"], r["scene"], r["level"]): r for r in rows if r["processes"] == 1 and r["threads"] == 1}
+    alone = {(r["tag"], r["scene"], r["level"]): r for r in rows
+             if r["processes"] == 1 and r["threads"] == 1 and r.get("copies", 1) == 1}
     out = []
     for r in rows:
         one = alone.get((r["tag"], r["scene"], r["level"]))
@@ -83,15 +103,26 @@ def table(rows: list[dict]) -> str:
              "largest difference of the particles' positions / velocities over the steps from the 1 x 1 "
              "row of the same run (tag, scene, level), relative to that row's largest value. Speed-up: the "
              "mean seconds per step (after the first) of the 1 x 1 rows of the same tag over this row's; "
-             "`*`: more processes times threads than cores (the times mean nothing).", "",
+             "`*`: more processes times threads than cores (the times mean nothing). `N at once`: N "
+             "independent runs at the same time, each one's seconds, the slowest one's other figures: N "
+             "times its speed-up is what "
+             "N processes could reach on this machine if dividing the work cost nothing. Exchanges: the "
+             "seconds per step (after the first; each process's) in the halo exchanges and the sums of "
+             "the slabs, the wait for the slower neighbour included.", "",
              "| tag | machine | tree | scene | level | unknowns | P x T | steps | difference | "
-             "cycles / step | s / step | speed-up | peak GB (largest process) | command |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "cycles / step | s / step | exchanges s / step | speed-up | peak GB (largest process) | "
+             "command |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r, difference, speedup in zip(rows, differences(rows), speed_ups(rows, "s_per_step")):
-        over = "*" if r["processes"] * r["threads"] > r["cores"] else ""
+        copies = r.get("copies", 1)
+        over = "*" if copies * r["processes"] * r["threads"] > r["cores"] else ""
+        at_once = f", {copies} at once" if copies > 1 else ""
+        seconds = " / ".join(f"{v:.2f}" for v in r.get("copy_s_per_step", [r["s_per_step"]]))
+        exchange = " / ".join(f"{e:.2f}" for e in np.atleast_1d(r.get("exchange_s_per_step", [])))
         lines.append(f"| {r['tag']} | {r['machine']} | {r['tree']} | {r['scene']} | {r['level']} | "
-                     f"{r['unknowns']} | {r['processes']} x {r['threads']}{over} | {len(r['position'])} | "
-                     f"{difference} | {r['cycles_per_step']:.1f} | {r['s_per_step']:.2f} | {speedup} | "
+                     f"{r['unknowns']} | {r['processes']} x {r['threads']}{at_once}{over} | "
+                     f"{len(r['position'])} | {difference} | {r['cycles_per_step']:.1f} | "
+                     f"{seconds} | {exchange} | {speedup} | "
                      f"{r['peak_gb_max']:.2f} | `{r['command']}` |")
     return "\n".join(lines) + "\n"
 
@@ -102,7 +133,8 @@ def run(*, rows: list[str] = ("1x1", "2x1", "4x1"), scene: str = "ten-cate", lev
 
     Parameters
     ----------
-    rows : ``PxT``: P processes of T Numba threads each, one run per row in this order
+    rows : ``PxT``: P processes of T Numba threads each, one run per row in this order;
+        ``N*PxT``: N such runs at once (``2*1x1``: the machine's own limit on two processes)
     scene : a particle scene's name
     level : its level
     steps : the time steps of every row
@@ -111,9 +143,9 @@ def run(*, rows: list[str] = ("1x1", "2x1", "4x1"), scene: str = "ten-cate", lev
     """
     settings = list(settings)
 
-    def measure(processes, threads):
+    def measure(processes, threads, copies=1):
         args = dict(scene=scene, level=level, steps=steps, settings=settings)
-        return dict(run_mpiexec(CHILD, args, processes, threads), scene=scene, level=level)
+        return dict(run_mpiexec(CHILD, args, processes, threads, copies), scene=scene, level=level)
 
     run_rows("distributed_particles", rows, measure, table, tag,
              f"--scene {scene} --level {level} --steps {steps} --settings {' '.join(settings)}")

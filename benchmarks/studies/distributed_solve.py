@@ -81,26 +81,38 @@ result = dict(unknowns=unknowns, levels=len(solver.levels) + 1, setup_s=setup,
 """ + CHILD_TAIL
 
 
-def run_mpiexec(code: str, args: dict, processes: int, threads: int) -> dict:
+def run_mpiexec(code: str, args: dict, processes: int, threads: int, copies: int = 1) -> dict:
     """Run ``code`` (reading ``json.loads(sys.argv[1])``, rank 0 printing a JSON line last) under
-    ``mpiexec -n processes`` at ``threads`` Numba threads and one BLAS thread each: that JSON."""
+    ``mpiexec -n processes`` at ``threads`` Numba threads and one BLAS thread each: that JSON.
+    ``copies > 1``: as many independent runs at the same time, each with its own ``mpiexec``;
+    the slowest copy's JSON (the largest ``s_per_step``, else the last), with every copy's
+    ``s_per_step`` as ``copy_s_per_step``."""
     mpiexec = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
     if mpiexec is None:
         raise SystemExit("this study needs mpiexec: pip install -e \".[mpi]\"")
     env = dict(os.environ, NUMBA_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    out = subprocess.run([mpiexec, "-n", str(processes), sys.executable, "-c", code, json.dumps(args)],
-                         env=env, capture_output=True, text=True, check=False)
-    if out.returncode != 0:
-        raise RuntimeError(f"{processes} x {threads} failed:\n{out.stderr[-3000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    runs = [subprocess.Popen([mpiexec, "-n", str(processes), sys.executable, "-c", code, json.dumps(args)],
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            for _ in range(copies)]
+    results = []
+    for run in runs:
+        out, err = run.communicate()
+        if run.returncode != 0:
+            raise RuntimeError(f"{processes} x {threads} failed:\n{err[-3000:]}")
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    if copies == 1:
+        return results[0]
+    slowest = max(results, key=lambda r: r.get("s_per_step", 0.0))
+    return dict(slowest, copy_s_per_step=[r.get("s_per_step") for r in results])
 
 
 def speed_ups(rows: list[dict], seconds: str) -> list[str]:
     """Per row, the mean ``seconds`` of the 1 x 1 rows of its run (tag) over its own ("" where the
-    run has none), with ``*`` beside its processes times threads where they exceed the cores."""
+    run has none), with ``*`` beside its processes times threads where they exceed the cores;
+    rows of several copies at once are not 1 x 1 rows."""
     alone: dict = {}
     for r in rows:
-        if r["processes"] == 1 and r["threads"] == 1:
+        if r["processes"] == 1 and r["threads"] == 1 and r.get("copies", 1) == 1:
             alone.setdefault(r["tag"], []).append(r[seconds])
     return [f"{sum(alone[r['tag']]) / len(alone[r['tag']]) / r[seconds]:.2f}" if r["tag"] in alone else ""
             for r in rows]
@@ -109,16 +121,20 @@ def speed_ups(rows: list[dict], seconds: str) -> list[str]:
 def run_rows(name: str, rows: list[str], measure, table, tag: str, options: str) -> list[dict]:
     """Measure every ``PxT`` row in turn (``measure(processes, threads) -> dict``), writing
     ``benchmarks/results/NAME.{json,md}`` (``table(rows) -> str``) after each, the rows of other
-    tags kept; ``options``: the study's command-line options beside ``--rows``."""
+    tags kept; ``options``: the study's command-line options beside ``--rows``. A row ``N*PxT``
+    runs ``N`` copies at once (``measure(processes, threads, copies=N)``, for studies that take
+    it)."""
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / f"{name}.json"
     kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
     done = []
     for row in rows:
-        processes, threads = (int(v) for v in row.split("x"))
-        r = measure(processes, threads)
-        r.update(tag=tag, machine=machine(), cores=os.cpu_count(), tree=commit(),
-                 command=f"python -m fbmbench {name} --rows {row} {options}")
+        many, _, shape = row.rpartition("*")
+        copies = int(many) if many else 1
+        processes, threads = (int(v) for v in shape.split("x"))
+        r = measure(processes, threads, **({"copies": copies} if copies > 1 else {}))
+        r.update(tag=tag, machine=machine(), cores=os.cpu_count(), tree=commit(), copies=copies,
+                 command=f"python -m fbmbench {name} --rows {repr(row) if copies > 1 else row} {options}")
         figures = ", ".join(f"{k} {v:.3g}" for k, v in r.items() if isinstance(v, float))
         print(f"{row}: {figures}", flush=True)
         done.append(r)
