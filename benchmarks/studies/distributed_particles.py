@@ -41,7 +41,7 @@ CHILD = r"""
 import json, resource, sys, time
 import numpy as np
 import numba
-from fbmflow.parallel.slabs import SlabPartition
+from fbmflow.parallel.blocks import BlockPartition
 from fbmflow.scenes.registry import load_scene
 args = json.loads(sys.argv[1])
 spent = [0.0]  # seconds in the partitions' exchanges and sums, the wait for a neighbour included
@@ -58,7 +58,7 @@ def timed(method):
 
 
 for name in ("update_ghosts", "add_ghosts", "dot", "pressure_dot"):
-    setattr(SlabPartition, name, timed(getattr(SlabPartition, name)))
+    setattr(BlockPartition, name, timed(getattr(BlockPartition, name)))
 scene, params, level = load_scene(args["scene"], args["level"], args["settings"])
 sim = scene.build(params, level).sim
 comm = sim.comm

@@ -60,11 +60,11 @@ if comm.rank == 0:
                           peak_gb_max=max(peaks), peak_gb_sum=sum(peaks))))
 """
 CHILD = CHILD_HEAD + r"""
-from fbmflow.flow.slabs import SlabFlowLevels
+from fbmflow.flow.blocks import BlockFlowLevels
 from fbmflow.solvers.distributed import DistributedMultigrid
 comm.Barrier() if comm.size > 1 else None
 t0 = time.perf_counter()
-slabs = SlabFlowLevels(mesh, boundary, True, comm, min_cells=64)
+slabs = BlockFlowLevels(mesh, boundary, True, comm, min_cells=64)
 x = slabs.levels[0].space.V.coordinates
 c = x - np.array([0.05, 0.05, 0.08])
 u = np.concatenate([-c[:, 1], c[:, 0], 0.0 * c[:, 2]]) * (0.1 / 0.05)

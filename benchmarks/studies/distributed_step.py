@@ -1,7 +1,7 @@
 """Time steps of a flow over several processes, against processes and threads.
 
 Question: is a time step of the ten Cate box's flow faster on two processes of one thread each
-than on one process of one or two threads (fbmflow.flow.slabs.SlabNavierStokesProblem), and how
+than on one process of one or two threads (fbmflow.flow.blocks.BlockNavierStokesProblem), and how
 do its cycles and memory per process change?
 Answer: at level 1 (the full box, 1 076 643 unknowns, no sphere) a step takes 80.5 / 83.6 s on
 two processes of one thread, 84.2 / 85.6 s on one process of two threads and 151.9 / 153.7 s on
@@ -29,12 +29,12 @@ from __future__ import annotations
 from studies.distributed_solve import CHILD_HEAD, CHILD_TAIL, run_mpiexec, run_rows, speed_ups
 
 CHILD = CHILD_HEAD + r"""
-from fbmflow.flow.slabs import SlabNavierStokesProblem
+from fbmflow.flow.blocks import BlockNavierStokesProblem
 from fbmflow.flow.time_schemes import advance
 from fbmflow.solvers import NewtonSettings
 boundary["zmax"] = Dirichlet((0.1, 0.0, 0.0))
 newton = NewtonSettings(rtol=1e-6, linear_rtol=1e-3, reuse_jacobian=True)
-flow = SlabNavierStokesProblem(mesh, 0.0373, boundary, comm, density=1250.0, newton=newton)
+flow = BlockNavierStokesProblem(mesh, 0.0373, boundary, comm, density=1250.0, newton=newton)
 x, t, times, cycles = flow.zero_state(), 0.0, [], []
 for k in range(1 + args["steps"]):
     before = flow.linear_work.iterations

@@ -154,7 +154,8 @@ class Simulation:
                                     integrator=coupling.integrator, fbm=fbm, contact=contact,
                                     repulsion=repulsion, symmetry=symmetry, frozen=frozen,
                                     linear_solver=linear, newton=solver.newton_settings(),
-                                    varying_steps=time.adaptive, comm=self.comm)
+                                    varying_steps=time.adaptive, comm=self.comm,
+                                    process_grid=solver.grid(self.comm.size, mesh.dim))
 
     # -- the state ------------------------------------------------------------------------------
     @property

@@ -1,6 +1,6 @@
 """Run under ``mpiexec -n P python _slab_flow.py DIM CASE STEPS``: every process takes ``STEPS``
 time steps (fractional-step theta) of a Navier–Stokes flow on its slabs
-(:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`) and compares its owned unknowns with the
+(:class:`~fbmflow.flow.blocks.BlockNavierStokesProblem`) and compares its owned unknowns with the
 same steps on the whole mesh by one process (multigrid too); prints one line per process with the
 largest relative difference and the cycles per step of both, and exits 1 on a mismatch.
 
@@ -11,7 +11,7 @@ import sys
 import numpy as np
 
 from fbmflow.flow import Dirichlet, DoNothing, NavierStokesProblem, NoSlip
-from fbmflow.flow.slabs import SlabNavierStokesProblem
+from fbmflow.flow.blocks import BlockNavierStokesProblem
 from fbmflow.flow.time_schemes import advance
 from fbmflow.mesh import StructuredMesh
 from fbmflow.parallel import world
@@ -49,7 +49,7 @@ def run(problem):
 
 alone = NavierStokesProblem(mesh, boundary=boundary, linear_solver=MultigridSolver(rtol=1e-10), **flow)
 whole, whole_cycles = run(alone)
-slab = SlabNavierStokesProblem(mesh, boundary=boundary, comm=comm, **flow)
+slab = BlockNavierStokesProblem(mesh, boundary=boundary, comm=comm, **flow)
 mine, cycles = run(slab)
 part = slab.partition
 want = part.local(whole)

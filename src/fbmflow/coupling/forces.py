@@ -208,7 +208,7 @@ class TestFunctionForces:
     walls : (k,) int64, velocity nodes held by the domain's walls (zero in every ``psi_i``)
     n_1d : Gauss points per axis of the fluid-part rule
     cells : (n_cells,) bool or None, the cells whose part of the integrals is taken (None: all):
-        a process's owned cells on its slab (:mod:`fbmflow.parallel.slabs`), the sums over all
+        a process's owned cells on its slab (:mod:`fbmflow.parallel.blocks`), the sums over all
         processes' parts being the whole mesh's. ``psi_i`` at an owned cell's node needs the
         owners of the nodes of the cells around it, which the slab's halo holds.
     """

@@ -187,7 +187,7 @@ def reach_layers(mesh) -> int:
     node), and its image point ``a + l <= 2 D`` away (``l = max(a, h_node)``); a cut cell's
     pressure comes from a cell two layers away at most, whose own is chosen among cells two
     further. On several processes this is the fine slab's halo
-    (:class:`~fbmflow.parallel.slabs.SlabPartition`): 4 for cubic cells, 4 on Glowinski's
+    (:class:`~fbmflow.parallel.blocks.BlockPartition`): 4 for cubic cells, 4 on Glowinski's
     level 0. Cut cells coarser than the finest (a graded mesh's outer zone) may reach further:
     :attr:`GhostNodes.beyond` says where."""
     finest = mesh.finest_spacing

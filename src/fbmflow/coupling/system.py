@@ -28,7 +28,7 @@ from ..contact.settings import ContactParams, RepulsionParams
 from ..fem.constraints import DirichletConstraints
 from ..fem.functions import mean_velocity, node_integrals
 from ..flow import NavierStokesProblem
-from ..flow.slabs import SlabNavierStokesProblem
+from ..flow.blocks import BlockNavierStokesProblem
 from ..flow.time_schemes import advance, pressure_lag
 from ..parallel import SerialComm, max_over, sum_replicated
 from ..params import FluidParams
@@ -187,13 +187,15 @@ class CoupledSystem:
     linear_solver : LinearSolver, newton : NewtonSettings, the flow's solvers
     varying_steps : bool, the steps change from one to the next (adaptive steps): the
         trapezoidal integrator then takes each step's own pressure force (:attr:`midpoint_pressure`)
-    comm : the processes' communicator (None: one process). On several, each holds a slab of the
-        mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`; the flow ``x`` is its local part),
+    comm : the processes' communicator (None: one process). On several, each holds a block of the
+        mesh (:class:`~fbmflow.flow.blocks.BlockNavierStokesProblem`; the flow ``x`` is its local part),
         sums the forces of its owned cells, and the sums are added up in the same order on every
         process (:func:`~fbmflow.parallel.comm.sum_replicated`): the particles, their contact and
-        the coupling's decisions are the same bits everywhere. The sharp boundary's slabs hold
+        the coupling's decisions are the same bits everywhere. The sharp boundary's blocks hold
         :func:`~fbmflow.coupling.sharp.reach_layers` halo layers. The multigrid solver and the
         volume or surface force only.
+    process_grid : tuple of int or None, the processes along every axis of the mesh on several
+        (None: chosen, :class:`~fbmflow.flow.blocks.BlockFlowLevels`)
 
     See :class:`~fbmflow.simulation.Simulation` for what each does; ValueError for a set-up that
     cannot run (placement, mirror planes, a boundary or force the shapes do not support).
@@ -202,7 +204,8 @@ class CoupledSystem:
     def __init__(self, mesh, particles: Particles, fluid: FluidParams, *, boundary: dict, time_scheme: str,
                  integrator: str, fbm: FictitiousBoundaryParams, contact: ContactParams | None,
                  repulsion: RepulsionParams | None, symmetry: tuple, frozen: bool,
-                 linear_solver: LinearSolver, newton: NewtonSettings, varying_steps: bool = False, comm=None):
+                 linear_solver: LinearSolver, newton: NewtonSettings, varying_steps: bool = False, comm=None,
+                 process_grid=None):
         sharp = fbm.boundary == "sharp"
         self.comm = comm if comm is not None else SerialComm()
         self.mesh = mesh  # the whole mesh (the flow's is a slab of it on several processes)
@@ -252,11 +255,11 @@ class CoupledSystem:
         self._wall_nodes = np.zeros(0, dtype=np.int64)  # set once the flow is made
         drive = None if not np.any(self.drive) else (lambda x, t: np.broadcast_to(self.drive, x.shape))
         if self.comm.size > 1:
-            self.flow = SlabNavierStokesProblem(mesh, fluid.viscosity, boundary, self.comm,
+            self.flow = BlockNavierStokesProblem(mesh, fluid.viscosity, boundary, self.comm,
                                                 density=fluid.density, body_force=drive, newton=newton,
                                                 multigrid=linear_solver.settings,
                                                 extra_constraints=self._own_constraints,
-                                                halo=reach_layers(mesh) if sharp else 1)
+                                                halo=reach_layers(mesh) if sharp else 1, grid=process_grid)
         else:
             self.flow = NavierStokesProblem(mesh, fluid.viscosity, boundary, density=fluid.density,
                                             body_force=drive, linear_solver=linear_solver, newton=newton,

@@ -175,7 +175,7 @@ class FlowLevel:
 
     def close_pockets(self, con: DirichletConstraints, partition=None) -> DirichletConstraints:
         """Hold still the fluid nodes cut off from the main fluid by constrained nodes
-        (``partition``: the :class:`~fbmflow.parallel.slabs.SlabPartition` whose slab this level's
+        (``partition``: the :class:`~fbmflow.parallel.blocks.BlockPartition` whose slab this level's
         mesh is; the components are then the whole mesh's, the largest the same on every process).
 
         A particle within a node layer of a wall or of another particle can enclose a few free

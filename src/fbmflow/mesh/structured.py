@@ -46,7 +46,7 @@ class StructuredMesh:
         Explicit vertex coordinates; uniform placement in the box when omitted.
     images : tuple of float, length dim, or None
         A piece cut from a periodic mesh that is not periodic itself (a slab of a ring of slabs,
-        :func:`~fbmflow.parallel.slabs.cut_layers`): the whole mesh's period of every axis (0
+        :func:`~fbmflow.parallel.blocks.cut_box`): the whole mesh's period of every axis (0
         where it has none), by which points and particles repeat (:attr:`periods`); None: the
         mesh's own periodic axes only.
     """

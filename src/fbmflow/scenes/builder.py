@@ -23,7 +23,7 @@ from ..contact.settings import ContactParams, ContactRepulsionParams, RepulsionP
 from ..coupling.settings import CouplingParams, FictitiousBoundaryParams, NodalBoundaryParams
 from ..fem import FlowSpace
 from ..flow import NavierStokesProblem
-from ..flow.slabs import SlabNavierStokesProblem
+from ..flow.blocks import BlockNavierStokesProblem
 from ..parallel import world
 from ..params import FluidParams, TimeParams
 from ..simulation import Simulation
@@ -189,7 +189,7 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     of ``solver`` (:meth:`~fbmflow.solvers.settings.SolverParams.linear_solver`) and its memory
     checked before the first solve (:func:`~fbmflow.solvers.choice.check_memory`); ``kwargs`` go to
     :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`. Where a launcher started several
-    processes, each holds a slab of the mesh (:class:`~fbmflow.flow.slabs.SlabNavierStokesProblem`,
+    processes, each holds a slab of the mesh (:class:`~fbmflow.flow.blocks.BlockNavierStokesProblem`,
     multigrid, ``halo`` cell layers of halo on the finest level: the sharp boundary's
     :func:`~fbmflow.coupling.sharp.reach_layers`; ParamError for the direct solver or a mesh too
     small to divide), and the memory check takes its share."""
@@ -200,9 +200,9 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     check_memory(n_unknowns // comm.size, mesh.dim, linear)
     if comm.size > 1:
         try:
-            return SlabNavierStokesProblem(mesh, viscosity, boundary, comm, density=density,
-                                           newton=solver.newton_settings(), multigrid=linear.settings,
-                                           halo=halo, **kwargs)
+            return BlockNavierStokesProblem(mesh, viscosity, boundary, comm, density=density,
+                                            newton=solver.newton_settings(), multigrid=linear.settings,
+                                            halo=halo, grid=solver.grid(comm.size, mesh.dim), **kwargs)
         except ValueError as err:  # a mesh too small for the processes
             raise ParamError(str(err)) from None
     return NavierStokesProblem(mesh, viscosity, boundary, density=density, linear_solver=linear,

@@ -1,7 +1,7 @@
 """Multigrid over several processes, each holding one slab of every level's mesh.
 
 Each process holds, on every level but the coarsest, the system assembled on its slab mesh (its
-owned cell layers and one halo layer, :mod:`fbmflow.parallel.slabs`): the rows of its owned
+owned cell layers and one halo layer, :mod:`fbmflow.parallel.blocks`): the rows of its owned
 unknowns are the whole mesh's. Vectors are local and *consistent* (ghosts hold their owners'
 values). One cycle per process:
 
@@ -15,7 +15,7 @@ values). One cycle per process:
 * **residual:** the local system's product, masked to the owned unknowns;
 * **restriction:** the transposed prolongation of the masked residual, each process's part of
   the coarse sums; the parts at the coarse ghosts are added to their owners
-  (:meth:`~fbmflow.parallel.slabs.SlabPartition.add_ghosts`);
+  (:meth:`~fbmflow.parallel.blocks.BlockPartition.add_ghosts`);
 * **coarsest level:** the whole coarsest mesh's system, factorised on every process; its
   right-hand side is the sum of all processes' parts (one ``allreduce``), and every process
   solves it redundantly and takes the correction of its own slab.

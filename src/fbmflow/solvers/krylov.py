@@ -24,7 +24,7 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         dropped, and the residuals are those of ``A x + lam e = b``.
     inner : optional ``(x, y) -> float``, the inner product (default ``x @ y``): a distributed
         vector's sum over the unknowns each process owns
-        (:meth:`fbmflow.parallel.slabs.SlabPartition.dot`)
+        (:meth:`fbmflow.parallel.blocks.BlockPartition.dot`)
 
     Returns
     -------

@@ -94,7 +94,7 @@ def solve_newton(residual: Callable[[np.ndarray], np.ndarray],
         rule, and with it the accuracy, stays the same.
     norm : x -> float, optional, the norm of residuals and steps (default the Euclidean norm; one
         process's part of a distributed vector: the sum over the unknowns it owns,
-        :meth:`fbmflow.parallel.slabs.SlabPartition.dot`)
+        :meth:`fbmflow.parallel.blocks.BlockPartition.dot`)
 
     Returns
     -------

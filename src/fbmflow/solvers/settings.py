@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from ..config import ParamError, Section, param, section
 from .base import LinearSolver
 from .choice import choose_linear_solver
@@ -33,6 +35,26 @@ class SolverParams(Section):
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
     newton_reuse_jacobian: bool = param(True, "keep a factorised Jacobian while it contracts the "
                                         "residual 10x per iteration (same solution, less work)")
+    process_grid: str = param("auto", "on several processes, how many divide every axis of the mesh, "
+                              "as '2x2x4' (the product the number of processes), or 'auto': the grid that "
+                              "divides the most multigrid levels, then the one with the fewest cell faces "
+                              "between the blocks (fbmflow.flow.blocks)")
+
+    def grid(self, size: int, dim: int) -> tuple[int, ...] | None:
+        """The process grid of :attr:`process_grid` for ``size`` processes on a ``dim``-dimensional
+        mesh (None: 'auto', or one process); ParamError where it is not ``dim`` whole numbers
+        whose product is ``size``."""
+        if self.process_grid == "auto" or size == 1:
+            return None
+        try:
+            grid = tuple(int(g) for g in self.process_grid.lower().split("x"))
+        except ValueError:
+            grid = ()
+        if len(grid) != dim or min(grid) < 1 or int(np.prod(grid)) != size:
+            raise ParamError(f"solver.process_grid = {self.process_grid!r} is not a grid of {size} processes "
+                             f"over the mesh's {dim} axes: give {dim} whole numbers joined by 'x' whose "
+                             f"product is {size} (as {'x'.join(['1'] * (dim - 1) + [str(size)])}), or 'auto'")
+        return grid
 
     def on_processes(self, size: int) -> "SolverParams":
         """These settings for a run on ``size`` processes: multigrid on several (the one solver

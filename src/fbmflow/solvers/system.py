@@ -76,7 +76,7 @@ class SaddlePointSystem:
         builds its preconditioner from, applying this system's matrix in the Krylov iteration;
         None: the system itself.
     transient : bool, a time step's system (the mass term is part of ``A``)
-    partition : :class:`~fbmflow.parallel.slabs.SlabPartition` or None, the slab of the mesh
+    partition : :class:`~fbmflow.parallel.blocks.BlockPartition` or None, the slab of the mesh
         this process holds where the system is one process's part of the whole mesh's (its rows
         of the owned unknowns are the whole system's; the solver is then
         :class:`~fbmflow.solvers.distributed.DistributedMultigrid`); None: the whole mesh's

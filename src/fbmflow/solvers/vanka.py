@@ -252,7 +252,7 @@ class FactoredVankaSmoother:
         component blocks (True) or by an LU of the whole block (False: 2.5 times their factors'
         memory, the same corrections to rounding).
     cells : (n_cells,) bool or None, the cells whose patches the sweeps update (None: all): a
-        process's owned cells on its slab of the mesh (:mod:`fbmflow.parallel.slabs`), whose halo
+        process's owned cells on its slab of the mesh (:mod:`fbmflow.parallel.blocks`), whose halo
         cells are a neighbour's to update
     """
 

@@ -1,5 +1,6 @@
-"""Run under ``mpiexec -n P python _slab_solve.py DIM CASE``: every process solves an Oseen time
-step's saddle-point system on its slabs with the distributed multigrid and compares its owned
+"""Run under ``mpiexec -n P python _block_solve.py DIM CASE [GRID]``: every process solves an Oseen
+time step's saddle-point system on its block (``GRID``: the processes along every axis, as
+``2x2``; the automatic choice where not given) with the distributed multigrid and compares its owned
 unknowns with the whole mesh's direct solution; it also solves the same system alone (one slab)
 for the cycles per solve. Prints one line per process and exits 1 on a mismatch.
 
@@ -11,8 +12,8 @@ import sys
 import numpy as np
 
 from fbmflow.flow import Dirichlet, DoNothing, NoSlip
+from fbmflow.flow.blocks import BlockFlowLevels
 from fbmflow.flow.levels import FlowLevel
-from fbmflow.flow.slabs import SlabFlowLevels
 from fbmflow.mesh import StructuredMesh
 from fbmflow.parallel import SerialComm, world
 from fbmflow.solvers.direct import factorize
@@ -20,6 +21,7 @@ from fbmflow.solvers.distributed import DistributedMultigrid
 
 comm = world()
 dim, case = int(sys.argv[1]), sys.argv[2]
+grid = tuple(int(g) for g in sys.argv[3].split("x")) if len(sys.argv) > 3 else None
 shape = (8, 16) if dim == 2 else (4, 4, 16)
 mesh = StructuredMesh.box(shape, upper=(1.0, 2.0) if dim == 2 else (1.0, 1.0, 2.0),
                           periodic=(case == "periodic",) * dim)
@@ -54,7 +56,8 @@ x_ref = np.concatenate([u_ref, p_ref])
 
 
 def solve(communicator):
-    slabs = SlabFlowLevels(mesh, boundary, closed, communicator)
+    slabs = BlockFlowLevels(mesh, boundary, closed, communicator,
+                            grid=grid if communicator.size > 1 else None)
     fine = slabs.partitions[0]
     u = velocity(slabs.levels[0].space.V.coordinates)
     system = slabs.systems(u, **coefficients)
@@ -66,12 +69,12 @@ def solve(communicator):
     own = fine.owned
     error = float(np.abs(x[own] - want[own]).max() / np.abs(x_ref).max())
     ghosts = float(np.abs(x - want).max() / np.abs(x_ref).max())  # consistent: ghosts too
-    return error, ghosts, report.iterations, len(solver.levels) + 1
+    return error, ghosts, report.iterations, len(solver.levels) + 1, slabs.grid
 
 
-error, ghosts, cycles, n_levels = solve(comm)
-_, _, alone, _ = solve(SerialComm())
+error, ghosts, cycles, n_levels, chosen = solve(comm)
+_, _, alone, _, _ = solve(SerialComm())
 ok = error < 1e-8 and ghosts < 1e-8 and cycles <= 1.3 * alone + 1
-print(f"rank {comm.rank} of {comm.size}: {case} {dim}D, {n_levels} levels, error {error:.1e} "
+print(f"rank {comm.rank} of {comm.size}: {case} {dim}D, grid {chosen}, {n_levels} levels, error {error:.1e} "
       f"(ghosts {ghosts:.1e}), cycles {cycles} against {alone} on one process", flush=True)
 sys.exit(0 if comm.allreduce(int(ok)) == comm.size else 1)

@@ -1,14 +1,22 @@
-"""The flow of one process among several: every multigrid level's slab
-(:mod:`fbmflow.parallel.slabs`) with its operators, the transfers between the slabs, and the
+"""The flow of one process among several: every multigrid level's block
+(:mod:`fbmflow.parallel.blocks`) with its operators, the transfers between the blocks, and the
 whole coarsest mesh, which every process holds (:mod:`fbmflow.solvers.distributed`); and the
-Navier–Stokes problem on the slabs.
+Navier–Stokes problem on the blocks.
 
 The fine mesh is coarsened as for one process (:func:`~fbmflow.flow.levels.coarse_levels`). The
-slabs are cut on the fine mesh in whole multiples of ``2^J`` cell layers, so that they stay
-slabs of two layers at least on the ``J`` coarser levels; the level below the last slab level is
-the coarsest, held whole. A fine halo of ``w`` layers (rows that reach further than a cell: the
-sharp boundary) halves from level to level, ``max(1, ceil(w / 2^j))`` on level ``j``, so that
-every slab's coarse correction covers the fine slab it is prolongated onto, halo included.
+blocks are cut on the fine mesh in whole multiples of ``2^J`` cell layers along every divided
+axis, so that they stay blocks of two layers at least on the ``J`` coarser levels; the level
+below the last block level is the coarsest, held whole. A fine halo of ``w`` layers (rows that
+reach further than a cell: the sharp boundary) halves from level to level,
+``max(1, ceil(w / 2^j))`` on level ``j``, so that every block's coarse correction covers the fine
+block it is prolongated onto, halo included.
+
+The process grid (how many processes divide every axis) is given, or chosen among every
+factorisation of the number of processes: the one that divides the most levels (the smallest
+coarsest mesh, which every process solves whole), then the one with the fewest cell faces
+between blocks (:func:`~fbmflow.parallel.blocks.halo_faces`, what the exchanges grow with).
+Slabs along the last axis win on long meshes and few processes (ten Cate's box on up to 4),
+blocks in two or three directions on many.
 """
 from __future__ import annotations
 
@@ -18,8 +26,8 @@ import scipy.sparse as sp
 from ..fem import FlowSpace
 from ..fem.dofmap import DofMap, PressureDofMap
 from ..mesh import StructuredMesh, face_tags
-from ..parallel import SlabPartition, max_over, sum_over
-from ..parallel.slabs import cut_layers, split_layers
+from ..parallel import BlockPartition, max_over, sum_over
+from ..parallel.blocks import box_numbers, cut_box, halo_faces, process_grids, split_layers
 from ..solvers import NewtonSettings
 from ..solvers.multigrid import MultigridSettings, MultigridSolver
 from ..solvers.system import SaddlePointSystem
@@ -29,30 +37,33 @@ from .levels import FlowLevel
 from .navier_stokes import NavierStokesProblem
 
 
-class SlabFlowLevels:
-    """Process ``comm.rank``'s slabs of the multigrid levels of ``mesh``.
+class BlockFlowLevels:
+    """Process ``comm.rank``'s blocks of the multigrid levels of ``mesh``.
 
     Parameters
     ----------
-    mesh : StructuredMesh, the fine mesh (its last axis is the slabs', a ring where periodic)
+    mesh : StructuredMesh, the fine mesh (a divided periodic axis: its blocks form a ring)
     boundary : dict, the whole mesh's boundary conditions (:mod:`fbmflow.flow.boundary`)
     pressure_fixed : bool, whether ``int p = 0`` closes the system (a closed domain)
     comm : the processes' communicator
     min_cells : int, the coarsest level keeps at least so many cells
     extra_constraints : callable ``(DofMap, t) -> DirichletConstraints`` or None, further
-        constraints on every level (particles), evaluated on each level's DOF map (the slabs'
+        constraints on every level (particles), evaluated on each level's DOF map (the blocks'
         and the whole coarsest mesh's)
-    halo : int, the fine slab's halo layers (see the module docstring)
+    halo : int, the fine block's halo layers (see the module docstring)
+    grid : tuple of int or None, the processes along every axis (None: chosen, see the module
+        docstring); ValueError where it cannot divide the mesh
 
     Attributes
     ----------
-    partitions : list of SlabPartition, finest first, the slab levels
-    levels : list of FlowLevel, on the slab meshes
+    grid : tuple of int, the process grid
+    partitions : list of BlockPartition, finest first, the block levels
+    levels : list of FlowLevel, on the block meshes
     coarsest : FlowLevel, on the whole coarsest mesh
     """
 
     def __init__(self, mesh: StructuredMesh, boundary: dict, pressure_fixed: bool, comm, min_cells: int = 1,
-                 extra_constraints=None, halo: int = 1):
+                 extra_constraints=None, halo: int = 1, grid=None):
         size, rank = comm.size, comm.rank
         meshes = [mesh]
         while all(n % 2 == 0 for n in meshes[-1].shape) and meshes[-1].n_cells // 2**mesh.dim >= min_cells:
@@ -60,52 +71,39 @@ class SlabFlowLevels:
                 meshes.append(meshes[-1].coarsen())
             except ValueError:
                 break
-        n_last = mesh.shape[-1]
         halos = [max(1, -(-halo // 2**j)) for j in range(len(meshes))]
-
-        ring = mesh.periodic[-1] and size > 1
-
-        def fits(J):  # slabs in multiples of 2^J layers: each holds halo + 1 layers on levels 0..J
-            bounds = split_layers(n_last, size, 2**J)  # (and on a ring wraps not onto itself)
-            return all(np.diff(bounds // 2**j).min() > halos[j] and not
-                       (ring and np.diff(bounds // 2**j).max() + 2 * halos[j] >= n_last // 2**j)
-                       for j in range(J + 1))
-
-        deepest = [J for J in range(len(meshes) - 1) if fits(J)]
         if len(meshes) == 1:
             raise ValueError(f"the mesh {mesh.shape} does not coarsen (an odd number of cells along an "
                              f"axis), so {size} processes have no multigrid level to divide: run it on one "
                              "process or on a mesh with even cell counts")
-        if not deepest:
-            least = max(2, halo + 1)
-            need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
-            most = n_last // (2 * least)
-            fix = f"use at most {most} processes or a finer mesh" if most > 1 else \
-                "run it on one process or a finer mesh"
-            if ring and size * least <= n_last:
-                need = f"{least} cell layers each and, the axis being periodic, a slab and its two halos " \
-                       "shorter than the axis"
-                fix = "use more processes, a finer mesh or one process"
-            raise ValueError(f"{size} processes need {need} on a level above the coarsest; the mesh has "
-                             f"{n_last} along its last axis and {len(meshes)} level(s): {fix}")
-        J = deepest[-1]
-        bounds = split_layers(n_last, size, 2**J)
+        grids = process_grids(size, mesh.dim) if grid is None else [tuple(grid)]
+        found = []  # (deepest block level, cell faces between blocks, the later axes first, grid)
+        for g in grids:
+            deepest = [J for J in range(len(meshes) - 1) if _fits(mesh, g, J, halos)]
+            if deepest:
+                found.append((-deepest[-1], halo_faces(mesh.shape, g), tuple(-k for k in g[::-1]), g))
+        if not found:
+            raise ValueError(_refusal(mesh, size, halo, len(meshes), grid))
+        J, grid = -min(found)[0], min(found)[3]
+        bounds = [split_layers(n, g, 2**J) for n, g in zip(mesh.shape, grid)]
         self.comm = comm
-        self.partitions = [SlabPartition(meshes[j], size, rank, bounds // 2**j, comm, halos[j])
-                           for j in range(J + 1)]
-        self.levels = [FlowLevel(part.mesh, _slab_boundary(boundary, part), pressure_fixed, extra_constraints)
-                       for part in self.partitions]
+        #: the processes along every axis
+        self.grid = grid
+        self.partitions = [BlockPartition(meshes[j], size, rank, [b // 2**j for b in bounds], comm, halos[j],
+                                          grid) for j in range(J + 1)]
+        self.levels = [FlowLevel(part.mesh, _block_boundary(boundary, part), pressure_fixed,
+                                 extra_constraints) for part in self.partitions]
         self.coarsest = FlowLevel(meshes[J + 1], boundary, pressure_fixed, extra_constraints)
         holders = self.partitions[1:] + [None]
-        self.prolongations = [_slab_prolongation(part, meshes[j + 1], holders[j])
+        self.prolongations = [_block_prolongation(part, meshes[j + 1], holders[j])
                               for j, part in enumerate(self.partitions)]
-        #: per coarser level, the finer slab's local node at each of its nodes that the finer
-        #: slab owns, and which they are (the injection's, found once)
+        #: per coarser level, the finer block's local node at each of its nodes that the finer
+        #: block owns, and which they are (the injection's, found once)
         self._injections = [_injection(self.partitions[j], part, self.coarsest)
                             for j, part in enumerate(holders)]
 
     def inject(self, u: np.ndarray) -> list[np.ndarray]:
-        """A consistent fine velocity ``u`` (local) injected into every coarser level: the slab
+        """A consistent fine velocity ``u`` (local) injected into every coarser level: the block
         levels' local vectors (consistent) and the whole coarsest mesh's (the same on every
         process)."""
         out = [u]
@@ -126,7 +124,7 @@ class SlabFlowLevels:
                 extra=None) -> SaddlePointSystem:
         """The linearisations ``m rho M + a (mu L + rho N(u))`` (with the Newton term ``R(u)``
         where ``newton``) at the consistent local fine velocity ``u`` on every level, chained:
-        this process's part of the fine system, its ``coarser`` chain the slab levels' (each
+        this process's part of the fine system, its ``coarser`` chain the block levels' (each
         with its ``partition`` and ``prolongation``) and the whole coarsest mesh's last
         (:class:`~fbmflow.solvers.distributed.DistributedMultigrid`'s input).
 
@@ -149,15 +147,46 @@ class SlabFlowLevels:
         return system
 
 
-def _slab_boundary(boundary: dict, part: SlabPartition) -> dict:
-    """The conditions on a slab mesh's faces: the whole mesh's, the faces cut between slabs
+def _fits(mesh: StructuredMesh, grid, J: int, halos: list[int]) -> bool:
+    """Whether blocks of ``grid`` in multiples of ``2^J`` layers hold ``halo + 1`` layers along
+    every divided axis on the levels ``0..J`` (and, on a periodic axis, wrap not onto
+    themselves)."""
+    for n, g, periodic in zip(mesh.shape, grid, mesh.periodic):
+        if g == 1:
+            continue
+        bounds = split_layers(n, g, 2**J)
+        for j in range(J + 1):
+            widths = np.diff(bounds // 2**j)
+            if widths.min() <= halos[j] or (periodic and widths.max() + 2 * halos[j] >= n // 2**j):
+                return False
+    return True
+
+
+def _refusal(mesh: StructuredMesh, size: int, halo: int, levels: int, grid) -> str:
+    """Why no grid of ``size`` processes divides ``mesh``, and what to do."""
+    least = max(2, halo + 1)
+    need = "two cell layers each" if least == 2 else f"{least} cell layers each (a halo of {halo})"
+    most = int(np.prod([max(1, n // (2 * least)) for n in mesh.shape]))
+    fix = f"use at most {most} processes or a finer mesh" if most > 1 else \
+        "run it on one process or a finer mesh"
+    if any(mesh.periodic) and size * least <= max(mesh.shape):
+        need += " and, along a periodic axis, a block and its two halos shorter than the axis"
+        fix = "use more processes, a finer mesh or one process"
+    which = f"a grid {tuple(grid)} of processes needs" if grid is not None else f"{size} processes need"
+    return (f"{which} {need} along every divided axis on a level above the coarsest; the mesh has "
+            f"{mesh.shape} cells and {levels} level(s): {fix}")
+
+
+def _block_boundary(boundary: dict, part: BlockPartition) -> dict:
+    """The conditions on a block mesh's faces: the whole mesh's, the faces cut between blocks
     unconstrained (their rows are the neighbours')."""
-    lower, upper = face_tags(part.dim)[-2:]  # the slab mesh's faces across its last axis
+    tags = face_tags(part.dim)
     local = dict(boundary)
-    if part.held[0] < part.layers[0]:
-        local[lower] = DoNothing()
-    if part.held[1] > part.layers[1]:
-        local[upper] = DoNothing()
+    for a, ((lo, hi), (ha, hb)) in enumerate(zip(part.layers, part.held)):
+        if ha < lo:
+            local[tags[2 * a]] = DoNothing()
+        if hb > hi:
+            local[tags[2 * a + 1]] = DoNothing()
     return local
 
 
@@ -179,9 +208,9 @@ def _fine_node(coarse: StructuredMesh, nodes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _injection(fine: SlabPartition, coarse: SlabPartition | None, coarsest: FlowLevel) -> tuple:
-    """For the coarser level's local nodes (``coarse``'s slab, or the whole ``coarsest`` mesh's):
-    the local node of ``fine``'s slab at those of them that ``fine`` owns, and a mask of which
+def _injection(fine: BlockPartition, coarse: BlockPartition | None, coarsest: FlowLevel) -> tuple:
+    """For the coarser level's local nodes (``coarse``'s block, or the whole ``coarsest`` mesh's):
+    the local node of ``fine``'s block at those of them that ``fine`` owns, and a mask of which
     they are."""
     coarse_mesh = coarse.whole if coarse is not None else coarsest.mesh
     nodes = coarse.nodes if coarse is not None else np.arange(coarsest.space.n_v)
@@ -191,52 +220,53 @@ def _injection(fine: SlabPartition, coarse: SlabPartition | None, coarsest: Flow
     return fine_nodes[inside], inside
 
 
-def _slab_prolongation(fine: SlabPartition, coarse_mesh: StructuredMesh, coarse: SlabPartition | None):
+def _block_prolongation(fine: BlockPartition, coarse_mesh: StructuredMesh, coarse: BlockPartition | None):
     """The scalar Q2 and P1disc prolongations ``(P_v, P_p)`` from the coarser level's local
-    vectors (``coarse``'s slab, or the whole ``coarse_mesh`` where None) onto ``fine``'s slab:
-    built between the coarse cell layers under the fine slab and their refinement, the rows of
-    the fine slab's nodes and cells taken."""
-    fa, fb = fine.held
-    sa, sb = fa // 2, (fb + 1) // 2
-    sub = cut_layers(coarse_mesh, sa, sb)
-    refined = cut_layers(fine.whole, 2 * sa, 2 * sb)
-    P_v = prolongation_q2(DofMap(sub), DofMap(refined))
+    vectors (``coarse``'s block, or the whole ``coarse_mesh`` where None) onto ``fine``'s block:
+    built between the coarse cells under the fine block and their refinement, the rows of the
+    fine block's nodes and cells taken."""
+    lower = [ha // 2 for ha, _ in fine.held]
+    upper = [(hb + 1) // 2 for _, hb in fine.held]
+    sub = cut_box(coarse_mesh, lower, upper)
+    refined = cut_box(fine.whole, [2 * a for a in lower], [2 * b for b in upper])
+    sub_v, refined_v = DofMap(sub), DofMap(refined)
+    P_v = prolongation_q2(sub_v, refined_v)
     P_p = prolongation_p1disc(PressureDofMap(sub), PressureDofMap(refined))
     npl = fine.dim + 1
-    n_c = coarse_mesh.shape[-1]
-    coarse_plane = int(np.prod(_node_counts(coarse_mesh)[:-1]))
-    fine_layer, coarse_layer = int(np.prod(fine.whole.shape[:-1])), int(np.prod(coarse_mesh.shape[:-1]))
-    # the coarse level's local node and cell of every node and cell of ``sub`` (a ring's wrap round)
-    n_planes = 2 * n_c if coarse_mesh.periodic[-1] else 2 * n_c + 1
-    k = np.arange(DofMap(sub).n_dofs)
-    nodes = ((2 * sa + k // coarse_plane) % n_planes) * coarse_plane + k % coarse_plane
-    c = np.arange(sub.n_cells)
-    cells = ((sa + c // coarse_layer) % n_c) * coarse_layer + c % coarse_layer
+    whole_counts = _node_counts(coarse_mesh)
+    # the fine block's nodes and cells in ``refined``'s numbers, ``sub``'s in the coarse level's
+    rows_v = box_numbers([np.arange(m) + 2 * (ha - 2 * a) for m, (ha, _), a in
+                           zip(fine.node_counts, fine.held, lower)], _node_counts(refined))
+    rows_c = box_numbers([np.arange(hb - ha) + (ha - 2 * a) for (ha, hb), a in zip(fine.held, lower)],
+                          list(refined.shape))
+    nodes = box_numbers([(2 * a + np.arange(m)) % c for a, m, c in
+                          zip(lower, _node_counts(sub), whole_counts)], whole_counts)
+    cells = box_numbers([(a + np.arange(m)) % n for a, m, n in zip(lower, sub.shape, coarse_mesh.shape)],
+                         list(coarse_mesh.shape))
     if coarse is not None:
         nodes, cells = coarse.local_nodes(nodes), coarse.local_cells(cells)
         n_v_c, n_cells_c = coarse.n_v, coarse.n_cells
     else:
-        n_v_c, n_cells_c = int(np.prod(_node_counts(coarse_mesh))), coarse_mesh.n_cells
+        n_v_c, n_cells_c = int(np.prod(whole_counts)), coarse_mesh.n_cells
     pressures = (cells[:, None] * npl + np.arange(npl)).ravel()
+    rows_p = (rows_c[:, None] * npl + np.arange(npl)).ravel()
 
-    def cut(P, row0, n_rows, columns, n_cols):
-        P = P.tocsr()[row0:row0 + n_rows]
-        return sp.csr_matrix((P.data, columns[P.indices], P.indptr), shape=(n_rows, n_cols))
+    def cut(P, rows, columns, n_cols):
+        P = P.tocsr()[rows]
+        return sp.csr_matrix((P.data, columns[P.indices], P.indptr), shape=(rows.size, n_cols))
 
-    return (cut(P_v, 2 * (fa - 2 * sa) * fine.plane, fine.n_v, nodes, n_v_c),
-            cut(P_p, (fa - 2 * sa) * fine_layer * npl, fine.n_cells * npl, pressures, n_cells_c * npl))
-
+    return cut(P_v, rows_v, nodes, n_v_c), cut(P_p, rows_p, pressures, n_cells_c * npl)
 
 
-class SlabNavierStokesProblem(NavierStokesProblem):
+class BlockNavierStokesProblem(NavierStokesProblem):
     """A :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem` of which this process holds one
-    slab (its owned cell layers and a halo layer each side, :mod:`fbmflow.parallel.slabs`).
+    block (its owned cell layers and a halo layer each side, :mod:`fbmflow.parallel.blocks`).
 
-    Vectors are this process's local ``[u, p]`` on its slab mesh, *consistent* (ghosts hold their
+    Vectors are this process's local ``[u, p]`` on its block mesh, *consistent* (ghosts hold their
     owners' values): every residual and operator product is completed by a ghost update, norms
     and the closed box's volume balance sum over the owned unknowns, and the linear steps are
-    solved by :class:`~fbmflow.solvers.distributed.DistributedMultigrid` on the slab levels of
-    :class:`SlabFlowLevels` (the Picard hierarchy inside FGMRES, which applies the Newton
+    solved by :class:`~fbmflow.solvers.distributed.DistributedMultigrid` on the block levels of
+    :class:`BlockFlowLevels` (the Picard hierarchy inside FGMRES, which applies the Newton
     operator where there is convection). The time schemes (:func:`~fbmflow.flow.time_schemes.advance`)
     run unchanged on every process.
 
@@ -250,32 +280,35 @@ class SlabNavierStokesProblem(NavierStokesProblem):
     multigrid : MultigridSettings or None, the solver's (V-cycles, vanka-factored, FGMRES; the
         coarse levels see particles by their own nodes)
     extra_constraints : as :class:`~fbmflow.flow.navier_stokes.NavierStokesProblem`'s (particles),
-        evaluated on every slab's and the whole coarsest mesh's DOF map; the fine level's fluid
-        pockets are closed over the whole mesh (:meth:`~fbmflow.parallel.slabs.SlabPartition.join_components`)
+        evaluated on every block's and the whole coarsest mesh's DOF map; the fine level's fluid
+        pockets are closed over the whole mesh
+        (:meth:`~fbmflow.parallel.blocks.BlockPartition.join_components`)
     coarse_cells : int or None, the coarsest level keeps at least so many cells (None: as few as
-        the slabs allow)
-    halo : int, the fine slab's halo layers: as far as a constraint row of an owned unknown
+        the blocks allow)
+    halo : int, the fine block's halo layers: as far as a constraint row of an owned unknown
         reaches (the sharp boundary's, :func:`~fbmflow.coupling.sharp.reach_layers`). Constraints
-        of the outer halo may then differ from their owners' (an image point off the slab mesh):
+        of the outer halo may then differ from their owners' (an image point off the block mesh):
         every vector a process changes by its own constraints is completed from the owners
         (:meth:`make_consistent`)
+    grid : tuple of int or None, the processes along every axis (None: chosen,
+        :class:`BlockFlowLevels`)
     """
 
     def __init__(self, mesh: StructuredMesh, viscosity: float, boundary: dict, comm, density: float = 1.0,
                  body_force=None, convection: bool = True, newton: NewtonSettings = NewtonSettings(),
                  multigrid: MultigridSettings | None = None, extra_constraints=None,
-                 coarse_cells: int | None = None, halo: int = 1):
+                 coarse_cells: int | None = None, halo: int = 1, grid=None):
         check_boundary(mesh.tags, boundary)
         multigrid = multigrid or MultigridSettings()
         if extra_constraints is not None and multigrid.coarse_obstacle != "nodes":
             raise ValueError("on several processes the coarse levels see particles by their own nodes: set "
                              "solver.multigrid.coarse_obstacle = 'nodes'")
-        self.slabs = SlabFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm,
+        self.blocks = BlockFlowLevels(mesh, boundary, not pressure_is_determined(boundary), comm,
                                     min_cells=coarse_cells or 1, extra_constraints=extra_constraints,
-                                    halo=halo)
-        self.partition = part = self.slabs.partitions[0]
+                                    halo=halo, grid=grid)
+        self.partition = part = self.blocks.partitions[0]
         solver = MultigridSolver(multigrid, rtol=newton.linear_rtol or 1e-8)
-        super().__init__(part.mesh, viscosity, _slab_boundary(boundary, part), density, body_force,
+        super().__init__(part.mesh, viscosity, _block_boundary(boundary, part), density, body_force,
                          convection, solver, newton, extra_constraints=extra_constraints)
         self.whole_mesh = mesh
         self._whole_space = None
@@ -283,7 +316,7 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         self._pressure_dot = part.pressure_dot
 
     def _fine_level(self, mesh, boundary, pressure_fixed, extra_constraints) -> FlowLevel:
-        return self.slabs.levels[0]
+        return self.blocks.levels[0]
 
     def dot(self, x: np.ndarray, y: np.ndarray) -> float:
         return self.partition.dot(x, y)
@@ -346,11 +379,11 @@ class SlabNavierStokesProblem(NavierStokesProblem):
         return v
 
     def linear_system(self, x, m, a, con, t=0.0, extra=None) -> SaddlePointSystem:
-        """The Picard linearisation on every slab level (:meth:`SlabFlowLevels.systems`; the fine
+        """The Picard linearisation on every block level (:meth:`BlockFlowLevels.systems`; the fine
         level under ``con``, the coarser ones under their walls and the particles' nodes), or,
         with convection, the Newton system whose ``preconditioner`` it is."""
         u = x[:self.space.n_u]
-        picard = self.slabs.systems(u, m, a, self.rho, self.mu, self.convection, con=con,
+        picard = self.blocks.systems(u, m, a, self.rho, self.mu, self.convection, con=con,
                                     orphans=self._known_orphans(con), t=t, extra=extra)
         if self.convection and a != 0.0:
             return self.fine.newton_system(picard, u, a, self.rho)
