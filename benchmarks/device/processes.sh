@@ -13,8 +13,9 @@
 #   level 2 on 16 processes of one thread and on one process of one thread (the strong-scaling
 #   target: 10x), level 1 on 2 processes (the weak-scaling target: level 2 on 16 within 1.5x of
 #   its time per step), then, while the call has time, level 2 on one process of 16 threads and
-#   on 8 and 4 processes (tags of their own: a tag's rows replace that tag's earlier ones; their
-#   speed-ups against device-L2's 1 x 1 row are worked out by hand).
+#   on 8 and 4 processes, and on 16 processes in slabs (1 x 1 x 16) against the chosen 1 x 2 x 8
+#   blocks (tags of their own: a tag's rows replace that tag's earlier ones; their speed-ups
+#   against device-L2's 1 x 1 row are worked out by hand).
 # A dry run here (level 0 and 1, 2 processes; this machine's Python): QUICK=1 OUT=/tmp/out bash
 # benchmarks/device/processes.sh, with the wheels of this machine's Python in out/whl.
 set -u
@@ -32,11 +33,11 @@ fi
 nproc >> "$OUT/mpi_check.txt"
 cd benchmarks || exit 1
 save() { cp results/distributed_particles.* "$OUT/" 2>/dev/null; }
-rows() {  # TAG LEVEL STEPS ROWS...
+rows() {  # TAG LEVEL STEPS ROWS... (EXTRA: more settings)
     local tag=$1 level=$2 steps=$3
     shift 3
     python -m fbmbench distributed_particles --rows "$@" --scene ten-cate --level "$level" --steps "$steps" \
-        --settings solver.linear=multigrid --tag "$tag" >> "$OUT/log.txt" 2>&1
+        --settings solver.linear=multigrid ${EXTRA:-} --tag "$tag" >> "$OUT/log.txt" 2>&1
     save
     echo "$(date +%T) $tag level $level rows $* done at ${SECONDS}s" >> "$OUT/log.txt"
 }
@@ -51,3 +52,4 @@ rows device-L2 2 2 16x1 1x1
 rows device-L1 1 2 2x1
 if [ "$SECONDS" -lt 400 ]; then rows device-L2-more 2 2 1x16 8x1; fi
 if [ "$SECONDS" -lt 470 ]; then rows device-L2-4 2 2 4x1; fi
+if [ "$SECONDS" -lt 500 ]; then EXTRA=solver.process_grid=1x1x16 rows device-L2-slabs 2 2 16x1; fi

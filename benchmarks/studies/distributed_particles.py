@@ -10,10 +10,17 @@ the cycles per step; with the nodal boundary to 2.0e-14 / 1.9e-12 and 2.7e-10 / 
 Cate level-1 step (quarter box, 278 739 unknowns) at its defaults takes 12.6 s on two processes
 of one thread, 12.5 s on one process of two threads and 19.1 s on one of one thread: 1.51x,
 short of the 1.8x asked for (13.1 / 13.5 / 18.8 s, 1.43x, before the Newton drift fix; nodal
-boundary: 1.46-1.59x); 0.50 GB per process against 0.69 GB.
-Measured: 2026-11-29, commit 1c96a0a (tag speed-sharp-2), 585120f (sharp-2d, sharp, speed-sharp),
-59e90f9 (same, speed) and 84a4a58 (same-2d, speed2); quoted in
-docs/validation/several-processes.md, "The sharp boundary" and "Particles"
+boundary: 1.46-1.59x); 0.50 GB per process against 0.69 GB. Two one-process runs at once
+(rows ``2*1x1``) each take 1.05-1.34x as long as one alone, so two processes cannot beat
+1.49-1.80x on this machine; the step on two processes reached 1.30-1.46x in the same runs, the
+lower slab's process waiting 2.99 s of a 13.46 s step in the exchanges against the sphere's 0.57
+s. On 4 processes (level 0, nodal, 10 steps) 2 x 2 x 1 blocks follow one process to 1.4e-10 in
+the velocities in 1.04 times the cycles, 1 x 1 x 4 slabs to 2.2e-10 in 1.00 times.
+Measured: 2026-11-30, commit e447e55 (speed-limit, speed-limit-2, speed-limit-3) and 6622083+
+(blocks-same, blocks-same-slabs); 2026-11-29, commit 1c96a0a (tag speed-sharp-2), 585120f
+(sharp-2d, sharp, speed-sharp), 59e90f9 (same, speed) and 84a4a58 (same-2d, speed2); quoted in
+docs/validation/several-processes.md, "The sharp boundary", "Particles", "Blocks in two and
+three directions" and "Two processes on this machine: what limits them"
 Run: python -m fbmbench distributed_particles --rows 1x1 2x1 4x1 --scene ten-cate --level 0 --steps 10
 --settings solver.linear=multigrid solver.newton_rtol=1e-10 solver.linear_rtol=1e-10
 coupling.tol=1e-10
