@@ -193,6 +193,19 @@ def test_a_particle_that_leaves_the_box_stops_the_run_with_a_remedy_that_fits(tm
     assert y > 0.125 * (1 - 0.5)  # the disk's centre at most half its radius into the floor
 
 
+def test_an_overlap_from_a_contact_skin_wider_than_the_gaps_names_the_skin_not_the_step(tmp_path, capsys):
+    """``sedimentation-3d`` at level 0: cells of 0.25 cm against spheres of radius 0.1 cm, so the
+    contact skin (one cell) is 2.5 radii and the lattice's gaps (0.14 cm) lie inside it; the
+    contact pushes the lattice apart in the first step, a sphere into another, whatever the time
+    step (it said "reduce time.dt"). The remedy now names the level and the skin."""
+    code = main(["run", "sedimentation-3d", "--level", "0", "--quiet", "--no-plot", "--set",
+                 "time.t_end=0.02", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 1 and "into particle" in err, err
+    assert "--level" in err and "contact.skin_cells" in err and "2.5 particle radii" in err, err
+    assert "reduce time.dt" not in err
+
+
 def test_a_particle_leaving_a_graded_mesh_s_fine_zone_is_warned_of_once(tmp_path, caplog):
     """A light disk rises out of Glowinski's fine zone (it ran 2.3 times as fast as on a uniform
     mesh there, and nothing warned): one warning naming the step, the cells and the remedy."""

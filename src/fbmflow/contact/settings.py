@@ -12,6 +12,11 @@ from .lubrication import Lubrication
 from .narrowphase import Planes
 from .repulsion import Repulsion
 
+#: the largest contact skin, as a fraction of the smallest particle radius, that contact times and
+#: distances survive: beyond it a scene warns and names the level that brings it below, and a
+#: step that ends in an overlap names the skin as the cause
+SKIN_FRACTION = 0.5
+
 
 @dataclasses.dataclass(frozen=True)
 class RepulsionParams(Section):

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..contact import ContactReport, Planes, deepest_overlap
-from ..contact.settings import ContactParams, RepulsionParams
+from ..contact.settings import SKIN_FRACTION, ContactParams, RepulsionParams
 from ..fem.constraints import DirichletConstraints
 from ..fem.functions import mean_velocity, node_integrals
 from ..flow import NavierStokesProblem
@@ -554,8 +554,16 @@ class CoupledSystem:
             keeper = "hard contact (contact.enabled = true), which keeps particles apart,"
         remedy = f"reduce time.dt (this step moved it {cells:.2g} cells; the repulsion needs several steps " \
                  "within its range to stop a particle)"
+        radius = float(new.bounding_radius[k] if overlap.other < 0 else
+                       min(new.bounding_radius[k], new.bounding_radius[overlap.other]))
         if self.contact is None:
             remedy = f"turn on {keeper} or {remedy}"
+        elif self.contact.skin > SKIN_FRACTION * radius:  # the skin, not the step, pushed it there
+            remedy = (f"refine the mesh (--level) or lower contact.skin_cells: hard contact keeps surfaces "
+                      f"{self.contact.skin:.3g} apart, {self.contact.skin / radius:.2g} particle radii, so "
+                      f"particles that start closer are pushed apart at once (this step moved it {cells:.2g} "
+                      "cells, whatever the step); or start them further apart (particles.spacing where the "
+                      "scene has it)")
         raise ConvergenceError(f"particle {k} reaches {where} (depth {overlap.depth:.3g})", remedy)
 
     def _warn_if_coarse(self, new: Particles) -> None:

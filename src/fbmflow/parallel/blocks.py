@@ -274,7 +274,8 @@ class BlockPartition:
 
         #: per grid offset ``(dest, send, source, receive)``: the local unknowns this process owns
         #: that are ghosts of the process ``dest`` at that offset, and its ghosts that the process
-        #: ``source`` at the opposite offset owns, in the whole mesh's order (None: no such process)
+        #: ``source`` at the opposite offset owns, in one order on both sides (lexicographic in the
+        #: unwrapped node planes and cell layers; None: no such process)
         self.exchanges = []
         for offset in itertools.product((-1, 0, 1), repeat=dim):
             if not any(offset):

@@ -19,7 +19,7 @@ import sys
 from dataclasses import dataclass
 
 from ..config import ParamError, Section, param, tree
-from ..contact.settings import ContactParams, ContactRepulsionParams, RepulsionParams
+from ..contact.settings import SKIN_FRACTION, ContactParams, ContactRepulsionParams, RepulsionParams
 from ..coupling.settings import CouplingParams, FictitiousBoundaryParams, NodalBoundaryParams
 from ..fem import FlowSpace
 from ..flow import NavierStokesProblem
@@ -32,10 +32,6 @@ from ..solvers.settings import SolverParams
 from .base import SceneResult, Setup, SimulationScene
 
 log = logging.getLogger(__name__)
-
-#: the largest contact skin, as a fraction of the smallest particle radius, that contact times and
-#: distances survive: beyond it the builder warns and names the level that brings it below
-SKIN_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -149,9 +145,10 @@ class ParticleScene(SimulationScene):
         return Setup(sim, None if sim.control else sim.dt, sim.n_steps)
 
     def _check_contact_skin(self, sim: Simulation, level: int) -> None:
-        """Warn when hard contact keeps surfaces more than :data:`SKIN_FRACTION` of the smallest
-        radius apart (the skin is counted in cells: at a coarse level it can exceed a diameter,
-        and contact times and distances lose their meaning), naming the level that avoids it."""
+        """Warn when hard contact keeps surfaces more than
+        :data:`~fbmflow.contact.settings.SKIN_FRACTION` of the smallest radius apart (the skin is
+        counted in cells: at a coarse level it can exceed a diameter, and contact times and
+        distances lose their meaning), naming the level that avoids it."""
         if sim.contact is None or sim.contact.skin == 0.0:
             return
         radius = float(sim.particles.bounding_radius.min())
