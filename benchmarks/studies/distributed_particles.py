@@ -1,6 +1,6 @@
 """Particle scenes over several processes: the same trajectory, the cycles, the time per step.
 
-Question: do ``mpiexec -n P`` runs of a particle scene (fbmflow.simulation.Simulation on slabs,
+Question: do ``mpiexec -n P`` runs of a particle scene (fbmflow.simulation.Simulation on blocks,
 multigrid) give one process's particle trajectory, in how many cycles, and is a step of ten
 Cate's level 1 faster on two processes than on one process of one or two threads?
 Answer: at level 0 with tolerances of 1e-10, 10 steps on 2 and 4 processes follow one process's
@@ -15,12 +15,15 @@ boundary: 1.46-1.59x); 0.50 GB per process against 0.69 GB. Two one-process runs
 1.49-1.80x on this machine; the step on two processes reached 1.30-1.46x in the same runs, the
 lower slab's process waiting 2.99 s of a 13.46 s step in the exchanges against the sphere's 0.57
 s. On 4 processes (level 0, nodal, 10 steps) 2 x 2 x 1 blocks follow one process to 1.4e-10 in
-the velocities in 1.04 times the cycles, 1 x 1 x 4 slabs to 2.2e-10 in 1.00 times.
-Measured: 2026-11-30, commit e447e55 (speed-limit, speed-limit-2, speed-limit-3) and 6622083+
-(blocks-same, blocks-same-slabs); 2026-11-29, commit 1c96a0a (tag speed-sharp-2), 585120f
-(sharp-2d, sharp, speed-sharp), 59e90f9 (same, speed) and 84a4a58 (same-2d, speed2); quoted in
-docs/validation/several-processes.md, "The sharp boundary", "Particles", "Blocks in two and
-three directions" and "Two processes on this machine: what limits them"
+the velocities in 1.04 times the cycles, 1 x 1 x 4 slabs to 2.2e-10 in 1.00 times. One step at
+level 2 (2 012 403 unknowns): the largest of 4 processes peaks at 1.06 GB against 2.71 GB on one
+(0.39; nodal boundary 1.10 against 2.94, 0.37).
+Measured: 2026-11-30, commit e447e55 (speed-limit, speed-limit-2, speed-limit-3), 6622083+
+(blocks-same, blocks-same-slabs) and 6497113 (memory-L2, memory-L2-nodes); 2026-11-29, commit
+1c96a0a (tag speed-sharp-2), 585120f (sharp-2d, sharp, speed-sharp), 59e90f9 (same, speed) and
+84a4a58 (same-2d, speed2); quoted in docs/validation/several-processes.md, "The sharp
+boundary", "Particles", "Blocks in two and three directions", "Two processes on this machine:
+what limits them" and "Memory per process at level 2"
 Run: python -m fbmbench distributed_particles --rows 1x1 2x1 4x1 --scene ten-cate --level 0 --steps 10
 --settings solver.linear=multigrid solver.newton_rtol=1e-10 solver.linear_rtol=1e-10
 coupling.tol=1e-10
