@@ -2,7 +2,10 @@
 
 ``njit`` is :func:`numba.njit` with ``cache=True`` so that a second process loads compiled
 kernels from disk (set ``NUMBA_CACHE_DIR`` to share the cache between CI runs). ``prange`` is
-re-exported so kernels never import numba themselves.
+re-exported so kernels never import numba themselves. ``jitable`` marks a helper that CPU
+kernels and GPU kernels (:mod:`fbmflow.gpu`, numba-cuda) both call, compiled into each caller
+(:func:`numba.extending.register_jitable`): one body for both targets; it must take every scratch
+array from its caller and allocate nothing.
 """
 from functools import partial
 
@@ -10,6 +13,19 @@ import numba
 
 njit = partial(numba.njit, cache=True)
 prange = numba.prange
+jitable = numba.extending.register_jitable
+
+
+float64 = numba.float64
+
+
+def cuda_target():
+    """Numba's CUDA target (:mod:`numba.cuda`, numba-cuda's where installed), imported on first
+    use: only :mod:`fbmflow.gpu` asks for it, so the core never loads CUDA. Under
+    ``NUMBA_ENABLE_CUDASIM=1`` it is Numba's simulator, which runs the kernels on the CPU."""
+    import numba.cuda
+
+    return numba.cuda
 
 
 def numba_threads() -> int:
@@ -28,4 +44,5 @@ def set_threads(n: int) -> None:
     numba.set_num_threads(n)
 
 
-__all__ = ["njit", "prange", "numba_threads", "max_threads", "set_threads"]
+__all__ = ["njit", "prange", "jitable", "float64", "cuda_target", "numba_threads", "max_threads",
+           "set_threads"]

@@ -7,7 +7,7 @@ map, ``detJw[c, q] = |det J| w_q``. Every kernel is checked against a plain NumP
 """
 import numpy as np
 
-from .._jit import njit, prange
+from .._jit import jitable, njit, prange
 
 
 @njit(parallel=True)
@@ -382,7 +382,7 @@ def replace_rows(indptr, indices, data, rows, r_indptr, r_indices, r_data):
 
 
 # -- matrix-free operators: values at the quadrature points, tested with the Q2 basis ----------
-@njit
+@jitable
 def _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq):
     """Velocity ``uq (nq, d)`` and gradient ``gq (nq, d, d)`` (``d u_i / d x_k``) of ``u (d, n_v)``
     at the quadrature points of cell ``c``, ``d`` 2 or 3; ``ul (d, nl)`` work. One pass over the
@@ -438,11 +438,12 @@ def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv):
     return react
 
 
-@njit
+@jitable
 def _test(c, fq, phi, cell_dofs, scale, out):
-    """``out[i, dof(c, a)] += scale sum_q phi[q, a] fq[q, i]`` (``fq (nq, d)`` already weighted)."""
+    """``out[i, dof(c, a)] += scale sum_q phi[q, a] fq[q, i]`` (``fq (nq, d)`` already weighted;
+    ``d`` is ``out``'s first axis, so ``fq`` may be a larger scratch array)."""
     nq, nl = phi.shape
-    d = fq.shape[1]
+    d = out.shape[0]
     for a in range(nl):
         dof = cell_dofs[c, a]
         for i in range(d):
@@ -515,12 +516,9 @@ def velocity_coefficients(u, cell_dofs, phi, detJw):
 @njit(parallel=True)
 def apply_cell_operator(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, w, out):
     """Add ``(alpha M + beta L + gamma N(c)) w_i`` to ``out[i]`` for every component, by quadrature
-    cell by cell, without a matrix: ``alpha int phi_a w_i + beta int grad phi_a . grad w_i + gamma
-    int phi_a (c . grad) w_i``, the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``,
-    ``|det J| w_q c_k`` (:func:`velocity_coefficients`; not read where ``gamma`` is 0), or ``w``
-    itself where ``conv`` is empty (``N(w) w``, from the point values: no coefficient array). ``w``,
-    ``out`` (d, n_v) float64; cells (n_groups, length) int64 in parallel groups of DOF-disjoint
-    cells (-1 = padding), each group in order."""
+    cell by cell, without a matrix (:func:`cell_operator` per cell). ``w``, ``out`` (d, n_v)
+    float64; cells (n_groups, length) int64 in parallel groups of DOF-disjoint cells (-1 =
+    padding), each group in order."""
     n_groups, length = cells.shape
     nq, nl = phi.shape
     d = w.shape[0]
@@ -533,39 +531,54 @@ def apply_cell_operator(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, g
         flux = np.empty((nq, d, d))
         for j in range(length):
             c = cells[g, j]
-            if c < 0:
-                continue
-            _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
-            for q in range(nq):  # what each point gives the test functions' values and gradients
-                weight = detJw[c, q]
-                for i in range(d):
-                    s = alpha * weight * wq[q, i]
-                    if gamma != 0.0:
-                        t = 0.0
-                        if own:
-                            for k in range(d):
-                                t += weight * wq[q, k] * gq[q, i, k]
-                        else:
-                            for k in range(d):
-                                t += conv[c, q, k] * gq[q, i, k]
-                        s += gamma * t
-                    value[q, i] = s
-                    if beta != 0.0:  # beta |det J| w_q grad w_i, to the reference axes
-                        for ax in range(d):
-                            t = 0.0
-                            for k in range(d):
-                                t += Jinv[c, q, ax, k] * gq[q, i, k]
-                            flux[q, i, ax] = beta * weight * t
-            _test(c, value, phi, cell_dofs, 1.0, out)
-            if beta != 0.0:  # tested with the reference gradients
-                for a in range(nl):
-                    dof = cell_dofs[c, a]
-                    for i in range(d):
-                        s = 0.0
-                        for q in range(nq):
-                            for ax in range(d):
-                                s += dphi[q, a, ax] * flux[q, i, ax]
-                        out[i, dof] += s
+            if c >= 0:
+                cell_operator(c, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out, wl,
+                              wq, gq, value, flux)
+
+
+@jitable
+def cell_operator(c, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out, wl, wq, gq,
+                  value, flux):
+    """Add cell ``c``'s part of ``(alpha M + beta L + gamma N(c)) w_i`` to ``out[i]``: ``alpha int
+    phi_a w_i + beta int grad phi_a . grad w_i + gamma int phi_a (c . grad) w_i`` by quadrature,
+    the convecting velocity ``c`` given by ``conv (n_cells, nq, d)``, ``|det J| w_q c_k``
+    (:func:`velocity_coefficients`; not read where ``gamma`` is 0), or ``w`` itself where ``own``
+    (``N(w) w``, from the point values: no coefficient array). ``w``, ``out`` (d, n_v) float64;
+    scratch ``wl (d, nl)``, ``wq``, ``value (nq, d)``, ``gq``, ``flux (nq, d, d)`` (or larger);
+    one body for the CPU kernel and the GPU's (:mod:`fbmflow.gpu.operators`)."""
+    nq, nl = phi.shape
+    d = w.shape[0]
+    _point_values(c, w, cell_dofs, phi, dphi, Jinv, wl, wq, gq)
+    for q in range(nq):  # what each point gives the test functions' values and gradients
+        weight = detJw[c, q]
+        for i in range(d):
+            s = alpha * weight * wq[q, i]
+            if gamma != 0.0:
+                t = 0.0
+                if own:
+                    for k in range(d):
+                        t += weight * wq[q, k] * gq[q, i, k]
+                else:
+                    for k in range(d):
+                        t += conv[c, q, k] * gq[q, i, k]
+                s += gamma * t
+            value[q, i] = s
+            if beta != 0.0:  # beta |det J| w_q grad w_i, to the reference axes
+                for ax in range(d):
+                    t = 0.0
+                    for k in range(d):
+                        t += Jinv[c, q, ax, k] * gq[q, i, k]
+                    flux[q, i, ax] = beta * weight * t
+    _test(c, value, phi, cell_dofs, 1.0, out)
+    if beta != 0.0:  # tested with the reference gradients
+        for a in range(nl):
+            dof = cell_dofs[c, a]
+            for i in range(d):
+                s = 0.0
+                for q in range(nq):
+                    for ax in range(d):
+                        s += dphi[q, a, ax] * flux[q, i, ax]
+                out[i, dof] += s
 
 
 @njit

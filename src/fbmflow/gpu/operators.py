@@ -1,0 +1,40 @@
+"""The matrix-free velocity operator ``alpha M + beta L + gamma N(c)`` on the GPU: one numba-cuda
+thread per cell, the cells in colours that share no node (so that threads add into ``out``
+without atomics), each cell's work ``fbmflow.fem._kernels.cell_operator``, the body the CPU
+kernel runs.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def cell_colours(cell_dofs: np.ndarray) -> list[np.ndarray]:
+    """The cells in colours, no two cells of a colour sharing a node (greedy, in cell order),
+    a list of (k,) int64 arrays. ``cell_dofs (n_cells, nl)``: every cell's nodes."""
+    from ..solvers._kernels import greedy_colours
+
+    n_cells, nl = cell_dofs.shape
+    rows = np.repeat(np.arange(n_cells), nl)
+    incidence = sp.csr_matrix((np.ones(cell_dofs.size), (rows, cell_dofs.ravel())))
+    touch = (incidence @ incidence.T).tocsr()
+    touch.setdiag(0.0)
+    touch.eliminate_zeros()
+    colour = greedy_colours(touch.indptr.astype(np.int64), touch.indices.astype(np.int64))
+    return [np.flatnonzero(colour == c).astype(np.int64) for c in range(int(colour.max()) + 1)]
+
+
+def apply_cell_operator(colours, detJw, Jinv, cell_dofs, phi, dphi, alpha: float, beta: float, gamma: float,
+                        conv, w, out, threads: int = 128) -> None:
+    """Add ``(alpha M + beta L + gamma N(c)) w`` to ``out`` in place on the GPU, as
+    ``fbmflow.fem._kernels.apply_cell_operator`` does on the CPU: the same arguments as
+    device arrays (numba-cuda's, or CuPy's), the cells in ``colours``
+    (:func:`cell_colours`, on the device too) instead of groups; ``conv`` empty
+    (``(0, 0, 0)``): ``N(w) w``. One launch of ``threads`` per block per colour."""
+    from ._kernels import apply_cells
+
+    own = conv.shape[0] == 0
+    for cells in colours:
+        blocks = max(1, -(-cells.shape[0] // threads))
+        apply_cells[blocks, threads](cells, detJw, Jinv, cell_dofs, phi, dphi, float(alpha), float(beta),
+                                     float(gamma), conv, own, w, out)
