@@ -1,14 +1,21 @@
-"""Run with ``NUMBA_ENABLE_CUDASIM=1``: the GPU's cell operator (:mod:`fbmflow.gpu.operators`)
-under Numba's CUDA simulator against the CPU kernel, on small 2D and 3D meshes (one periodic
-axis), for the mass, Laplace and convection terms with a given convecting velocity and with
-``N(w) w``. Prints one line per case; exits 1 on a mismatch."""
+"""Run with ``NUMBA_ENABLE_CUDASIM=1``: the GPU's operators (:mod:`fbmflow.gpu.operators`) under
+Numba's CUDA simulator against the CPU kernels, on small 2D and 3D meshes (one periodic axis):
+the cell operator for the mass, Laplace and convection terms with a given convecting velocity
+and with ``N(w) w``, the Newton term, and the two coefficient arrays they read. Prints one line
+per case; exits 1 on a mismatch."""
 import sys
 
 import numpy as np
 from numba import cuda
 
 from fbmflow.fem import FlowSpace, _kernels
-from fbmflow.gpu import apply_cell_operator, cell_colours
+from fbmflow.gpu import (
+    apply_cell_operator,
+    apply_reaction,
+    cell_colours,
+    reaction_coefficients,
+    velocity_coefficients,
+)
 from fbmflow.mesh import StructuredMesh
 
 assert cuda.is_available()
@@ -41,4 +48,28 @@ for shape, periodic in (((6, 4), (True, False)), ((4, 2, 4), (False, False, True
         worst = max(worst, error)
         print(f"{mesh.dim}D {shape}, alpha beta gamma {coefficients}, conv {c.shape}: relative error "
               f"{error:.1e}, {len(colours)} colours", flush=True)
+    u = rng.standard_normal((space.dim, space.n_v))
+    d_u = cuda.to_device(u)
+    conv_gpu = cuda.to_device(np.zeros_like(conv))
+    velocity_coefficients(d_u, device[2], device[3], device[0], conv_gpu, threads=4)
+    want = _kernels.velocity_coefficients(u, space.V.cell_dofs, space.phi, space.detJw)
+    error = float(np.abs(conv_gpu.copy_to_host() - want).max() / np.abs(want).max())
+    worst = max(worst, error)
+    print(f"{mesh.dim}D {shape}, velocity coefficients: relative error {error:.1e}", flush=True)
+    react = _kernels.reaction_coefficients(u, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
+                                           space.Jinv)
+    react_gpu = cuda.to_device(np.zeros_like(react))
+    reaction_coefficients(d_u, device[2], device[3], device[4], device[0], device[1], react_gpu, threads=4)
+    error = float(np.abs(react_gpu.copy_to_host() - react).max() / np.abs(react).max())
+    worst = max(worst, error)
+    print(f"{mesh.dim}D {shape}, reaction coefficients: relative error {error:.1e}", flush=True)
+    want = np.zeros_like(w)
+    for batch in space.colour_groups:
+        _kernels.apply_reaction(batch, react, space.V.cell_dofs, space.phi, w, 0.8, want)
+    out = cuda.to_device(np.zeros_like(w))
+    apply_reaction([cuda.to_device(k) for k in colours], cuda.to_device(react), device[2], device[3],
+                   cuda.to_device(w), 0.8, out, threads=4)
+    error = float(np.abs(out.copy_to_host() - want).max() / np.abs(want).max())
+    worst = max(worst, error)
+    print(f"{mesh.dim}D {shape}, Newton term: relative error {error:.1e}", flush=True)
 sys.exit(0 if worst < 1e-13 else 1)

@@ -430,12 +430,19 @@ def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv):
         ul = np.empty((d, nl))
         uq = np.empty((nq, d))
         gq = np.empty((nq, d, d))
-        _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq)
-        for q in range(nq):
-            for i in range(d):
-                for k in range(d):
-                    react[c, q, i, k] = gq[q, i, k] * detJw[c, q]
+        reaction_at(c, u, cell_dofs, phi, dphi, detJw, Jinv, react, ul, uq, gq)
     return react
+
+
+@jitable
+def reaction_at(c, u, cell_dofs, phi, dphi, detJw, Jinv, react, ul, uq, gq):
+    """Cell ``c``'s row of :func:`reaction_coefficients`, ``react[c] (nq, d, d)``, written;
+    scratch ``ul (d, nl)``, ``uq (nq, d)``, ``gq (nq, d, d)`` (or larger)."""
+    _point_values(c, u, cell_dofs, phi, dphi, Jinv, ul, uq, gq)
+    for q in range(phi.shape[0]):
+        for i in range(u.shape[0]):
+            for k in range(u.shape[0]):
+                react[c, q, i, k] = gq[q, i, k] * detJw[c, q]
 
 
 @jitable
@@ -453,12 +460,15 @@ def _test(c, fq, phi, cell_dofs, scale, out):
             out[i, dof] += scale * s
 
 
-@njit
+@jitable
 def _values(c, w, cell_dofs, phi, wq):
     """Values ``wq (nq, d)`` of ``w (d, n_v)`` at the quadrature points of cell ``c``, overwritten
-    (zero DOF values skipped: sparse fields, e.g. a lifting, cost only their non-zeros)."""
+    (zero DOF values skipped: sparse fields, e.g. a lifting, cost only their non-zeros; ``wq``
+    may be a larger scratch array)."""
     nq, nl = phi.shape
-    wq[:, :] = 0.0
+    for q in range(nq):
+        for k in range(w.shape[0]):
+            wq[q, k] = 0.0
     for b in range(nl):
         dof = cell_dofs[c, b]
         for k in range(w.shape[0]):
@@ -471,7 +481,7 @@ def _values(c, w, cell_dofs, phi, wq):
 @njit(parallel=True)
 def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
     """Add ``scale R(u) w`` to ``out``: the Newton term ``R_ik[a, b] = int phi_a phi_b d u_i/d x_k``
-    applied without a matrix, ``out[i, a] += scale sum_q phi_a(q) sum_k react[c, q, i, k] w_k(q)``.
+    applied without a matrix (:func:`reaction_cell` per cell).
 
     cells (n_groups, length) int64, -1 = padding, groups DOF-disjoint (they run in parallel, each
     sequentially); react (n_cells, nq, d, d) float32 or float64, ``|det J| w_q d u_i / d x_k``; cell_dofs
@@ -485,32 +495,48 @@ def apply_reaction(cells, react, cell_dofs, phi, w, scale, out):
         fq = np.empty((nq, d))
         for j in range(length):
             c = cells[g, j]
-            if c < 0:
-                continue
-            _values(c, w, cell_dofs, phi, wq)
-            for q in range(nq):
-                for i in range(d):
-                    s = 0.0
-                    for k in range(d):
-                        s += react[c, q, i, k] * wq[q, k]
-                    fq[q, i] = s
-            _test(c, fq, phi, cell_dofs, scale, out)
+            if c >= 0:
+                reaction_cell(c, react, cell_dofs, phi, w, scale, out, wq, fq)
+
+
+@jitable
+def reaction_cell(c, react, cell_dofs, phi, w, scale, out, wq, fq):
+    """Add cell ``c``'s part of ``scale R(u) w`` to ``out``: ``out[i, a] += scale sum_q phi_a(q)
+    sum_k react[c, q, i, k] w_k(q)``; scratch ``wq``, ``fq (nq, d)`` (or larger). One body for the
+    CPU kernel and the GPU's (:mod:`fbmflow.gpu.operators`)."""
+    nq = phi.shape[0]
+    d = w.shape[0]
+    _values(c, w, cell_dofs, phi, wq)
+    for q in range(nq):
+        for i in range(d):
+            s = 0.0
+            for k in range(d):
+                s += react[c, q, i, k] * wq[q, k]
+            fq[q, i] = s
+    _test(c, fq, phi, cell_dofs, scale, out)
 
 
 @njit(parallel=True)
 def velocity_coefficients(u, cell_dofs, phi, detJw):
     """``|det J| w_q u_k`` at every cell's quadrature points, (n_cells, nq, d) float64, for
-    ``u (d, n_v)``: what :func:`apply_convection` needs of the convecting velocity."""
+    ``u (d, n_v)``: what :func:`apply_convection` needs of the convecting velocity
+    (:func:`velocity_at` per cell)."""
     n_cells = cell_dofs.shape[0]
     nq = phi.shape[0]
     d = u.shape[0]
     conv = np.empty((n_cells, nq, d))
     for c in prange(n_cells):
-        _values(c, u, cell_dofs, phi, conv[c])
-        for q in range(nq):
-            for k in range(d):
-                conv[c, q, k] *= detJw[c, q]
+        velocity_at(c, u, cell_dofs, phi, detJw, conv)
     return conv
+
+
+@jitable
+def velocity_at(c, u, cell_dofs, phi, detJw, conv):
+    """Cell ``c``'s row of :func:`velocity_coefficients`, ``conv[c] (nq, d)``, written."""
+    _values(c, u, cell_dofs, phi, conv[c])
+    for q in range(phi.shape[0]):
+        for k in range(u.shape[0]):
+            conv[c, q, k] *= detJw[c, q]
 
 
 @njit(parallel=True)

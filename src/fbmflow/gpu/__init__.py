@@ -7,6 +7,13 @@ imports CUDA before a kernel is asked for; the kernels run under Numba's CUDA si
 Not yet: a solver that runs on the GPU (``solver.device``); this package holds its kernels,
 each checked against its CPU kernel.
 """
-from .operators import apply_cell_operator, cell_colours
+from .operators import (
+    apply_cell_operator,
+    apply_reaction,
+    cell_colours,
+    reaction_coefficients,
+    velocity_coefficients,
+)
 
-__all__ = ["apply_cell_operator", "cell_colours"]
+__all__ = ["apply_cell_operator", "apply_reaction", "cell_colours", "reaction_coefficients",
+           "velocity_coefficients"]

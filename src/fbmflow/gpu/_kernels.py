@@ -2,7 +2,7 @@
 Numba's CUDA target). Each thread runs a body that the CPU kernels run too (``jitable`` in
 ``fbmflow._jit``), with scratch arrays of the largest cell's sizes."""
 from .._jit import cuda_target, float64
-from ..fem._kernels import cell_operator
+from ..fem._kernels import cell_operator, reaction_at, reaction_cell, velocity_at
 
 cuda = cuda_target()
 
@@ -24,3 +24,35 @@ def apply_cells(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, co
         flux = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
         cell_operator(cells[t], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out, wl,
                       wq, gq, value, flux)
+
+
+@cuda.jit
+def apply_reaction_cells(cells, react, cell_dofs, phi, w, scale, out):
+    """Thread ``t`` adds cell ``cells[t]``'s part of ``scale R(u) w`` to ``out``
+    (``fbmflow.fem._kernels.reaction_cell``); ``cells`` share no node."""
+    t = cuda.grid(1)
+    if t < cells.shape[0]:
+        wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+        fq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+        reaction_cell(cells[t], react, cell_dofs, phi, w, scale, out, wq, fq)
+
+
+@cuda.jit
+def velocity_rows(u, cell_dofs, phi, detJw, conv):
+    """Thread ``c`` writes cell ``c``'s row of the convecting velocity's coefficients
+    (``fbmflow.fem._kernels.velocity_at``)."""
+    c = cuda.grid(1)
+    if c < cell_dofs.shape[0]:
+        velocity_at(c, u, cell_dofs, phi, detJw, conv)
+
+
+@cuda.jit
+def reaction_rows(u, cell_dofs, phi, dphi, detJw, Jinv, react):
+    """Thread ``c`` writes cell ``c``'s row of the Newton term's coefficients
+    (``fbmflow.fem._kernels.reaction_at``)."""
+    c = cuda.grid(1)
+    if c < cell_dofs.shape[0]:
+        ul = cuda.local.array((MAX_DIM, MAX_NODES), float64)
+        uq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+        gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
+        reaction_at(c, u, cell_dofs, phi, dphi, detJw, Jinv, react, ul, uq, gq)

@@ -1,7 +1,9 @@
-"""The matrix-free velocity operator ``alpha M + beta L + gamma N(c)`` on the GPU: one numba-cuda
-thread per cell, the cells in colours that share no node (so that threads add into ``out``
-without atomics), each cell's work ``fbmflow.fem._kernels.cell_operator``, the body the CPU
-kernel runs.
+"""The matrix-free velocity operators on the GPU: ``alpha M + beta L + gamma N(c)`` and the Newton
+term ``R(u)``, and the per-point coefficients they read. One numba-cuda thread per cell; where
+threads add into a vector, the cells go in colours that share no node (no atomics). Each
+thread runs the body the CPU kernel runs per cell (``fbmflow.fem._kernels``: ``cell_operator``,
+``reaction_cell``, ``velocity_at``, ``reaction_at``). Arguments are device arrays (numba-cuda's
+or CuPy's) of the CPU kernels' shapes and types.
 """
 from __future__ import annotations
 
@@ -38,3 +40,31 @@ def apply_cell_operator(colours, detJw, Jinv, cell_dofs, phi, dphi, alpha: float
         blocks = max(1, -(-cells.shape[0] // threads))
         apply_cells[blocks, threads](cells, detJw, Jinv, cell_dofs, phi, dphi, float(alpha), float(beta),
                                      float(gamma), conv, own, w, out)
+
+
+def apply_reaction(colours, react, cell_dofs, phi, w, scale: float, out, threads: int = 128) -> None:
+    """Add ``scale R(u) w`` to ``out`` in place on the GPU, as ``fbmflow.fem._kernels.apply_reaction``
+    does on the CPU, the cells in ``colours`` (:func:`cell_colours`) instead of groups."""
+    from ._kernels import apply_reaction_cells
+
+    for cells in colours:
+        blocks = max(1, -(-cells.shape[0] // threads))
+        apply_reaction_cells[blocks, threads](cells, react, cell_dofs, phi, w, float(scale), out)
+
+
+def velocity_coefficients(u, cell_dofs, phi, detJw, conv, threads: int = 128) -> None:
+    """``|det J| w_q u_k`` at every cell's quadrature points written into ``conv (n_cells, nq, d)``
+    float64, as ``fbmflow.fem._kernels.velocity_coefficients`` returns it on the CPU."""
+    from ._kernels import velocity_rows
+
+    velocity_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](u, cell_dofs, phi, detJw, conv)
+
+
+def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv, react, threads: int = 128) -> None:
+    """``|det J| w_q d u_i / d x_k`` at every cell's quadrature points written into ``react
+    (n_cells, nq, d, d)`` (float32, as ``fbmflow.fem._kernels.reaction_coefficients`` returns it
+    on the CPU)."""
+    from ._kernels import reaction_rows
+
+    reaction_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](u, cell_dofs, phi, dphi, detJw, Jinv,
+                                                                       react)
