@@ -3,9 +3,9 @@
 ``njit`` is :func:`numba.njit` with ``cache=True`` so that a second process loads compiled
 kernels from disk (set ``NUMBA_CACHE_DIR`` to share the cache between CI runs). ``prange`` is
 re-exported so kernels never import numba themselves. ``jitable`` marks a helper that CPU
-kernels and GPU kernels (:mod:`fbmflow.gpu`, numba-cuda) both call, compiled into each caller
-(:func:`numba.extending.register_jitable`): one body for both targets; it must take every scratch
-array from its caller and allocate nothing.
+kernels and GPU kernels (:mod:`fbmflow.gpu`, numba-cuda) both call, inlined into each caller:
+one body for both targets; it must take every scratch array from its caller and allocate
+nothing.
 """
 from functools import partial
 
@@ -13,7 +13,13 @@ import numba
 
 njit = partial(numba.njit, cache=True)
 prange = numba.prange
-jitable = numba.extending.register_jitable
+
+
+def jitable(function):
+    """``function`` callable from CPU and GPU kernels alike, inlined into each caller's code
+    (:func:`numba.extending.register_jitable` with ``inline="always"``: a called helper measured
+    5-10 % slower per cell than the same code written in its kernel)."""
+    return numba.extending.register_jitable(inline="always")(function)
 
 
 float64 = numba.float64
