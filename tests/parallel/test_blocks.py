@@ -571,7 +571,7 @@ def test_block_levels_choose_the_grid_that_divides_most_levels_with_fewest_faces
             SolverParams(process_grid=bad).grid(4, 2)
 
 
-def test_slab_levels_refuse_a_mesh_too_thin_for_the_processes():
+def test_block_levels_refuse_a_mesh_too_thin_for_the_processes():
     """4 layers along the last axis cannot hold two slabs with the sharp boundary's halo of 4 on a
     level above the coarsest (dfg-3d-1z at level 2): the message says to run on one process. A
     mesh that does not coarsen (a suspension's odd cell count) has no level to divide either."""

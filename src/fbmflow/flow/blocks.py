@@ -179,9 +179,9 @@ def _largest_block(shape, periodic, grid, J: int, halo: int) -> int:
     cells = 1
     for n, g, p in zip(shape, grid, periodic):
         widths = np.diff(split_layers(n, g, 2**J))
-        sides = np.full(g, 2 if p else 1) if g > 1 else np.zeros(1, dtype=np.int64)
-        if g > 2 or (g > 1 and p):
-            sides[1:-1] = 2
+        sides = np.full(g, 2 if g > 1 else 0)  # halos per block: none where the axis is not cut,
+        if g > 1 and not p:  # one at the ends of a closed axis
+            sides[[0, -1]] = 1
         cells *= int((widths + halo * sides).max())
     return cells
 

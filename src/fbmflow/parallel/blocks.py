@@ -184,8 +184,8 @@ class BlockPartition:
     ----------
     mesh : StructuredMesh, 2D or 3D (a periodic axis divided among processes: a ring of blocks)
     size, rank : int, the number of processes and this one's rank (0-based)
-    bounds : list over the axes of ``(grid[a] + 1,)`` int, or ``(size + 1,)`` int (slabs: the
-        last axis's, the others whole), or None (:func:`split_layers` on every axis); every block
+    bounds : list over the axes of ``(grid[a] + 1,)`` int, or None (:func:`split_layers` on every
+        axis); every block
         needs ``halo + 1`` layers along a divided axis at least, so that a neighbour's ghosts are
         all owned by this block
     comm : the processes' communicator (mpi4py's, or anything with its ``Sendrecv``, ``Send``,
@@ -221,8 +221,6 @@ class BlockPartition:
             raise ValueError(f"a grid {grid} of processes for {size} processes on a {dim}D mesh")
         if bounds is None:
             bounds = [split_layers(n, g) for n, g in zip(mesh.shape, grid)]
-        elif np.ndim(bounds[0]) == 0:  # the last axis's bounds: slabs
-            bounds = [np.array([0, n]) for n in mesh.shape[:-1]] + [np.asarray(bounds)]
         bounds = [np.asarray(b, dtype=np.int64) for b in bounds]
         least = w + 1  # the halo's last node plane is the neighbour's own
         for a, (n, g, b) in enumerate(zip(mesh.shape, grid, bounds)):

@@ -1,16 +1,16 @@
-"""Multigrid over several processes, each holding one slab of every level's mesh.
+"""Multigrid over several processes, each holding one block of every level's mesh.
 
-Each process holds, on every level but the coarsest, the system assembled on its slab mesh (its
-owned cell layers and one halo layer, :mod:`fbmflow.parallel.blocks`): the rows of its owned
+Each process holds, on every level but the coarsest, the system assembled on its block mesh (its
+owned cells and the halo layers around them, :mod:`fbmflow.parallel.blocks`): the rows of its owned
 unknowns are the whole mesh's. Vectors are local and *consistent* (ghosts hold their owners'
 values). One cycle per process:
 
 * **smoothing:** the Vanka sweep (:class:`~fbmflow.solvers.vanka.FactoredVankaSmoother`) over the
   patches of the owned cells, the ghosts held fixed, then the ghosts updated from their owners
-  (a restricted additive Schwarz step between the slabs, Gauss–Seidel within each): one
-  exchange with each neighbour per sweep. A patch of an owned cell next to the slab below also
-  moves the shared node plane, which the update then sets back to the owner's value. The
-  smoother differs from the serial one at the slab boundaries, so the cycles per solve may grow
+  (a restricted additive Schwarz step between the blocks, Gauss–Seidel within each): one
+  exchange with each neighbour per sweep. A patch of an owned cell next to a lower block also
+  moves the shared nodes, which the update then sets back to the owner's value. The
+  smoother differs from the serial one at the blocks' boundaries, so the cycles per solve may grow
   with the number of processes;
 * **residual:** the local system's product, masked to the owned unknowns;
 * **restriction:** the transposed prolongation of the masked residual, each process's part of
@@ -18,7 +18,7 @@ values). One cycle per process:
   (:meth:`~fbmflow.parallel.blocks.BlockPartition.add_ghosts`);
 * **coarsest level:** the whole coarsest mesh's system, factorised on every process; its
   right-hand side is the sum of all processes' parts (one ``allreduce``), and every process
-  solves it redundantly and takes the correction of its own slab.
+  solves it redundantly and takes the correction of its own block.
 
 The Krylov method (FGMRES) sums its inner products over the owned unknowns, one reduction each.
 """
@@ -46,7 +46,7 @@ class DistributedMultigrid(Factorization):
     Parameters
     ----------
     system : SaddlePointSystem, this process's part of the fine system (its ``partition`` set),
-        its ``coarser`` chain the slab levels' systems (each with its ``partition`` and its
+        its ``coarser`` chain the block levels' systems (each with its ``partition`` and its
         ``prolongation`` from the next one's local vectors) down to the whole coarsest mesh's
         (``partition`` None); or a system whose ``preconditioner`` is such a chain (FGMRES then
         applies ``system``: the Newton operator of a Picard hierarchy)
