@@ -213,3 +213,29 @@ def test_agglomerated_patches_of_a_colour_touch_nothing_of_each_other():
         smoother.sweep_phases(ordered, b, x)
         out.append(x)
     assert np.array_equal(out[0], out[1]) and np.any(out[0])
+
+
+@pytest.mark.parametrize("shape, periodic, reach, n_colours", [
+    ((12, 12, 64), (False, False, False), 2, 27),    # the plain discretisation: 3 x 3 x 3
+    ((12, 12, 64), (False, False, False), 6, 125),   # a sharp boundary's reach: 5 layers apart
+    ((10, 8, 7), (True, False, True), 2, 105),       # periodic: 5 (divides 10), 3, 7 (none below)
+    ((7, 5), (False, False), 2, 9),
+])
+def test_cells_of_a_colour_are_independent(shape, periodic, reach, n_colours):
+    """The GPU's order (:func:`~fbmflow.solvers.ordering.colour_phases`): every cell once, every
+    patch a group of its own, and two cells of one colour at least ``gap`` layers apart along
+    some axis (modulo the period)."""
+    mesh = StructuredMesh.box(shape, periodic=periodic)
+    index = mesh.cell_indices()
+    phases = ordering.colour_phases(mesh.shape, mesh.periodic, index, np.arange(mesh.n_cells), reach)
+    assert len(phases) == n_colours
+    swept = np.concatenate([order for _, order in phases])
+    assert np.array_equal(np.sort(swept), np.arange(mesh.n_cells))
+    gap = int(np.floor(1 + reach / 2)) + 1
+    n = np.array(shape)
+    for gptr, order in phases:
+        assert np.array_equal(gptr, np.arange(order.size + 1)) and np.all(np.diff(order) > 0)
+        diff = np.abs(index[order][:, None, :] - index[order][None, :, :])
+        diff = np.where(np.array(periodic), np.minimum(diff, n - diff), diff)
+        apart = (diff >= gap).any(axis=2)
+        assert np.all(apart | np.eye(order.size, dtype=bool))

@@ -3,6 +3,7 @@ Numba's CUDA target). Each thread runs a body that the CPU kernels run too (``ji
 ``fbmflow._jit``), with scratch arrays of the largest cell's sizes."""
 from .._jit import cuda_target, float64
 from ..fem._kernels import cell_operator, reaction_at, reaction_cell, velocity_at
+from ..solvers._kernels import vanka_patch
 
 cuda = cuda_target()
 
@@ -56,3 +57,18 @@ def reaction_rows(u, cell_dofs, phi, dphi, detJw, Jinv, react):
         uq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
         gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
         reaction_at(c, u, cell_dofs, phi, dphi, detJw, Jinv, react, ul, uq, gq)
+
+
+@cuda.jit(fastmath=True)
+def vanka_patches(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u,
+                  regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                  b_idx, k_ptr, k_idx, k_val, r, w, w64, out):
+    """Thread ``t`` adds patch ``patches[t]``'s Vanka correction to ``x``
+    (``fbmflow.solvers._kernels.vanka_patch``), with the rows ``t`` of the work arrays ``r``,
+    ``w64``, ``out`` (float64) and ``w`` (the factors' dtype), (threads, width) each; ``patches``
+    touch nothing of each other."""
+    t = cuda.grid(1)
+    if t < patches.shape[0]:
+        vanka_patch(patches[t], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
+                    (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                     b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])

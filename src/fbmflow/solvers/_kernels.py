@@ -13,7 +13,7 @@ Every kernel is checked against a NumPy reference in ``tests/solvers/test_vanka.
 """
 import numpy as np
 
-from .._jit import njit, prange
+from .._jit import jitable, njit, prange
 
 
 @njit
@@ -354,7 +354,7 @@ def crossing_rows(ptr, idx, val, rows, n_v):
 #   gt[c, m, :] and the columns b_idx[r w:(r + 1) w] of row r = c (d + 1) + m (w = d nl);
 #   (k_ptr, k_idx, k_val): every other row of K (the velocity rows of the other nodes, A and G,
 #   and the pressure block's rows), global columns. Velocity row (i, a) is i n_v + a.
-@njit
+@jitable
 def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
     """``(B p)[(i, node)]`` for a held node, ``p = x[n_u:]``, from the divergence's cells."""
     npl, w = gt.shape[1], gt.shape[2]
@@ -368,7 +368,7 @@ def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
     return s
 
 
-@njit
+@jitable
 def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
     """``(B^T x)[row]``, the continuity row as the operator holds it (see above)."""
     s = 0.0
@@ -384,7 +384,7 @@ def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
     return s
 
 
-@njit
+@jitable
 def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
                  d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """``(K x)[q]``."""
@@ -591,12 +591,11 @@ def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_pos, d_ptr, d_i
     return out
 
 
-@njit(fastmath=True)
-def _lu_solve_stored(LU, piv, r, w, out):
-    """:func:`_lu_solve` in the storage precision of ``LU`` (``w`` work of that dtype; ``r``
-    float64, overwritten; the result goes to ``out``). fastmath lets the row dot products
-    vectorise."""
-    n = LU.shape[0]
+@jitable
+def _lu_solve_stored(store, base, n, piv, r, w, out):
+    """:func:`_lu_solve` with the factors ``LU (n, n)`` stored row by row at ``store[base:]``, in
+    the storage precision of ``store`` (``w`` work of that dtype; ``r`` float64, overwritten;
+    the result goes to ``out``)."""
     for k in range(n):
         p = piv[k]
         if p != k:
@@ -605,22 +604,24 @@ def _lu_solve_stored(LU, piv, r, w, out):
         w[i] = r[i]
     for i in range(1, n):
         s = w[0] - w[0]  # a zero of the storage dtype
+        row = base + i * n
         for k in range(i):
-            s += LU[i, k] * w[k]
+            s += store[row + k] * w[k]
         w[i] -= s
     for k in range(n - 1, -1, -1):
-        if LU[k, k] == 0.0:
+        row = base + k * n
+        if store[row + k] == 0.0:
             w[k] = 0.0
             continue
         s = w[0] - w[0]
         for j in range(k + 1, n):
-            s += LU[k, j] * w[j]
-        w[k] = (w[k] - s) / LU[k, k]
+            s += store[row + j] * w[j]
+        w[k] = (w[k] - s) / store[row + k]
     for i in range(n):
         out[i] = w[i]
 
 
-@njit(fastmath=True)
+@jitable
 def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_val):
     """The correction of a Schur patch with ``nb`` stored component inverses (see
     :func:`vanka_factor`) from its residual ``r`` (d nl + d + 1,) float64 into ``out``; ``w``
@@ -669,68 +670,82 @@ def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_v
         out[j] = s
 
 
-@njit
+@jitable
+def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
+    """Add ``omega`` times patch ``k``'s correction ``K[S, S]^-1 (b - K x)[S]`` to ``x`` (the CPU's
+    sweeps and the GPU's, :mod:`fbmflow.gpu`, run this body). ``patches``: the tuple ``(ptr,
+    dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)``, ``op`` the operator's 16
+    arrays (see above; tuples: an inlined call takes at most 30 arguments); ``r``, ``w64``,
+    ``out`` float64 and ``w`` of the storage dtype, work of the patch's size at least."""
+    ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u = patches
+    (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+     k_idx, k_val) = op
+    nu = d * nl
+    npl = d + 1
+    S = dofs[ptr[k]:ptr[k + 1]]
+    nk = S.shape[0]
+    nb = blocks[k]
+    if nb > 0:  # a Schur patch: the scalar row of a regular node serves its d components
+        for a in range(nl):
+            node = S[a]
+            if not regular[node]:
+                for i in range(d):
+                    q = S[i * nl + a]
+                    r[i * nl + a] = b[q] - _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val,
+                                                        nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx,
+                                                        d_val, b_idx, k_ptr, k_idx, k_val)
+                continue
+            for i in range(d):
+                r[i * nl + a] = 0.0
+            for j in range(s_ptr[node], s_ptr[node + 1]):
+                v = s_val[j]
+                col = s_idx[j]
+                for i in range(d):
+                    r[i * nl + a] += v * x[i * n_v + col]
+            for j in range(nc_ptr[node], nc_ptr[node + 1]):  # the gradient, cell by cell
+                c = nc_cell[j]
+                rank = nc_rank[j]
+                for m in range(npl):
+                    pm = x[n_u + c * npl + m]
+                    for i in range(d):
+                        r[i * nl + a] += gt[c, m, i * nl + rank] * pm
+            for i in range(d):
+                r[i * nl + a] = b[i * n_v + node] - r[i * nl + a]
+        for a in range(nu, nk):
+            r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
+                                          nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+                                          k_idx, k_val)
+        _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, gt,
+                     d_pos, d_ptr, d_val)
+    else:
+        for a in range(nk):
+            r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
+                                          nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+                                          k_idx, k_val)
+        _lu_solve_stored(store, lu_ptr[k], nk, piv[ptr[k]:ptr[k + 1]], r, w, out)
+    for a in range(nk):
+        x[S[a]] += omega * out[a]
+
+
+@njit(fastmath=True)
 def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
                      width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
                      d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
-    """Block Gauss-Seidel over the patches ``order[start:end]`` in that order: each correction
-    ``K[S, S]^-1 (b - K x)[S]`` is added (times ``omega``) to ``x`` before the next patch's
-    residual is taken."""
+    """Block Gauss-Seidel over the patches ``order[start:end]`` in that order (:func:`vanka_patch`):
+    each correction is added to ``x`` before the next patch's residual is taken. fastmath lets
+    the rows' dot products vectorise."""
     r = np.empty(width)
     w = np.empty(width, dtype=store.dtype)
     w64 = np.empty(width)
     out = np.empty(width)
-    nu = d * nl
-    npl = d + 1
+    patches = (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)
+    op = (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx,
+          k_ptr, k_idx, k_val)
     for e in range(start, end):
-        k = order[e]
-        S = dofs[ptr[k]:ptr[k + 1]]
-        nk = S.shape[0]
-        nb = blocks[k]
-        if nb > 0:  # a Schur patch: the scalar row of a regular node serves its d components
-            for a in range(nl):
-                node = S[a]
-                if not regular[node]:
-                    for i in range(d):
-                        q = S[i * nl + a]
-                        r[i * nl + a] = b[q] - _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val,
-                                                            nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx,
-                                                            d_val, b_idx, k_ptr, k_idx, k_val)
-                    continue
-                for i in range(d):
-                    r[i * nl + a] = 0.0
-                for j in range(s_ptr[node], s_ptr[node + 1]):
-                    v = s_val[j]
-                    col = s_idx[j]
-                    for i in range(d):
-                        r[i * nl + a] += v * x[i * n_v + col]
-                for j in range(nc_ptr[node], nc_ptr[node + 1]):  # the gradient, cell by cell
-                    c = nc_cell[j]
-                    rank = nc_rank[j]
-                    for m in range(npl):
-                        pm = x[n_u + c * npl + m]
-                        for i in range(d):
-                            r[i * nl + a] += gt[c, m, i * nl + rank] * pm
-                for i in range(d):
-                    r[i * nl + a] = b[i * n_v + node] - r[i * nl + a]
-            for a in range(nu, nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                              nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
-                                              k_idx, k_val)
-            _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, gt,
-                         d_pos, d_ptr, d_val)
-        else:
-            for a in range(nk):
-                r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                              nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
-                                              k_idx, k_val)
-            _lu_solve_stored(store[lu_ptr[k]:lu_ptr[k] + nk * nk].reshape(nk, nk), piv[ptr[k]:ptr[k + 1]],
-                             r, w, out)
-        for a in range(nk):
-            x[S[a]] += omega * out[a]
+        vanka_patch(order[e], b, x, omega, patches, op, r, w, w64, out)
 
 
-@njit(parallel=True)
+@njit(parallel=True, fastmath=True)
 def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
                        width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
                        d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
@@ -744,7 +759,7 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
                          nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
 
 
-@njit
+@njit(fastmath=True)
 def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, width,
                            n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr,
                            d_idx, d_val, b_idx, k_ptr, k_idx, k_val):

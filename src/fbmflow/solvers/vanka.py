@@ -94,6 +94,8 @@ PRECISIONS = {"single": np.float32, "double": np.float64}
 #: (4 096 cells on 16, as before)
 SERIAL_CELLS_PER_THREAD = 256
 VANKA_VARIANTS = {"vanka-full": 0.7, "vanka-diagonal": 0.7, "vanka-factored": 0.7}  # name -> default damping
+#: the orders of the factored smoother's cell patches (:class:`FactoredVankaSmoother`)
+ORDERS = ("slabs", "colours")
 
 
 def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None,
@@ -254,11 +256,18 @@ class FactoredVankaSmoother:
     cells : (n_cells,) bool or None, the cells whose patches the sweeps update (None: all): a
         process's owned cells on its slab of the mesh (:mod:`fbmflow.parallel.blocks`), whose halo
         cells are a neighbour's to update
+    order : "slabs" or "colours"
+        The order of the cell patches: slab phases (above), or colours
+        (:func:`~fbmflow.solvers.ordering.colour_phases`: a colour's patches at once, the far
+        ones in colours of their own after them), the order in which the GPU sweeps
+        (:mod:`fbmflow.gpu`), so that the CPU can reproduce its sweeps.
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "auto",
                  interface_sweeps: int = 2, symmetric: bool = False, component_blocks: bool = True,
-                 cells: np.ndarray | None = None):
+                 cells: np.ndarray | None = None, order: str = "slabs"):
+        if order not in ORDERS:
+            raise ValueError(f"unknown patch order {order!r}; choose one of {ORDERS}")
         if precision == "auto":
             precision = "double" if partly_orphaned(system) else "single"
         if precision not in PRECISIONS:
@@ -352,11 +361,17 @@ class FactoredVankaSmoother:
         index = mesh.cell_indices()
         reach = np.maximum.reduceat(ordering.unknown_reach(system, G)[self.dofs], self.ptr[:-1])  # per patch
         near = ordering.near_patches(reach[:cells.size])
-        phases = ordering.slab_phases(mesh.shape, mesh.periodic, index, cells[near],
-                                      int(reach[:cells.size][near].max(initial=0)))
-        phases = [(gptr, np.flatnonzero(near)[order]) for gptr, order in phases]  # as patch indices
-        #: cell patches whose rows reach too far for the phases, updated after them one by one
+        phased = ordering.slab_phases if order == "slabs" else ordering.colour_phases
+        phases = phased(mesh.shape, mesh.periodic, index, cells[near],
+                        int(reach[:cells.size][near].max(initial=0)))
+        phases = [(gptr, np.flatnonzero(near)[k]) for gptr, k in phases]  # as patch indices
+        #: cell patches whose rows reach too far for the phases, updated after them one by one (in
+        #: colours after them where the order is "colours")
         self.far = np.flatnonzero(~near).astype(np.int64)
+        if order == "colours":
+            phases += self._colour_phases(system, self.far, G)
+            self.far = self.far[:0]
+        self.order = order
         self.sweeps = [(phases, self.far), (ordering.reversed_phases(phases), self.far[::-1].copy())]
         self.sweeps = self.sweeps if symmetric else self.sweeps[:1]
         self.merged = np.arange(cells.size, cells.size + len(merged), dtype=np.int64)
@@ -371,7 +386,7 @@ class FactoredVankaSmoother:
         merged_interface = self.interface[self.interface >= cells.size]
         self.interface_merged_phases = self._colour_phases(system, merged_interface, G)
         interface_reach = int(reach[plain_interface].max(initial=0))
-        self.interface_phases = [(gptr, plain_interface[order]) for gptr, order in ordering.slab_phases(
+        self.interface_phases = [(gptr, plain_interface[k]) for gptr, k in phased(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
         del G  # before the factors: the set-up's peak holds one of the two
         self.store = np.empty(self.lu_ptr[-1], dtype=dtype)

@@ -1,0 +1,74 @@
+"""Where the GPU solver's arrays live (:class:`Backend`): CuPy's arrays and sparse matrices on an
+NVIDIA GPU, or NumPy's and SciPy's under Numba's CUDA simulator, where the numba-cuda kernels run
+on the CPU (``NUMBA_ENABLE_CUDASIM=1``: how the tests check the GPU path on a machine without
+one). :func:`gpu_problem` says, before any work, why ``solver.device = "gpu"`` cannot run here."""
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import scipy.sparse as sp
+
+
+class Backend:
+    """The array module ``xp`` (``cupy`` or ``numpy``) and sparse module (``cupyx.scipy.sparse`` or
+    ``scipy.sparse``) of a device solver, and the moves between host and device."""
+
+    def __init__(self, xp, sparse, name: str):
+        self.xp, self.sparse, self.name = xp, sparse, name
+
+    def put(self, a, dtype=None):
+        """A host array (or scalar sequence) as a contiguous device array."""
+        return self.xp.asarray(np.ascontiguousarray(a, dtype=dtype))
+
+    def get(self, a) -> np.ndarray:
+        """A device array back on the host."""
+        return a.get() if hasattr(a, "get") else np.asarray(a)
+
+    def csr(self, M):
+        """A host sparse matrix as the device's CSR matrix (int32 indices: CuPy's kernels take
+        no others)."""
+        M = sp.csr_matrix(M)
+        return self.sparse.csr_matrix((self.put(M.data), self.put(M.indices, np.int32),
+                                       self.put(M.indptr, np.int32)), shape=M.shape)
+
+    def free_bytes(self) -> int | None:
+        """The device memory free now [bytes], None where the arrays live on the host."""
+        if self.name != "cupy":
+            return None
+        free, _ = self.xp.cuda.runtime.memGetInfo()
+        return int(free)
+
+
+def gpu_backend() -> Backend:
+    """CuPy's backend (the ``gpu`` extra; :func:`gpu_problem` first says whether it can run)."""
+    import cupy
+    import cupyx.scipy.sparse
+
+    return Backend(cupy, cupyx.scipy.sparse, "cupy")
+
+
+def simulated_backend() -> Backend:
+    """NumPy and SciPy, for numba-cuda kernels under Numba's CUDA simulator (tests)."""
+    return Backend(np, sp, "numpy")
+
+
+def gpu_problem() -> str | None:
+    """Why the GPU solver cannot run in this process, in words that name the fix, or None where
+    it can: the ``gpu`` extra missing, or no CUDA device or driver. Imports CUDA only where the
+    extra is installed."""
+    missing = [name for name in ("cupy", "numba") if importlib.util.find_spec(name) is None]
+    if missing:
+        return (f"solver.device = 'gpu' needs the gpu extra ({', '.join(missing)} not installed): "
+                "pip install -e '.[gpu]' on a machine with an NVIDIA GPU, or set solver.device = 'cpu'")
+    from .._jit import cuda_target
+
+    cuda = cuda_target()
+    try:
+        available = cuda.is_available()
+    except Exception:  # a broken driver raises instead of saying False
+        available = False
+    if not available:
+        return ("solver.device = 'gpu' found no CUDA GPU (numba.cuda.is_available() is False: no device, or "
+                "no NVIDIA driver); run on a machine with one, or set solver.device = 'cpu'")
+    return None
