@@ -12,10 +12,11 @@ import scipy.sparse as sp
 
 class Backend:
     """The array module ``xp`` (``cupy`` or ``numpy``) and sparse module (``cupyx.scipy.sparse`` or
-    ``scipy.sparse``) of a device solver, and the moves between host and device."""
+    ``scipy.sparse``) of a device solver, the moves between host and device, and the threads per
+    block of the kernels' launches (the simulator runs a Python thread for each, idle or not)."""
 
-    def __init__(self, xp, sparse, name: str):
-        self.xp, self.sparse, self.name = xp, sparse, name
+    def __init__(self, xp, sparse, name: str, threads: int):
+        self.xp, self.sparse, self.name, self.threads = xp, sparse, name, threads
 
     def put(self, a, dtype=None):
         """A host array (or scalar sequence) as a contiguous device array."""
@@ -45,12 +46,12 @@ def gpu_backend() -> Backend:
     import cupy
     import cupyx.scipy.sparse
 
-    return Backend(cupy, cupyx.scipy.sparse, "cupy")
+    return Backend(cupy, cupyx.scipy.sparse, "cupy", 64)
 
 
 def simulated_backend() -> Backend:
     """NumPy and SciPy, for numba-cuda kernels under Numba's CUDA simulator (tests)."""
-    return Backend(np, sp, "numpy")
+    return Backend(np, sp, "numpy", 1)
 
 
 def gpu_problem() -> str | None:

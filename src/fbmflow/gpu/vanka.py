@@ -13,9 +13,6 @@ from __future__ import annotations
 from ..solvers.vanka import FactoredVankaSmoother
 from .device import Backend
 
-#: threads per block of the sweep's launches
-THREADS = 64
-
 
 class DeviceVanka:
     """``smoother``'s sweeps on the device of ``backend``.
@@ -37,6 +34,7 @@ class DeviceVanka:
         self.patches += (nl, d, n_v, n_u)
         self.op = tuple(put(a) for a in s.op)
         self.omega = smoother.omega
+        self.threads = backend.threads
         self.interface_sweeps = smoother.interface_sweeps
 
         def colours(phases):
@@ -58,9 +56,9 @@ class DeviceVanka:
         from ._kernels import vanka_patches
 
         for patches in colours:
-            blocks = max(1, -(-patches.shape[0] // THREADS))
-            vanka_patches[blocks, THREADS](patches, b, x, float(self.omega), *self.patches, *self.op,
-                                           *self.work)
+            blocks = max(1, -(-patches.shape[0] // self.threads))
+            vanka_patches[blocks, self.threads](patches, b, x, float(self.omega), *self.patches, *self.op,
+                                                *self.work)
 
     def smooth(self, b, x, sweeps: int, first: int = 0) -> None:
         """``sweeps`` sweeps on ``K x = b`` (device arrays), as

@@ -74,7 +74,8 @@ class DistributedMultigrid(Factorization):
         omega = s.omega or VANKA_VARIANTS["vanka-factored"]
         symmetric = s.symmetric_sweeps(chain[0].transient)
         self.smoothers = [FactoredVankaSmoother(lv, omega, symmetric=symmetric,
-                                                cells=lv.partition.owned_cells) for lv in self.levels]
+                                                cells=lv.partition.owned_cells, order=s.order)
+                          for lv in self.levels]
         self.transfers = [truncated_prolongation(lv, *lv.prolongation) for lv in self.levels]
         self.direct = factorize(self.coarsest)
         super().__init__(time.perf_counter() - t0)

@@ -1,6 +1,7 @@
 """Flexible GMRES (Saad 1993) with right preconditioning, for variable (multigrid) preconditioners."""
 from __future__ import annotations
 
+import sys
 from typing import Callable
 
 import numpy as np
@@ -26,6 +27,9 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         vector's sum over the unknowns each process owns
         (:meth:`fbmflow.parallel.blocks.BlockPartition.dot`)
 
+    The vectors may be CuPy arrays (a device solver's, :mod:`fbmflow.gpu`): the Krylov basis is
+    then held on the device, the small Hessenberg problem on the host.
+
     Returns
     -------
     x : (n,) float64
@@ -33,8 +37,13 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         every iteration
     iterations : int
     """
+    xp = sys.modules["cupy"] if type(b).__module__.startswith("cupy") else np
     if inner is None:
-        inner, norm = np.dot, np.linalg.norm
+        def inner(v, w):
+            return float(xp.dot(v, w))
+
+        def norm(v):
+            return float(xp.linalg.norm(v))
     else:
         def norm(v):
             return np.sqrt(inner(v, v))
@@ -49,8 +58,8 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
     while beta > target and its < max_iterations:
         m = min(restart, max_iterations - its) + aug
         n = b.size
-        V = np.zeros((m + 1, n))
-        Z = np.zeros((m, n))
+        V = xp.zeros((m + 1, n))
+        Z = xp.zeros((m, n))
         H = np.zeros((m + 1, m))
         cs, sn = np.zeros(m), np.zeros(m)
         g = np.zeros(m + 1)
@@ -59,7 +68,7 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         k_done = 0
         for k in range(m):
             if aug and k == 0:  # the direction of lam: A-image e, no preconditioning
-                w = np.array(augment, dtype=float)
+                w = augment.astype(float)
             else:  # V[1] of an augmented cycle is e's direction, which needs no preconditioning
                 z = precondition(V[0 if aug and k == 1 else k])
                 if project is not None:
@@ -86,7 +95,7 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
             if abs(g[k + 1]) <= target:
                 break
         y = np.linalg.solve(np.triu(H[:k_done, :k_done]), g[:k_done]) if k_done else np.zeros(0)
-        x += y[aug:] @ Z[aug:k_done]
+        x += xp.asarray(y[aug:]) @ Z[aug:k_done]
         if aug and k_done:
             lam += y[0]
         r = b - apply_A(x) - (lam * augment if aug else 0.0)

@@ -34,7 +34,7 @@ from .galerkin import truncated_prolongation
 from .krylov import fgmres
 from .reports import LinearReport
 from .system import SaddlePointSystem, expansion
-from .vanka import VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
+from .vanka import ORDERS, VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +81,9 @@ class MultigridSettings(Section):
     threads: str = param("free", "Numba threads of the set-ups and solves: free (the cores other processes "
                          "leave free, looked at before each; the same results) or fixed (Numba's count as "
                          "set, NUMBA_NUM_THREADS)", choices=THREADS)
+    order: str = param("slabs", "order of the factored smoother's cell patches: slabs (threads sweep slabs "
+                       "at once) or colours (a colour's patches at once: the GPU's order, which "
+                       "solver.device = 'gpu' takes; on the CPU for comparing with it)", choices=ORDERS)
 
     def validate(self):
         if self.coarse_obstacle == "galerkin" and self.smoother not in ("auto", "vanka-factored"):
@@ -123,7 +126,7 @@ class _Level:
             return
         omega = settings.omega or VANKA_VARIANTS[smoother]
         if smoother == "vanka-factored":
-            self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric)
+            self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric, order=settings.order)
         else:
             self.smoother = VankaSmoother(system, smoother, omega, symmetric=symmetric)
         # prolongation truncated on the fine DOFs that are no PDE unknowns, restriction its

@@ -1,0 +1,179 @@
+"""Multigrid on the GPU (``solver.device = "gpu"``).
+
+The hierarchy is set up on the CPU as :class:`~fbmflow.solvers.multigrid.MultigridSolver` sets it
+up, with the smoothers in colour order (``solver.multigrid.order = "colours"``), and copied to the
+device: every level but the coarsest holds its operator (:class:`~fbmflow.gpu.operator.DeviceOperator`),
+its smoother's factors and colours (:class:`~fbmflow.gpu.vanka.DeviceVanka`) and its transfers
+(the truncated prolongation and its transpose as CSR matrices). FGMRES and the cycles run on the
+device; the coarsest level's direct solve stays on the CPU, one transfer of its right-hand side
+and its solution per cycle. Particles, forces and contact stay on the CPU: a solve takes host
+vectors and returns host vectors.
+
+The cycle is the CPU's (:meth:`MultigridHierarchy.cycle
+<fbmflow.solvers.multigrid.MultigridHierarchy.cycle>`) operation for operation, so a solve on
+the device gives what the CPU gives with the same settings (``order = "colours"``) to the
+rounding of the sums' order, in as many cycles.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..solvers.base import Factorization
+from ..solvers.krylov import fgmres
+from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border
+from ..solvers.reports import LinearReport
+from .device import Backend, gpu_backend
+from .operator import DeviceOperator
+from .vanka import DeviceVanka
+
+
+class _DeviceLevel:
+    """One level's operator, smoother and transfers on the device."""
+
+    def __init__(self, level, backend: Backend):
+        put = backend.put
+        self.n_u, self.n_p = level.n_u, level.n_p
+        self.operator = DeviceOperator(level.system, backend)
+        self.smoother = DeviceVanka(level.smoother, backend)
+        P = level.P.tocsr()
+        self.P, self.R = backend.csr(P), backend.csr(P.T.tocsr())
+        self.coarse_fixed = put(level.coarse_fixed)
+        self.coarse_orphans = None if level.coarse_orphans is None else backend.csr(level.coarse_orphans)
+        self.nbytes = self.operator.nbytes + self.smoother.nbytes + sum(
+            int(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes) for M in (self.P, self.R))
+
+    def restrict(self, r, n_u_coarse: int):
+        rc = self.R @ r
+        rc[self.coarse_fixed] = 0.0
+        if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
+            rc[n_u_coarse:] -= self.coarse_orphans @ rc[n_u_coarse:]
+        return rc
+
+
+class DeviceHierarchy(Factorization):
+    """A :class:`~fbmflow.solvers.multigrid.MultigridHierarchy` (set up on the CPU, smoothers in
+    colour order) with its cycles and its FGMRES on the device of ``backend``. :attr:`nbytes`:
+    the device memory it holds [bytes]."""
+
+    def __init__(self, host: MultigridHierarchy, backend: Backend):
+        t0 = time.perf_counter()
+        self.host, self.backend = host, backend
+        self.settings = host.settings
+        self.levels = [_DeviceLevel(level, backend) for level in host.levels[:-1]]
+        system = host.system
+        self.operator = (self.levels[0].operator if self.levels and system is host.levels[0].system
+                         else DeviceOperator(system, backend))
+        self.nbytes = sum(lv.nbytes for lv in self.levels) + (
+            0 if self.levels and self.operator is self.levels[0].operator else self.operator.nbytes)
+        super().__init__(host.setup_time_s + time.perf_counter() - t0)
+
+    def cycle(self, b, x, depth: int = 0, kind: str | None = None):
+        """One cycle on level ``depth`` for ``K x = b`` from ``x`` (device vectors; ``x`` updated
+        and returned), the CPU's cycle step for step; the coarsest level solved on the CPU."""
+        kind = kind or self.settings.cycle
+        if depth == len(self.levels):
+            coarse = self.host.levels[-1]
+            host_b = self.backend.get(b)
+            u, p = coarse.direct(host_b[:coarse.n_u], host_b[coarse.n_u:])
+            return self.backend.put(np.concatenate([u, p]))
+        s = self.settings
+        level = self.levels[depth]
+        level.smoother.smooth(b, x, s.pre_smooth)
+        r = b - level.operator.apply(x)
+        n_u_coarse = self.host.levels[depth + 1].n_u
+        rc = level.restrict(r, n_u_coarse)
+        ec = self.backend.xp.zeros_like(rc)
+        last = depth + 1 == len(self.levels)
+        if kind == "V":
+            ec = self.cycle(rc, ec, depth + 1, "V")
+        elif kind == "W":
+            ec = self.cycle(rc, ec, depth + 1, "W")
+            if not last:
+                ec = self.cycle(rc, ec, depth + 1, "W")
+        else:  # F: an F-cycle then a V-cycle on the coarser level
+            ec = self.cycle(rc, ec, depth + 1, "F")
+            if not last:
+                ec = self.cycle(rc, ec, depth + 1, "V")
+        x += level.P @ ec
+        level.smoother.smooth(b, x, s.post_smooth)
+        return x
+
+    def _remove_pressure_mean(self, x) -> None:
+        """:meth:`~fbmflow.solvers.system.SaddlePointSystem.remove_pressure_mean` on the device."""
+        p = x[self.host.system.n_u:]
+        p[::self._npl] -= float(self._mean_weights @ p) / self._mean_constant
+
+    def solve(self, f, g, rtol=None):
+        """As :meth:`MultigridHierarchy.solve <fbmflow.solvers.multigrid.MultigridHierarchy.solve>`,
+        on the device: host vectors in and out, the report counting cycles and sweeps."""
+        system, s, backend = self.host.system, self.settings, self.backend
+        t0 = time.perf_counter()
+        setup = self._charge_setup()
+        rtol = self.host.rtol if rtol is None else rtol
+        self.operator.refresh()
+        host_b = np.concatenate([f, system.balance(g)])
+        host_x = np.zeros_like(host_b)
+        if system.fixed is not None:
+            host_x[system.fixed] = f[system.fixed]  # unit rows: the solution there is the rhs
+        b, x = backend.put(host_b), backend.put(host_x)
+        project = None
+        if system.mean_weights is not None:
+            self._npl = system.space.dim + 1
+            self._mean_weights = backend.put(system.mean_weights)
+            self._mean_constant = float(system.mean_weights[::self._npl].sum())
+            project = self._remove_pressure_mean
+        border = _border(system)
+        if s.krylov == "fgmres":
+            def precondition(r):
+                return self.cycle(r, backend.xp.zeros_like(r))
+
+            x, residuals, cycles = fgmres(self.operator.apply, precondition, b, x, rtol, s.max_iterations,
+                                          s.restart, project, None if border is None else backend.put(border))
+        else:
+            r0 = float(backend.xp.linalg.norm(b - self.operator.apply(x)))
+            residuals, cycles = [r0], 0
+            while residuals[-1] > rtol * r0 and cycles < s.max_iterations:
+                x = self.cycle(b, x)
+                if project is not None:
+                    project(x)
+                residuals.append(float(backend.xp.linalg.norm(b - self.operator.apply(x))))
+                cycles += 1
+        if project is not None:
+            project(x)
+        host_x = backend.get(x)
+        converged = bool(residuals[-1] <= rtol * residuals[0])
+        report = LinearReport("multigrid (GPU)", setup + time.perf_counter() - t0, iterations=cycles,
+                              residuals=residuals, smoothing_sweeps=cycles * self.host.sweeps_per_cycle,
+                              setup_time_s=setup, converged=converged)
+        return host_x[:system.n_u], host_x[system.n_u:], report
+
+
+class DeviceMultigridSolver(MultigridSolver):
+    """:class:`~fbmflow.solvers.multigrid.MultigridSolver` whose solves run on a GPU
+    (:class:`DeviceHierarchy`); the smoothers in colour order whatever ``settings`` say.
+    ``backend``: where the arrays go (default CuPy's, :func:`~fbmflow.gpu.device.gpu_backend`;
+    the tests pass the simulator's)."""
+
+    name = "multigrid"
+
+    def __init__(self, settings=None, rtol: float = 1e-8, backend: Backend | None = None, **kwargs):
+        super().__init__(settings, rtol, **kwargs)
+        if self.settings.smoother not in ("auto", "vanka-factored"):
+            raise ValueError("the GPU smoothes with the vanka-factored smoother, not "
+                             f"{self.settings.smoother!r}")
+        self.settings = dataclasses.replace(self.settings, order="colours")
+        self.backend = backend
+
+    def describe(self, dim: int, n_unknowns: int) -> str:
+        return "multigrid on the GPU"
+
+    def _factor(self, system) -> Factorization:
+        host = super()._factor(system)
+        if not isinstance(host, MultigridHierarchy):
+            raise ValueError("the GPU solver runs on one process")
+        if self.backend is None:
+            self.backend = gpu_backend()
+        return DeviceHierarchy(host, self.backend)

@@ -1,0 +1,20 @@
+"""Multigrid on the device (:mod:`fbmflow.gpu.multigrid`) against the CPU's, under Numba's CUDA
+simulator (no GPU needed: CI has none)."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+
+def test_a_solve_on_the_device_under_the_simulator_is_the_cpus_in_colour_order():
+    """``NUMBA_ENABLE_CUDASIM=1 python _simulated_multigrid.py``: FGMRES with multigrid cycles on
+    the device (operator, smoother, transfers; the coarsest level on the CPU) takes as many
+    cycles as the CPU's multigrid with the smoothers in the same colour order and gives its
+    velocity to 1e-10 relative, on a 2D sharp-boundary disk in a closed box (the Picard
+    hierarchy, the mean-pressure border) and on a 3D Newton block moved to another iterate (the
+    Newton terms applied without a matrix on the device)."""
+    script = Path(__file__).with_name("_simulated_multigrid.py")
+    out = subprocess.run([sys.executable, str(script)], env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"),
+                         capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.count("cycles CPU") == 2
