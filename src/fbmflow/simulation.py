@@ -148,6 +148,10 @@ class Simulation:
         responses = self.coupling.stored_responses(particles, tuple(symmetry))
         linear = solver.linear_solver(mesh.dim, n_unknowns, responses)
         check_memory(n_unknowns // self.comm.size, mesh.dim, linear, responses, transient=True)
+        if solver.device == "gpu":
+            from .gpu import gpu_solver  # the gpu extra, imported where asked for
+
+            linear = gpu_solver(linear, mesh.dim, n_unknowns)
         boundary = {t: NoSlip() for t in mesh.tags} if boundary is None else boundary
         #: the coupled flow and particles and their state
         self.system = CoupledSystem(mesh, particles, fluid, boundary=boundary, time_scheme=time.scheme,

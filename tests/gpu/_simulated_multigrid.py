@@ -1,4 +1,5 @@
-"""Run with ``NUMBA_ENABLE_CUDASIM=1``: a multigrid solve on the device
+"""Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU with the ``gpu`` extra: CuPy's arrays,
+benchmarks/device/gpu.sh): a multigrid solve on the device
 (:class:`fbmflow.gpu.multigrid.DeviceMultigridSolver`, its arrays NumPy's and its kernels run by
 Numba's CUDA simulator) against the CPU's multigrid with the smoothers in the same colour order,
 on the Newton systems of a time step: a 2D closed box with a sharp-boundary disk (the Picard
@@ -7,6 +8,7 @@ moved to another iterate (the reaction term and the drift's convection applied w
 Prints one line per case; exits 1 where the cycles differ or the velocities by more than 1e-10
 relative (the two sum in different orders; a wrong operation shows at the solves' tolerance,
 1e-6)."""
+import os
 import sys
 
 import numpy as np
@@ -14,7 +16,7 @@ from numba import cuda
 
 from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
 from fbmflow.flow import NavierStokesProblem, NoSlip
-from fbmflow.gpu.device import simulated_backend
+from fbmflow.gpu.device import gpu_backend, simulated_backend
 from fbmflow.gpu.multigrid import DeviceHierarchy, DeviceMultigridSolver
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
@@ -56,13 +58,14 @@ def box(solver):
     return system
 
 
+backend = simulated_backend() if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" else gpu_backend()
 worst = 0.0
 cases = {"2D, sharp disk": disk, "3D, Newton block moved": box}
 for name in sys.argv[1:] or cases:
     make = cases[name]
     results = []
     for solver in (MultigridSolver(rtol=RTOL, order="colours"),
-                   DeviceMultigridSolver(rtol=RTOL, backend=simulated_backend())):
+                   DeviceMultigridSolver(rtol=RTOL, backend=backend)):
         system = make(solver)
         rng = np.random.default_rng(7)
         f, g = rng.standard_normal(system.n_u), rng.standard_normal(system.n_p)

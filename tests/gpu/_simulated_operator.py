@@ -1,8 +1,8 @@
-"""Run with ``NUMBA_ENABLE_CUDASIM=1``: the GPU's operators (:mod:`fbmflow.gpu.operators`) under
-Numba's CUDA simulator against the CPU kernels, on small 2D and 3D meshes (one periodic axis):
-the cell operator for the mass, Laplace and convection terms with a given convecting velocity
-and with ``N(w) w``, the Newton term, and the two coefficient arrays they read. Prints one line
-per case; exits 1 on a mismatch."""
+"""Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU, benchmarks/device/gpu.sh): the GPU's
+operators (:mod:`fbmflow.gpu.operators`) under Numba's CUDA simulator against the CPU kernels, on
+small 2D and 3D meshes (one periodic axis): the cell operator for the mass, Laplace and convection
+terms with a given convecting velocity and with ``N(w) w``, the Newton term, and the two coefficient
+arrays they read. Prints one line per case; exits 1 on a mismatch."""
 import sys
 
 import numpy as np

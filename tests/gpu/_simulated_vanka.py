@@ -1,9 +1,11 @@
-"""Run with ``NUMBA_ENABLE_CUDASIM=1``: the GPU's Vanka sweeps (:class:`fbmflow.gpu.vanka.DeviceVanka`,
+"""Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU with the ``gpu`` extra: CuPy's arrays,
+benchmarks/device/gpu.sh): the GPU's Vanka sweeps (:class:`fbmflow.gpu.vanka.DeviceVanka`,
 one thread per patch of a colour) under Numba's CUDA simulator against the CPU's factored smoother
 in the same colour order, symmetric sweeps (forwards, then backwards): a 2D box with a
 sharp-boundary disk (far patches, agglomerated patches, interface sweeps) and a 3D box with a
 convecting flow, its Newton system (LU patches) and its Picard one (Schur patches); factors in
 single precision. Prints one line per case; exits 1 on a mismatch."""
+import os
 import sys
 from pathlib import Path
 
@@ -14,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).parents[1]))
 from sharp_disk import sharp_disk_problem  # noqa: E402
 
 from fbmflow.flow import NavierStokesProblem, NoSlip  # noqa: E402
-from fbmflow.gpu.device import simulated_backend  # noqa: E402
+from fbmflow.gpu.device import gpu_backend, simulated_backend  # noqa: E402
 from fbmflow.gpu.vanka import DeviceVanka  # noqa: E402
 from fbmflow.mesh import StructuredMesh  # noqa: E402
 from fbmflow.solvers import MultigridSolver, ordering  # noqa: E402
@@ -38,17 +40,18 @@ def systems():
         yield f"3D, convection, {kind}", system.preconditioner or system
 
 
-backend = simulated_backend()
+backend = simulated_backend() if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" else gpu_backend()
 worst = 0.0
 for name, system in systems():
     smoother = FactoredVankaSmoother(system, symmetric=True, order="colours")
     device = DeviceVanka(smoother, backend)
     rng = np.random.default_rng(1)
     b = rng.standard_normal(system.n_u + system.n_p)
-    want, got = rng.standard_normal(b.size), None
-    got = want.copy()
+    want = rng.standard_normal(b.size)
+    x = backend.put(want)
     smoother.smooth(b, want, 2)
-    device.smooth(backend.put(b), got, 2)
+    device.smooth(backend.put(b), x, 2)
+    got = backend.get(x)
     error = float(np.abs(got - want).max() / np.abs(want).max())
     tolerance = 1e-5 if smoother.store.dtype == np.float32 and 0 in smoother.blocks else 1e-12
     worst = max(worst, error / tolerance)

@@ -1,12 +1,14 @@
-"""GPU computing (issue "GPU computing"), an optional extra (``pip install -e ".[gpu]"``:
-numba-cuda and CuPy): the matrix-free operators as numba-cuda kernels with the same per-cell
-bodies as the CPU kernels. Nothing here is imported by the rest of fbmflow, and nothing here
-imports CUDA before a kernel is asked for; the kernels run under Numba's CUDA simulator
-(``NUMBA_ENABLE_CUDASIM=1``) on a machine without a GPU, which is how the tests check them.
-
-Not yet: a solver that runs on the GPU (``solver.device``); this package holds its kernels,
-each checked against its CPU kernel.
+"""GPU computing, an optional extra (``pip install -e ".[gpu]"``: numba-cuda and CuPy):
+``solver.device = "gpu"`` runs multigrid's cycles and FGMRES on an NVIDIA GPU
+(:mod:`fbmflow.gpu.multigrid`), the set-up and the coarsest level on the CPU. The kernels are
+numba-cuda kernels whose threads run the CPU kernels' own per-cell and per-patch bodies: the
+matrix-free operators (:mod:`fbmflow.gpu.operators`) and the factored Vanka sweep
+(:mod:`fbmflow.gpu.vanka`). Nothing here is imported by the rest of fbmflow before a GPU is asked
+for, and nothing here imports CUDA before a kernel runs; under Numba's CUDA simulator
+(``NUMBA_ENABLE_CUDASIM=1``, :func:`~fbmflow.gpu.device.simulated_backend`) the kernels run on
+the CPU, which is how the tests check them on a machine without a GPU.
 """
+from .multigrid import DeviceMultigridSolver, gpu_solver
 from .operators import (
     apply_cell_operator,
     apply_reaction,
@@ -15,5 +17,5 @@ from .operators import (
     velocity_coefficients,
 )
 
-__all__ = ["apply_cell_operator", "apply_reaction", "cell_colours", "reaction_coefficients",
-           "velocity_coefficients"]
+__all__ = ["DeviceMultigridSolver", "apply_cell_operator", "apply_reaction", "cell_colours", "gpu_solver",
+           "reaction_coefficients", "velocity_coefficients"]

@@ -17,17 +17,29 @@ rounding of the sums' order, in as many cycles.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 
 import numpy as np
 
+from ..config import ParamError
 from ..solvers.base import Factorization
+from ..solvers.choice import InsufficientMemory
 from ..solvers.krylov import fgmres
 from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border
 from ..solvers.reports import LinearReport
-from .device import Backend, gpu_backend
+from .device import Backend, gpu_backend, gpu_problem
 from .operator import DeviceOperator
 from .vanka import DeviceVanka
+
+log = logging.getLogger(__name__)
+
+#: device memory the GPU solver holds per unknown of the finest level [bytes]: the hierarchy's
+#: arrays (operators, smoothers' factors and colours, transfers of all levels but the coarsest;
+#: measured on a set-up's arrays, ten Cate level 1 1 968 and glowinski-free-fall level 3 764,
+#: ``python -m fbmbench gpu_solver --rows arrays``, benchmarks/results/gpu_solver.md), FGMRES's
+#: basis (61 vectors, 488) and ten work vectors (80), rounded up
+DEVICE_BYTES = {2: 1340, 3: 2540}
 
 
 class _DeviceLevel:
@@ -64,8 +76,13 @@ class DeviceHierarchy(Factorization):
         self.settings = host.settings
         self.levels = [_DeviceLevel(level, backend) for level in host.levels[:-1]]
         system = host.system
-        self.operator = (self.levels[0].operator if self.levels and system is host.levels[0].system
-                         else DeviceOperator(system, backend))
+        first = host.levels[0].system
+        if self.levels and system is first:
+            self.operator = self.levels[0].operator
+        else:  # a Newton system shares the blocks of its preconditioner, the finest level
+            shares = (self.levels and system.preconditioner is first
+                      and getattr(system.A, "base", None) is first.A)
+            self.operator = DeviceOperator(system, backend, self.levels[0].operator if shares else None)
         self.nbytes = sum(lv.nbytes for lv in self.levels) + (
             0 if self.levels and self.operator is self.levels[0].operator else self.operator.nbytes)
         super().__init__(host.setup_time_s + time.perf_counter() - t0)
@@ -176,4 +193,26 @@ class DeviceMultigridSolver(MultigridSolver):
             raise ValueError("the GPU solver runs on one process")
         if self.backend is None:
             self.backend = gpu_backend()
-        return DeviceHierarchy(host, self.backend)
+        device = DeviceHierarchy(host, self.backend)
+        n = system.n_u + system.n_p
+        log.info("GPU: %.2f GB on the device, %.0f bytes per unknown", device.nbytes / 1e9, device.nbytes / n)
+        return device
+
+
+def gpu_solver(linear: MultigridSolver, dim: int, n_unknowns: int) -> DeviceMultigridSolver:
+    """``linear``'s settings on the GPU, checked before any work: ParamError naming the fix where
+    the ``gpu`` extra or a CUDA device is missing (:func:`~fbmflow.gpu.device.gpu_problem`),
+    :class:`~fbmflow.solvers.choice.InsufficientMemory` with the figures where ``n_unknowns``
+    of a ``dim``-dimensional flow need more device memory (:data:`DEVICE_BYTES` each) than the
+    GPU has free."""
+    problem = gpu_problem()
+    if problem is not None:
+        raise ParamError(problem)
+    backend = gpu_backend()
+    need, free = DEVICE_BYTES[dim] * n_unknowns, backend.free_bytes()
+    if free is not None and need > free:
+        raise InsufficientMemory(f"the GPU solver needs about {need / 1e9:.1f} GB of device memory for "
+                                 f"{n_unknowns} unknowns ({DEVICE_BYTES[dim]} bytes each, {dim}D), more than "
+                                 f"the {free / 1e9:.1f} GB free on the GPU; use a coarser mesh (a lower "
+                                 "--level) or solver.device = 'cpu'")
+    return DeviceMultigridSolver(linear.settings, linear.rtol, backend=backend)

@@ -22,15 +22,21 @@ def _matrix_free(A) -> bool:
 
 
 class DeviceOperator:
-    """``K x`` of ``system`` on the device of ``backend`` (device vectors (n_u + n_p,))."""
+    """``K x`` of ``system`` on the device of ``backend`` (device vectors (n_u + n_p,)).
+    ``shared``: a device operator whose CSR matrix is this one's assembled part (a Newton
+    system's preconditioner, whose blocks it shares): used, not copied again; :attr:`nbytes`
+    counts only what this one adds."""
 
-    def __init__(self, system: SaddlePointSystem, backend: Backend):
+    def __init__(self, system: SaddlePointSystem, backend: Backend, shared: "DeviceOperator | None" = None):
         self.system, self.backend = system, backend
         self.n_u = system.n_u
         A = system.A
         self.free = _matrix_free(A)
-        self.K = backend.csr(system.matrix(bordered=False, velocity=A.base if self.free else None))
-        self.nbytes = int(self.K.data.nbytes + self.K.indices.nbytes + self.K.indptr.nbytes)
+        if shared is not None:
+            self.K, self.nbytes = shared.K, 0
+        else:
+            self.K = backend.csr(system.matrix(bordered=False, velocity=A.base if self.free else None))
+            self.nbytes = int(self.K.data.nbytes + self.K.indices.nbytes + self.K.indptr.nbytes)
         if self.free:
             space = A.space
             put = backend.put

@@ -195,6 +195,10 @@ def flow_problem(mesh, viscosity: float, boundary: dict, solver: SolverParams, d
     solver = solver.on_processes(comm.size)
     linear = solver.linear_solver(mesh.dim, n_unknowns)
     check_memory(n_unknowns // comm.size, mesh.dim, linear)
+    if solver.device == "gpu":
+        from ..gpu import gpu_solver  # the gpu extra, imported where asked for
+
+        linear = gpu_solver(linear, mesh.dim, n_unknowns)
     if comm.size > 1:
         try:
             return BlockNavierStokesProblem(mesh, viscosity, boundary, comm, density=density,

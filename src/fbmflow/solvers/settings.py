@@ -13,6 +13,9 @@ from .choice import choose_linear_solver
 from .multigrid import MultigridSettings
 from .newton import NewtonSettings
 
+#: where the linear solves run (:attr:`SolverParams.device`)
+DEVICES = ("cpu", "gpu")
+
 
 @dataclasses.dataclass(frozen=True)
 class SolverParams(Section):
@@ -35,10 +38,21 @@ class SolverParams(Section):
     newton_max_iterations: int = param(30, "Newton iteration limit per solve", minimum=1)
     newton_reuse_jacobian: bool = param(True, "keep a factorised Jacobian while it contracts the "
                                         "residual 10x per iteration (same solution, less work)")
+    device: str = param("cpu", "where the linear solves run: cpu, or gpu (multigrid's cycles and FGMRES on "
+                        "an NVIDIA GPU, the set-up and the coarsest level on the CPU; the gpu extra; "
+                        "fbmflow.gpu)", choices=DEVICES)
     process_grid: str = param("auto", "on several processes, how many divide every axis of the mesh, "
                               "as '2x2x4' (the product the number of processes), or 'auto': the grid that "
                               "divides the most multigrid levels, then the one with the fewest cell faces "
                               "between the blocks (fbmflow.flow.blocks)")
+
+    def validate(self):
+        if self.device == "gpu" and self.linear == "direct":
+            raise ParamError("solver.device = 'gpu' runs multigrid, not the direct solver: set "
+                             "solver.linear = 'multigrid' (or 'auto'), or solver.device = 'cpu'")
+        if self.device == "gpu" and self.multigrid.smoother not in ("auto", "vanka-factored"):
+            raise ParamError("solver.device = 'gpu' smoothes with vanka-factored, not "
+                             f"{self.multigrid.smoother!r}: set solver.multigrid.smoother = 'auto'")
 
     def grid(self, size: int, dim: int) -> tuple[int, ...] | None:
         """The process grid of :attr:`process_grid` for ``size`` processes on a ``dim``-dimensional
@@ -58,9 +72,13 @@ class SolverParams(Section):
 
     def on_processes(self, size: int) -> "SolverParams":
         """These settings for a run on ``size`` processes: multigrid on several (the one solver
-        that divides among them), ParamError where the direct solver is asked for there."""
+        that divides among them), ParamError where the direct solver or the GPU is asked for
+        there."""
         if size == 1:
             return self
+        if self.device == "gpu":
+            raise ParamError("solver.device = 'gpu' runs on one process: start one, or set solver.device = "
+                             "'cpu' to run on several")
         if self.linear == "direct":
             raise ParamError("the direct solver runs on one process: set solver.linear = 'multigrid' (or "
                              "'auto') to run on several")
@@ -70,7 +88,8 @@ class SolverParams(Section):
         """The linear solver for a ``dim``-dimensional flow of ``n_unknowns``, ``"auto"`` resolved
         with ``responses`` right-hand sides per step besides the Newton steps
         (:func:`~fbmflow.solvers.choice.choose_linear_solver`)."""
-        return choose_linear_solver(dim, n_unknowns, self.linear_rtol, self.linear, self.multigrid, responses)
+        linear = "multigrid" if self.device == "gpu" else self.linear
+        return choose_linear_solver(dim, n_unknowns, self.linear_rtol, linear, self.multigrid, responses)
 
     def newton_settings(self) -> NewtonSettings:
         """The Newton stopping rule and Jacobian reuse of these settings."""

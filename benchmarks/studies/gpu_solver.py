@@ -1,0 +1,143 @@
+"""The GPU solver (solver.device = "gpu"): its sweep order on the CPU, its device memory, and on a GPU its
+seconds per cycle and per step.
+
+Question: the GPU sweeps the factored Vanka smoother's patches in colours (a colour's patches at
+once) instead of the CPU's slabs; does that order take more multigrid cycles per solve, and how
+much device memory does the GPU solver hold per unknown? On a GPU: how fast is a step against the
+CPU path of the same machine?
+Answer: pending (see the results table).
+Measured: pending; quoted in docs/validation/gpu.md
+Run: python -m fbmbench gpu_solver --rows slabs colours arrays
+
+Rows, each in a process of its own, one after the other, ``steps`` time steps of the scene at its
+defaults with multigrid (``solver.linear = multigrid``):
+
+* ``slabs``: the CPU, the smoothers in slab order (the default);
+* ``colours``: the CPU, the smoothers in the GPU's colour order (``solver.multigrid.order``): the
+  GPU's arithmetic, so its cycles are the GPU's;
+* ``arrays``: the GPU solver set up with NumPy arrays in place of CuPy's (no GPU needed: the
+  arrays a device would hold, the same sizes) and its solves done by the CPU hierarchy it was
+  built from: the device memory per unknown, the hierarchy's (operators, smoothers, transfers)
+  and FGMRES's basis;
+* ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra).
+
+Cycles: FGMRES iterations, one cycle each; per solve: over all the step's linear solves.
+
+writes benchmarks/results/gpu_solver.{json,md}; ``--tag`` names the run (rows with other tags are
+kept).
+"""
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+import time
+
+from studies.thread_scaling import BENCHMARKS, RESULTS, commit, machine
+
+ROWS = {"slabs": ["solver.multigrid.order=slabs"], "colours": ["solver.multigrid.order=colours"],
+        "arrays": ["solver.multigrid.order=colours"], "gpu": ["solver.device=gpu"]}
+
+
+def _count_device_arrays(record: dict) -> None:
+    """Make ``solver.device = gpu`` build its device hierarchy from NumPy arrays (the simulator's
+    backend) and solve on the CPU hierarchy under it, recording the device bytes per unknown."""
+    import fbmflow.gpu.multigrid as gm
+    from fbmflow.gpu.device import simulated_backend
+
+    gm.gpu_problem = lambda: None
+    gm.gpu_backend = simulated_backend
+
+    def solve(self, f, g, rtol=None):
+        n = self.host.system.n_u + self.host.system.n_p
+        record["hierarchy_bytes"] = max(record.get("hierarchy_bytes", 0.0), self.nbytes / n)
+        krylov = 2 * self.settings.restart + 1  # FGMRES's V and Z
+        record["krylov_bytes"] = 8.0 * krylov
+        return self.host.solve(f, g, rtol)
+
+    gm.DeviceHierarchy.solve = solve
+
+
+def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
+    """``steps`` steps of ``scene_name`` at ``level`` in this process, as row ``row`` says."""
+    from fbmflow.scenes.registry import load_scene
+
+    record: dict = {}
+    settings = ["solver.linear=multigrid"] + ROWS[row]
+    if row == "arrays":
+        settings = ["solver.linear=multigrid", "solver.device=gpu"]
+        _count_device_arrays(record)
+    scene, params, level = load_scene(scene_name, level, settings)
+    setup = scene.build(params, level)
+    sim = setup.sim
+    out = []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        rep = sim.step(setup.dt)
+        out.append(dict(wall_s=time.perf_counter() - t0, solves=rep.linear.solves,
+                        cycles=rep.linear.iterations, linear_s=rep.linear.time_s))
+    return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
+                solver=sim.flow.linear_solver_description,
+                peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9, **record)
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["# The GPU solver: sweep order, device memory, speed (python -m fbmbench gpu_solver)", "",
+             "Each row a process of its own, the scene's defaults with multigrid. Cycles: FGMRES iterations "
+             "(one cycle each) per linear solve, over the steps after the first (the first includes the "
+             "set-up and JIT compilation). Device bytes: per unknown of the finest level, the hierarchy's "
+             "arrays (operators, smoothers' factors and colours, transfers; the coarsest level stays on the "
+             "CPU) and FGMRES's basis (2 x 30 + 1 vectors). Seconds compare only rows of one tag run alone "
+             "on their machine: the rows tagged order-bytes and bytes-shared ran beside another job.", "",
+             "| scene | level | unknowns | row | solver | steps | s per step | cycles per solve "
+             "| s per cycle | device bytes per unknown (hierarchy + basis) | peak host GB | machine "
+             "| measured | tag |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        later = r["steps"][1:] or r["steps"]
+        step_s = sum(s["wall_s"] for s in later) / len(later)
+        solves = sum(s["solves"] for s in later)
+        cycles = sum(s["cycles"] for s in later)
+        linear_s = sum(s["linear_s"] for s in later)
+        device = (f"{r['hierarchy_bytes'] + r['krylov_bytes']:.0f} ({r['hierarchy_bytes']:.0f} + "
+                  f"{r['krylov_bytes']:.0f})" if "hierarchy_bytes" in r else "–")
+        lines.append(f"| {r['scene']} | {r['level']} | {r['unknowns']} | {r['row']} | {r['solver']} | "
+                     f"{len(r['steps'])} | {step_s:.2f} | {cycles / max(solves, 1):.2f} | "
+                     f"{linear_s / max(cycles, 1):.3f} | {device} | {r['peak_rss_gb']:.2f} | "
+                     f"{r['machine']} | {r['measured']} | {r['tag']} |")
+    return "\n".join(lines) + "\n"
+
+
+def run(*, scenes: list[str] = ("ten-cate", "glowinski-free-fall"), levels: list[int] = (1, 3),
+        rows: list[str] = ("slabs", "colours", "arrays"), steps: int = 3, tag: str = "",
+        one: list[str] = ()) -> None:
+    """Every scene (at the level in the same place of ``levels``) with every row, each in a
+    process of its own.
+
+    Parameters
+    ----------
+    scenes : scenes to run
+    levels : their levels, one per scene
+    rows : slabs, colours, arrays, gpu (see the module docstring)
+    steps : time steps per row
+    tag : names this run's rows in the results
+    one : internal: run SCENE LEVEL ROW in this process
+    """
+    if one:
+        print(json.dumps(measure(one[0], int(one[1]), one[2], steps)))
+        return
+    path = RESULTS / "gpu_solver.json"
+    kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
+    stamp = f"{time.strftime('%Y-%m-%d')} {commit()}"
+    for scene, level in zip(scenes, levels):
+        for row in rows:
+            out = subprocess.run([sys.executable, "-m", "fbmbench", "gpu_solver", "--steps", str(steps),
+                                  "--one", scene, str(level), row], check=True, capture_output=True,
+                                 text=True, cwd=BENCHMARKS).stdout
+            result = json.loads(out.strip().splitlines()[-1])
+            result.update(machine=machine(), measured=stamp, tag=tag)
+            kept.append(result)
+            print(json.dumps(result), flush=True)
+            path.write_text(json.dumps(kept, indent=1))
+            (RESULTS / "gpu_solver.md").write_text(table(kept))

@@ -1,0 +1,60 @@
+"""Asking for the GPU: clear errors before any work (no GPU, no ``gpu`` extra, settings the GPU
+solver cannot take, a problem too large for the device)."""
+import subprocess
+import sys
+
+import pytest
+
+from fbmflow.config import ParamError
+from fbmflow.gpu.device import gpu_problem
+from fbmflow.solvers.choice import InsufficientMemory
+from fbmflow.solvers.settings import SolverParams
+
+
+@pytest.mark.skipif(gpu_problem() is None, reason="a GPU and the gpu extra are here: the run would start")
+def test_asking_for_the_gpu_without_one_stops_before_any_work_with_one_line(tmp_path):
+    """``fbmflow run cavity-2d --set solver.device=gpu`` on a machine without a GPU or without the
+    ``gpu`` extra: exit code 2, one line that names the setting and the fix, no results."""
+    out = subprocess.run([sys.executable, "-m", "fbmflow.cli", "run", "cavity-2d", "--level", "1", "--set",
+                          "solver.device=gpu", "--out", str(tmp_path / "run"), "--no-plot"],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2, out.stderr
+    errors = [line for line in out.stderr.splitlines() if line.startswith("fbmflow: error:")]
+    assert len(errors) == 1 and "solver.device = 'gpu'" in errors[0] and "solver.device = 'cpu'" in errors[0]
+    assert ("gpu extra" in errors[0]) != ("no CUDA GPU" in errors[0])
+    assert not (tmp_path / "run" / "summary.json").exists()
+
+
+@pytest.mark.parametrize("settings, words", [
+    (dict(linear="direct"), "not the direct solver"),
+    (dict(multigrid={"smoother": "vanka-full"}), "smoothes with vanka-factored"),
+])
+def test_settings_the_gpu_solver_cannot_take_are_refused(settings, words):
+    from fbmflow.config import from_dict
+    with pytest.raises(ParamError, match=words):
+        from_dict(SolverParams, dict(settings, device="gpu"))
+
+
+def test_the_gpu_runs_on_one_process():
+    with pytest.raises(ParamError, match="runs on one process"):
+        SolverParams(device="gpu").on_processes(2)
+    assert SolverParams(device="gpu").on_processes(1).device == "gpu"
+
+
+def test_a_problem_larger_than_the_free_device_memory_is_refused_with_the_figures(monkeypatch):
+    """:func:`fbmflow.gpu.gpu_solver` on a device with 1 GB free: a 3D problem of 10 million
+    unknowns is refused naming the need, the free memory and the remedies; 100 000 pass."""
+    import fbmflow.gpu.multigrid as gm
+    from fbmflow.gpu.device import simulated_backend
+
+    class Small(type(simulated_backend())):
+        def free_bytes(self):
+            return 10**9
+
+    monkeypatch.setattr(gm, "gpu_problem", lambda: None)
+    monkeypatch.setattr(gm, "gpu_backend", lambda: Small(*vars(simulated_backend()).values()))
+    linear = SolverParams(device="gpu").linear_solver(3, 100_000)
+    assert isinstance(gm.gpu_solver(linear, 3, 100_000), gm.DeviceMultigridSolver)
+    with pytest.raises(InsufficientMemory, match=r"needs about \d+\.\d GB of device memory for 10000000 "
+                       r"unknowns.*1\.0 GB free on the GPU.*a lower --level"):
+        gm.gpu_solver(linear, 3, 10_000_000)
