@@ -1,7 +1,8 @@
-"""Where the GPU solver's arrays live (:class:`Backend`): CuPy's arrays and sparse matrices on an
-NVIDIA GPU, or NumPy's and SciPy's under Numba's CUDA simulator, where the numba-cuda kernels run
-on the CPU (``NUMBA_ENABLE_CUDASIM=1``: how the tests check the GPU path on a machine without
-one). :func:`gpu_problem` says, before any work, why ``solver.device = "gpu"`` cannot run here."""
+"""Where the GPU solver's arrays live (:class:`~fbmflow.gpu.device.Backend`): CuPy's arrays and sparse
+matrices on an NVIDIA GPU, or NumPy's and SciPy's under Numba's CUDA simulator, where the numba-cuda
+kernels run on the CPU (``NUMBA_ENABLE_CUDASIM=1``: how the tests check the GPU path on a machine
+without one). :func:`gpu_problem` says, before any work, why ``solver.device = "gpu"`` cannot run
+here."""
 from __future__ import annotations
 
 import importlib.util

@@ -67,7 +67,7 @@ class _DeviceLevel:
 
 class DeviceHierarchy(Factorization):
     """A :class:`~fbmflow.solvers.multigrid.MultigridHierarchy` (set up on the CPU, smoothers in
-    colour order) with its cycles and its FGMRES on the device of ``backend``. :attr:`nbytes`:
+    colour order) with its cycles and its FGMRES on the device of ``backend``. ``nbytes``:
     the device memory it holds [bytes]."""
 
     def __init__(self, host: MultigridHierarchy, backend: Backend):
@@ -176,7 +176,7 @@ class DeviceMultigridSolver(MultigridSolver):
 
     name = "multigrid"
 
-    def __init__(self, settings=None, rtol: float = 1e-8, backend: Backend | None = None, **kwargs):
+    def __init__(self, settings=None, rtol: float = 1e-8, backend=None, **kwargs):
         super().__init__(settings, rtol, **kwargs)
         if self.settings.smoother not in ("auto", "vanka-factored"):
             raise ValueError("the GPU smoothes with the vanka-factored smoother, not "

@@ -24,7 +24,7 @@ def _matrix_free(A) -> bool:
 class DeviceOperator:
     """``K x`` of ``system`` on the device of ``backend`` (device vectors (n_u + n_p,)).
     ``shared``: a device operator whose CSR matrix is this one's assembled part (a Newton
-    system's preconditioner, whose blocks it shares): used, not copied again; :attr:`nbytes`
+    system's preconditioner, whose blocks it shares): used, not copied again; ``nbytes``
     counts only what this one adds."""
 
     def __init__(self, system: SaddlePointSystem, backend: Backend, shared: "DeviceOperator | None" = None):
