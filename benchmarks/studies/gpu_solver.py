@@ -6,13 +6,14 @@ once) instead of the CPU's slabs; does that order take more multigrid cycles per
 much device memory does the GPU solver hold per unknown? On a GPU: how fast is a step against the
 CPU path of the same machine?
 Answer: no more cycles: on the CPU in the GPU's colour order ten Cate level 1 takes 3.00 cycles per
-solve as in slab order, glowinski-free-fall level 3 10.93 against 10.79. The GPU solver holds 2 456
-bytes per unknown on the device in 3D (ten Cate level 1: 1 968 the hierarchy, 488 FGMRES's basis)
-and 1 252 in 2D (glowinski level 3). The speed on a GPU is not measured yet (no GPU was lent);
-the GPU takes over the cycles only, and on this machine the set-up and the work outside the
-solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step: free cycles would make it at most
+solve as in slab order, glowinski-free-fall level 3 10.93 against 10.79. The GPU solver holds 2 050
+bytes per unknown on the device in 3D (ten Cate level 1: 1 562 the hierarchy, 488 FGMRES's basis;
+level 2 the same) and 1 174 in 2D (glowinski level 3). The speed on a GPU is not measured yet (no
+GPU was lent); the GPU takes over the cycles only, and on this machine the set-up and the work
+outside the solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step: free cycles would make it at most
 4.70x faster (level 1: 4.40x).
-Measured: 2026-11-30, commit ce687a0 (order), 0d66be8 (bytes) and e1a47de (split); quoted in
+Measured: 2026-11-30, commit ce687a0 (order), 15a1ca4 (bytes, with the blocks on the device as on the
+CPU) and e1a47de (split); quoted in
 docs/validation/gpu.md, "The same answer"
 Run: python -m fbmbench gpu_solver --rows slabs colours arrays
 

@@ -1,16 +1,21 @@
 """The saddle-point operator ``K x`` on the GPU.
 
-``K = [[A, B], [B^T, C]]`` is held as one CSR matrix on the device (CuPy's sparse product: the
-issue's measurement, a 3D Q2 matrix of 135 M non-zeros in 0.57 ms on an H200, 2.9 TB/s). A
-Newton block that applies its Newton terms without a matrix (the flow problem's ``NewtonBlock``:
-an assembled block plus the reaction term ``s R(u)`` and the drift's convection ``s N(u - u0)``)
-keeps that form on the device: its assembled part in the CSR, the two terms by the matrix-free
-kernels (:mod:`fbmflow.gpu.operators`) from its coefficient arrays, which :meth:`DeviceOperator.refresh`
+``K = [[A, B], [B^T, C]]`` is held as its blocks, CSR matrices on the device (CuPy's sparse
+products: the issue's measurement, a 3D Q2 matrix of 135 M non-zeros in 0.57 ms on an H200,
+2.9 TB/s). A velocity block stored once per scalar (:class:`~fbmflow.fem.velocity_block.VelocityBlock`:
+``diag(S, ..., S)`` with some rows replaced) stays so: ``S`` applied to the ``d`` components at
+once (one sparse-times-dense product, ``S`` read once), the replaced rows written over them; ``d``
+times fewer bytes than the assembled block, to store and to stream. A Newton block that applies
+its Newton terms without a matrix (the flow problem's ``NewtonBlock``: an assembled block plus
+the reaction term ``s R(u)`` and the drift's convection ``s N(u - u0)``) keeps that form on the
+device: its assembled part as above, the two terms by the matrix-free kernels
+(:mod:`fbmflow.gpu.operators`) from its coefficient arrays, which :meth:`DeviceOperator.refresh`
 copies again when the block has moved to another Newton iterate.
 """
 from __future__ import annotations
 
-from ..solvers.system import SaddlePointSystem
+from ..fem.velocity_block import VelocityBlock
+from ..solvers.system import SaddlePointSystem, as_csr
 from .device import Backend
 from .operators import apply_cell_operator, apply_reaction, cell_colours
 
@@ -21,9 +26,53 @@ def _matrix_free(A) -> bool:
     return hasattr(A, "base") and hasattr(A, "react") and hasattr(A, "drift")
 
 
+def _nbytes(*matrices) -> int:
+    """Device bytes of CSR matrices (None: none)."""
+    return int(sum(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes for M in matrices if M is not None))
+
+
+class _Blocks:
+    """The assembled blocks of ``system`` on the device, ``A`` its velocity block (or a Newton
+    block's assembled part): ``A`` as ``S`` and its replaced rows where it is a
+    :class:`~fbmflow.fem.velocity_block.VelocityBlock`, else as a CSR matrix; the gradient
+    ``B``, the continuity rows ``B^T``, the pressure block ``C`` (None where there is none)."""
+
+    def __init__(self, system: SaddlePointSystem, A, backend: Backend):
+        csr, self.xp = backend.csr, backend.xp
+        self.n_u = system.n_u
+        self.S = self.A = None
+        if isinstance(A, VelocityBlock):
+            self.S, self.R = csr(A.scalar()), csr(A.rows)
+            self.replaced = backend.put(A.dofs)
+            self.d, self.n_v = A.space.dim, A.space.n_v
+        else:
+            self.A = csr(A)
+        C = system.pressure_block
+        self.B, self.D, self.C = csr(system.gradient), csr(as_csr(system.BT)), None if C is None else csr(C)
+        self.nbytes = _nbytes(self.S, self.A, self.B, self.D, self.C) + (
+            0 if self.S is None else _nbytes(self.R) + int(self.replaced.nbytes))
+
+    def apply(self, x):
+        """``K x`` of the assembled blocks for a device vector ``x`` (n_u + n_p,)."""
+        xp, n_u = self.xp, self.n_u
+        u, p = x[:n_u], x[n_u:]
+        if self.S is not None:  # S on the d components at once, then the replaced rows
+            U = self.S @ xp.ascontiguousarray(u.reshape(self.d, self.n_v).T)
+            yu = xp.ascontiguousarray(U.T).reshape(-1)
+            if self.replaced.shape[0]:
+                yu[self.replaced] = self.R @ u
+        else:
+            yu = self.A @ u
+        yu += self.B @ p
+        yp = self.D @ u
+        if self.C is not None:
+            yp += self.C @ p
+        return xp.concatenate([yu, yp])
+
+
 class DeviceOperator:
     """``K x`` of ``system`` on the device of ``backend`` (device vectors (n_u + n_p,)).
-    ``shared``: a device operator whose CSR matrix is this one's assembled part (a Newton
+    ``shared``: a device operator whose blocks are this one's assembled part (a Newton
     system's preconditioner, whose blocks it shares): used, not copied again; ``nbytes``
     counts only what this one adds."""
 
@@ -33,10 +82,10 @@ class DeviceOperator:
         A = system.A
         self.free = _matrix_free(A)
         if shared is not None:
-            self.K, self.nbytes = shared.K, 0
+            self.blocks, self.nbytes = shared.blocks, 0
         else:
-            self.K = backend.csr(system.matrix(bordered=False, velocity=A.base if self.free else None))
-            self.nbytes = int(self.K.data.nbytes + self.K.indices.nbytes + self.K.indptr.nbytes)
+            self.blocks = _Blocks(system, A.base if self.free else A, backend)
+            self.nbytes = self.blocks.nbytes
         if self.free:
             space = A.space
             put = backend.put
@@ -64,7 +113,7 @@ class DeviceOperator:
 
     def apply(self, x):
         """``K x`` for a device vector ``x`` (n_u + n_p,)."""
-        y = self.K @ x
+        y = self.blocks.apply(x)
         if self.free:
             detJw, Jinv, cell_dofs, phi, dphi = self.geometry
             v = x[:self.n_u].reshape(self.d, self.n_v)

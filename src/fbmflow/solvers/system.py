@@ -190,15 +190,13 @@ class SaddlePointSystem:
         const[::self.space.dim + 1] = 1.0  # the constant pressure: mean DOFs of P1disc
         p -= np.multiply.outer(const, self.mean_weights @ p) / (self.mean_weights @ const)
 
-    def matrix(self, bordered: bool = True, velocity: sp.spmatrix | None = None) -> sp.spmatrix:
+    def matrix(self, bordered: bool = True) -> sp.spmatrix:
         """The assembled system matrix, bordered by ``mean_weights`` (CSC) unless ``bordered`` is
         False (CSR, explicit zeros of the blocks kept, sorted indices). The unbordered one is
         stacked row-wise from CSR blocks without a COO round trip (scipy's ``bmat`` took 3.6 s
-        per factorisation at ten-cate level 1). ``velocity``: a block in place of ``A`` (the
-        assembled part of a velocity block that applies the rest without a matrix)."""
+        per factorisation at ten-cate level 1)."""
         C = self.pressure_block
-        A = self.A if velocity is None else velocity
-        A = A.tocsr() if isinstance(A, VelocityBlock) else A
+        A = self.A.tocsr() if isinstance(self.A, VelocityBlock) else self.A
         if bordered and self.mean_weights is not None:
             w = sp.csr_matrix(self.mean_weights[None, :])
             blocks = [[A, self.gradient, None], [as_csr(self.BT), C, w.T], [None, w, None]]
