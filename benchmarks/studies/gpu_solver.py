@@ -12,7 +12,7 @@ level 2 the same) and 1 174 in 2D (glowinski level 3). The speed on a GPU is not
 GPU was lent); the GPU takes over the cycles only, and on this machine the set-up and the work
 outside the solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step: free cycles would make it at most
 4.70x faster (level 1: 4.40x).
-Measured: 2026-11-30, commit ce687a0 (order), 15a1ca4 (bytes, with the blocks on the device as on the
+Measured: 2026-11-30, commit ce687a0 (order), 5561688 (bytes, with the blocks on the device as on the
 CPU) and e1a47de (split); quoted in
 docs/validation/gpu.md, "The same answer"
 Run: python -m fbmbench gpu_solver --rows slabs colours arrays
