@@ -5,8 +5,8 @@ CPU in colour order (``order="colours"``: its local factors, its copy of the ope
 phases, every phase a colour whose patches touch nothing of each other) and sweeps with them on
 the device: one kernel launch per colour, one thread per patch, each thread running the body the
 CPU's sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU smoother's in
-the same order, to the rounding of the sums' order (the CPU's kernels are compiled with
-fastmath as well).
+the same order, to the rounding of the sums' order (the kernel is compiled with fastmath, the
+CPU's triangular solves too).
 """
 from __future__ import annotations
 

@@ -354,7 +354,7 @@ def crossing_rows(ptr, idx, val, rows, n_v):
 #   gt[c, m, :] and the columns b_idx[r w:(r + 1) w] of row r = c (d + 1) + m (w = d nl);
 #   (k_ptr, k_idx, k_val): every other row of K (the velocity rows of the other nodes, A and G,
 #   and the pressure block's rows), global columns. Velocity row (i, a) is i n_v + a.
-@jitable
+@jitable(inline=False)
 def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
     """``(B p)[(i, node)]`` for a held node, ``p = x[n_u:]``, from the divergence's cells."""
     npl, w = gt.shape[1], gt.shape[2]
@@ -368,7 +368,7 @@ def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
     return s
 
 
-@jitable
+@jitable(inline=False)
 def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
     """``(B^T x)[row]``, the continuity row as the operator holds it (see above)."""
     s = 0.0
@@ -384,7 +384,7 @@ def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
     return s
 
 
-@jitable
+@jitable(inline=False)
 def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
                  d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """``(K x)[q]``."""
@@ -591,7 +591,7 @@ def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_pos, d_ptr, d_i
     return out
 
 
-@jitable
+@jitable(inline=False, fastmath=True)
 def _lu_solve_stored(store, base, n, piv, r, w, out):
     """:func:`_lu_solve` with the factors ``LU (n, n)`` stored row by row at ``store[base:]``, in
     the storage precision of ``store`` (``w`` work of that dtype; ``r`` float64, overwritten;
@@ -621,7 +621,7 @@ def _lu_solve_stored(store, base, n, piv, r, w, out):
         out[i] = w[i]
 
 
-@jitable
+@jitable(inline=False, fastmath=True)
 def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_val):
     """The correction of a Schur patch with ``nb`` stored component inverses (see
     :func:`vanka_factor`) from its residual ``r`` (d nl + d + 1,) float64 into ``out``; ``w``
@@ -670,7 +670,7 @@ def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_v
         out[j] = s
 
 
-@jitable
+@jitable(inline=False)
 def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
     """Add ``omega`` times patch ``k``'s correction ``K[S, S]^-1 (b - K x)[S]`` to ``x`` (the CPU's
     sweeps and the GPU's, :mod:`fbmflow.gpu`, run this body). ``patches``: the tuple ``(ptr,
@@ -727,13 +727,12 @@ def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
         x[S[a]] += omega * out[a]
 
 
-@njit(fastmath=True)
+@njit
 def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
                      width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
                      d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
     """Block Gauss-Seidel over the patches ``order[start:end]`` in that order (:func:`vanka_patch`):
-    each correction is added to ``x`` before the next patch's residual is taken. fastmath lets
-    the rows' dot products vectorise."""
+    each correction is added to ``x`` before the next patch's residual is taken."""
     r = np.empty(width)
     w = np.empty(width, dtype=store.dtype)
     w64 = np.empty(width)
@@ -745,7 +744,7 @@ def _update_in_order(order, start, end, b, x, omega, ptr, dofs, lu_ptr, store, p
         vanka_patch(order[e], b, x, omega, patches, op, r, w, w64, out)
 
 
-@njit(parallel=True, fastmath=True)
+@njit(parallel=True)
 def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d,
                        width, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos,
                        d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
@@ -759,7 +758,7 @@ def vanka_sweep_groups(gptr, order, b, x, omega, ptr, dofs, lu_ptr, store, piv, 
                          nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
 
 
-@njit(fastmath=True)
+@njit
 def vanka_sweep_sequential(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, width,
                            n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr,
                            d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
