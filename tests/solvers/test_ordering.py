@@ -16,6 +16,18 @@ def _groups(phases):
     return [[order[gptr[g]:gptr[g + 1]] for g in range(gptr.size - 1)] for gptr, order in phases]
 
 
+def _phases(order, shape, periodic, reach):
+    """``order``'s phases (:func:`~fbmflow.solvers.ordering.slab_phases` or ``colour_phases``) of
+    every cell of a box, checked to sweep each cell once: (cell indices, phases, the gap in
+    layers that keeps two patches independent, the cells per axis)."""
+    mesh = StructuredMesh.box(shape, periodic=periodic)
+    index = mesh.cell_indices()
+    phases = order(mesh.shape, mesh.periodic, index, np.arange(mesh.n_cells), reach)
+    swept = np.concatenate([cells for _, cells in phases])
+    assert np.array_equal(np.sort(swept), np.arange(mesh.n_cells))
+    return index, phases, int(np.floor(1 + reach / 2)) + 1, np.array(shape)
+
+
 @pytest.mark.parametrize("shape, periodic, reach, n_phases", [
     ((40, 40, 64), (False, False, False), 2, 4),     # 16 slabs, then 8 along y: 32 blocks per phase
     ((12, 12, 64), (False, False, False), 2, 4),     # ten Cate level 1: 16 blocks per phase
@@ -30,24 +42,18 @@ def test_groups_of_a_phase_are_independent(shape, periodic, reach, n_phases):
     """Every cell is swept once, each group in lexicographic order; two cells of different
     groups of one phase lie at least ``gap`` layers apart along some axis (modulo the period),
     so that no group touches a DOF another reads."""
-    mesh = StructuredMesh.box(shape, periodic=periodic)
-    index = mesh.cell_indices()
-    phases = ordering.slab_phases(mesh.shape, mesh.periodic, index, np.arange(mesh.n_cells), reach)
+    index, phases, gap, n = _phases(ordering.slab_phases, shape, periodic, reach)
     assert len(phases) == n_phases
-    swept = np.concatenate([order for _, order in phases])
-    assert np.array_equal(np.sort(swept), np.arange(mesh.n_cells))
-    gap = int(np.floor(1 + reach / 2)) + 1
-    n = np.array(shape)
     for groups in _groups(phases):
         assert len(groups) >= 2
         for g in groups:
             assert np.all(np.diff(g) > 0)  # lexicographic
         # per group and axis: the set of layers it occupies
-        layers = [[np.unique(index[g, a]) for a in range(mesh.dim)] for g in groups]
+        layers = [[np.unique(index[g, a]) for a in range(len(shape))] for g in groups]
         for i in range(len(groups)):
             for j in range(i + 1, len(groups)):
                 apart = False
-                for a in range(mesh.dim):
+                for a in range(len(shape)):
                     diff = np.abs(layers[i][a][:, None] - layers[j][a][None, :])
                     if periodic[a]:
                         diff = np.minimum(diff, n[a] - diff)
@@ -225,14 +231,8 @@ def test_cells_of_a_colour_are_independent(shape, periodic, reach, n_colours):
     """The GPU's order (:func:`~fbmflow.solvers.ordering.colour_phases`): every cell once, every
     patch a group of its own, and two cells of one colour at least ``gap`` layers apart along
     some axis (modulo the period)."""
-    mesh = StructuredMesh.box(shape, periodic=periodic)
-    index = mesh.cell_indices()
-    phases = ordering.colour_phases(mesh.shape, mesh.periodic, index, np.arange(mesh.n_cells), reach)
+    index, phases, gap, n = _phases(ordering.colour_phases, shape, periodic, reach)
     assert len(phases) == n_colours
-    swept = np.concatenate([order for _, order in phases])
-    assert np.array_equal(np.sort(swept), np.arange(mesh.n_cells))
-    gap = int(np.floor(1 + reach / 2)) + 1
-    n = np.array(shape)
     for gptr, order in phases:
         assert np.array_equal(gptr, np.arange(order.size + 1)) and np.all(np.diff(order) > 0)
         diff = np.abs(index[order][:, None, :] - index[order][None, :, :])
