@@ -42,19 +42,19 @@ def test_the_gpu_runs_on_one_process():
 
 
 def test_a_problem_larger_than_the_free_device_memory_is_refused_with_the_figures(monkeypatch):
-    """:func:`fbmflow.gpu.gpu_solver` on a device with 1 GB free: a 3D problem of 10 million
+    """:func:`fbmflow.gpu.gpu_solver` on a device with 2 GB free: a 3D problem of 10 million
     unknowns is refused naming the need, the free memory and the remedies; 100 000 pass."""
     import fbmflow.gpu.multigrid as gm
     from fbmflow.gpu.device import simulated_backend
 
     class Small(type(simulated_backend())):
         def free_bytes(self):
-            return 10**9
+            return 2 * 10**9
 
     monkeypatch.setattr(gm, "gpu_problem", lambda: None)
     monkeypatch.setattr(gm, "gpu_backend", lambda: Small(*vars(simulated_backend()).values()))
     linear = SolverParams(device="gpu").linear_solver(3, 100_000)
     assert isinstance(gm.gpu_solver(linear, 3, 100_000), gm.DeviceMultigridSolver)
     with pytest.raises(InsufficientMemory, match=r"needs about \d+\.\d GB of device memory for 10000000 "
-                       r"unknowns.*1\.0 GB free on the GPU.*a lower --level"):
+                       r"unknowns.*2\.0 GB free on the GPU.*a lower --level"):
         gm.gpu_solver(linear, 3, 10_000_000)

@@ -3,7 +3,7 @@ Numba's CUDA target). Each thread runs a body that the CPU kernels run too (``ji
 ``fbmflow._jit``), with scratch arrays of the largest cell's sizes."""
 from .._jit import cuda_target, float64
 from ..fem._kernels import cell_operator, reaction_at, reaction_cell, velocity_at
-from ..solvers._kernels import vanka_patch
+from ..solvers._kernels import factor_patch, vanka_patch
 
 cuda = cuda_target()
 
@@ -72,3 +72,20 @@ def vanka_patches(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d
         vanka_patch(patches[t], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
                     (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
                      b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])
+
+
+@cuda.jit
+def vanka_factors(patches, schur_tol, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u, regular,
+                  s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+                  k_idx, k_val, work, A, Ainv, Y, Sc, Sinv, p_work, e, col):
+    """Thread ``t`` writes patch ``patches[t]``'s local factors into ``store`` and ``piv``
+    (``fbmflow.solvers._kernels.factor_patch``, positions by bisection), with
+    entry ``t`` of the work arrays ``work (threads, width, width)``, ``A``, ``Ainv``, ``Y``,
+    ``Sc``, ``Sinv``, ``p_work``, ``e``, ``col`` (the shapes of ``factor_patch``'s behind
+    the thread axis)."""
+    t = cuda.grid(1)
+    if t < patches.shape[0]:
+        factor_patch(patches[t], (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
+                     (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                      b_idx, k_ptr, k_idx, k_val), schur_tol, None, work[t], A[t], Ainv[t], Y[t], Sc[t],
+                     Sinv[t], p_work[t], e[t], col[t])

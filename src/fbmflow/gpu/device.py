@@ -20,12 +20,13 @@ class Backend:
         self.xp, self.sparse, self.name, self.threads = xp, sparse, name, threads
 
     def put(self, a, dtype=None):
-        """A host array (or scalar sequence) as a contiguous device array."""
-        return self.xp.asarray(np.ascontiguousarray(a, dtype=dtype))
+        """A host array (or scalar sequence) as a contiguous device array: a copy, also under the
+        simulator, so that host and device arrays never alias, as on a GPU."""
+        return self.xp.array(np.ascontiguousarray(a, dtype=dtype))
 
     def get(self, a) -> np.ndarray:
-        """A device array back on the host."""
-        return a.get() if hasattr(a, "get") else np.asarray(a)
+        """A device array back on the host (a copy)."""
+        return a.get() if hasattr(a, "get") else np.array(a)
 
     def csr(self, M):
         """A host sparse matrix as the device's CSR matrix (int32 indices: CuPy's kernels take

@@ -1,10 +1,11 @@
 """Multigrid on the GPU (``solver.device = "gpu"``).
 
 The hierarchy is set up on the CPU as :class:`~fbmflow.solvers.multigrid.MultigridSolver` sets it
-up, with the smoothers in colour order (``solver.multigrid.order = "colours"``), and copied to the
-device: every level but the coarsest holds its operator (:class:`~fbmflow.gpu.operator.DeviceOperator`),
-its smoother's factors and colours (:class:`~fbmflow.gpu.vanka.DeviceVanka`) and its transfers
-(the truncated prolongation and its transpose as CSR matrices). FGMRES and the cycles run on the
+up, with the smoothers in colour order (``solver.multigrid.order = "colours"``) but without their
+local factors, and copied to the device: every level but the coarsest holds its operator
+(:class:`~fbmflow.gpu.operator.DeviceOperator`), its smoother's patches, colours and local
+factors, these computed on the device (:class:`~fbmflow.gpu.vanka.DeviceVanka`), and its
+transfers (the truncated prolongation and its transpose as CSR matrices). FGMRES and the cycles run on the
 device; the coarsest level's direct solve stays on the CPU, one transfer of its right-hand side
 and its solution per cycle. Particles, forces and contact stay on the CPU: a solve takes host
 vectors and returns host vectors.
@@ -30,7 +31,7 @@ from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border
 from ..solvers.reports import LinearReport
 from .device import Backend, gpu_backend, gpu_problem
 from .operator import DeviceOperator
-from .vanka import DeviceVanka
+from .vanka import FACTOR_SCRATCH, DeviceVanka
 
 log = logging.getLogger(__name__)
 
@@ -176,6 +177,7 @@ class DeviceMultigridSolver(MultigridSolver):
     the tests pass the simulator's)."""
 
     name = "multigrid"
+    host_factors = False  # the smoothers' local factors are computed on the device
 
     def __init__(self, settings=None, rtol: float = 1e-8, backend=None, **kwargs):
         super().__init__(settings, rtol, **kwargs)
@@ -205,15 +207,16 @@ def gpu_solver(linear: MultigridSolver, dim: int, n_unknowns: int) -> DeviceMult
     the ``gpu`` extra or a CUDA device is missing (:func:`~fbmflow.gpu.device.gpu_problem`),
     :class:`~fbmflow.solvers.choice.InsufficientMemory` with the figures where ``n_unknowns``
     of a ``dim``-dimensional flow need more device memory (:data:`DEVICE_BYTES` each) than the
-    GPU has free."""
+    GPU has free, with the work of the factors' kernel (:data:`~fbmflow.gpu.vanka.FACTOR_SCRATCH`)."""
     problem = gpu_problem()
     if problem is not None:
         raise ParamError(problem)
     backend = gpu_backend()
-    need, free = DEVICE_BYTES[dim] * n_unknowns, backend.free_bytes()
+    need, free = DEVICE_BYTES[dim] * n_unknowns + FACTOR_SCRATCH, backend.free_bytes()
     if free is not None and need > free:
         raise InsufficientMemory(f"the GPU solver needs about {need / 1e9:.1f} GB of device memory for "
-                                 f"{n_unknowns} unknowns ({DEVICE_BYTES[dim]} bytes each, {dim}D), more than "
-                                 f"the {free / 1e9:.1f} GB free on the GPU; use a coarser mesh (a lower "
+                                 f"{n_unknowns} unknowns ({DEVICE_BYTES[dim]} bytes each, {dim}D, and "
+                                 f"{FACTOR_SCRATCH / 1e9:.1f} GB to compute the smoothers' factors), more "
+                                 f"than the {free / 1e9:.1f} GB free on the GPU; use a coarser mesh (a lower "
                                  "--level) or solver.device = 'cpu'")
     return DeviceMultigridSolver(linear.settings, linear.rtol, backend=backend)

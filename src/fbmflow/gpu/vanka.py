@@ -1,17 +1,25 @@
 """The factored Vanka smoother's sweeps on the GPU.
 
 :class:`DeviceVanka` takes a :class:`~fbmflow.solvers.vanka.FactoredVankaSmoother` set up on the
-CPU in colour order (``order="colours"``: its local factors, its copy of the operator and its
-phases, every phase a colour whose patches touch nothing of each other) and sweeps with them on
-the device: one kernel launch per colour, one thread per patch, each thread running the body the
-CPU's sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU smoother's in
-the same order, to the rounding of the sums' order (the kernel is compiled with fastmath, the
-CPU's triangular solves too).
+CPU in colour order (``order="colours"``: its patches, its copy of the operator and its phases,
+every phase a colour whose patches touch nothing of each other), computes the patches' local
+factors on the device where the CPU left them out (``factor=False``: one thread per patch, each
+running the body the CPU's set-up runs, ``fbmflow.solvers._kernels.factor_patch``) and sweeps
+with them on the device: one kernel launch per colour, one thread per patch, each thread running
+the body the CPU's sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU
+smoother's in the same order, to the rounding of the sums' order (the sweeps' kernel is compiled
+with fastmath, the CPU's triangular solves too; the factors are the CPU's to the last bits).
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ..solvers.vanka import FactoredVankaSmoother
 from .device import Backend
+
+#: the most device memory the factors' kernel takes for its threads' work arrays [bytes]: a
+#: launch factors as many patches as their work fits (a 3D cell patch, 85 unknowns: 61 kB each)
+FACTOR_SCRATCH = 2**30
 
 
 class DeviceVanka:
@@ -19,7 +27,8 @@ class DeviceVanka:
 
     Parameters
     ----------
-    smoother : FactoredVankaSmoother with ``order == "colours"``
+    smoother : FactoredVankaSmoother with ``order == "colours"``, its factors computed
+        (copied to the device) or not (``factor=False``: computed on the device)
     backend : Backend, where the arrays go
     """
 
@@ -30,11 +39,19 @@ class DeviceVanka:
         put = backend.put
         nl, d, width, n_v, n_u = smoother.shape
         s = smoother
-        self.patches = tuple(put(a) for a in (s.ptr, s.dofs, s.lu_ptr, s.store, s.piv, s.blocks, s.d_read))
-        self.patches += (nl, d, n_v, n_u)
-        self.op = tuple(put(a) for a in s.op)
-        self.omega = smoother.omega
+        xp = backend.xp
         self.threads = backend.threads
+        if s.store is None:
+            store = xp.empty(int(s.lu_ptr[-1]), dtype=s.dtype)
+            piv = xp.zeros(int(s.ptr[-1]), dtype=np.int32)
+        else:
+            store, piv = put(s.store), put(s.piv)
+        self.patches = (put(s.ptr), put(s.dofs), put(s.lu_ptr), store, piv, put(s.blocks), put(s.d_read),
+                        nl, d, n_v, n_u)
+        self.op = tuple(put(a) for a in s.op)
+        if s.store is None:
+            self._factor(s.ptr, s.dofs, s.schur_tol, backend)
+        self.omega = smoother.omega
         self.interface_sweeps = smoother.interface_sweeps
 
         def colours(phases):
@@ -44,12 +61,40 @@ class DeviceVanka:
         self.interface = colours(smoother.interface_phases) + colours(smoother.interface_merged_phases)
         self.merged = colours(smoother.merged_phases)
         largest = max((c.shape[0] for c in self.sweeps[0] + self.interface + self.merged), default=1)
-        xp = backend.xp
-        self.work = (xp.empty((largest, width)), xp.empty((largest, width), dtype=s.store.dtype),
+        self.work = (xp.empty((largest, width)), xp.empty((largest, width), dtype=s.dtype),
                      xp.empty((largest, width)), xp.empty((largest, width)))
         self.nbytes = int(sum(a.nbytes for a in self.patches[:7] + self.op + self.work)
                           + sum(c.nbytes for c in self.interface + self.merged)
                           + sum(c.nbytes for sweep in self.sweeps for c in sweep))
+
+    def _factor(self, ptr: np.ndarray, dofs: np.ndarray, schur_tol: float, backend: Backend) -> None:
+        """The local factors of the patches ``dofs[ptr[k]:ptr[k + 1]]`` (each ascending: the
+        kernel finds an unknown's place by bisection) into ``store`` and ``piv`` on the device:
+        the patches of one size at a time, as many per launch as :data:`FACTOR_SCRATCH` holds
+        their work arrays."""
+        from ._kernels import vanka_factors
+
+        inside = np.ones(dofs.size - 1, dtype=bool)
+        inside[ptr[1:-1] - 1] = False  # the steps from one patch to the next
+        if not (np.diff(dofs)[inside] > 0).all():
+            raise ValueError("the device factors patches whose unknowns ascend; these do not")
+        sizes = np.diff(ptr)
+        xp = backend.xp
+        nl, d = self.patches[7], self.patches[8]
+        npl = d + 1
+        for width in np.unique(sizes):
+            patches = np.flatnonzero(sizes == width)
+            per_patch = 8 * (width * width + (d + 1) * nl * nl + d * nl * npl + 2 * npl * npl + 2 * width) \
+                + 4 * width
+            chunk = int(min(patches.size, max(1, FACTOR_SCRATCH // per_patch)))
+            work = (xp.empty((chunk, width, width)), xp.empty((chunk, nl, nl)), xp.empty((chunk, d, nl, nl)),
+                    xp.empty((chunk, d * nl, npl)), xp.empty((chunk, npl, npl)), xp.empty((chunk, npl, npl)),
+                    xp.empty((chunk, width), dtype=np.int32), xp.empty((chunk, width)),
+                    xp.empty((chunk, width)))
+            for first in range(0, patches.size, chunk):
+                part = backend.put(patches[first:first + chunk])
+                launch = vanka_factors[max(1, -(-part.shape[0] // self.threads)), self.threads]
+                launch(part, float(schur_tol), *self.patches, *self.op, *work)
 
     def sweep_colours(self, colours: list, b, x) -> None:
         """The patches of every colour in turn, a colour's at once: ``x`` updated in place."""

@@ -108,7 +108,7 @@ def _solve_dense(K, r, out):
     """Solve ``K y = r`` by LU with partial pivoting (``K`` and ``r`` overwritten); a pivot below
     ``1e-13 max|K|`` (a locally singular pressure mode) gives that unknown zero."""
     piv = np.empty(K.shape[0], dtype=np.int32)
-    _lu_factor(K, piv)
+    _lu_factor(K, piv, 1e-13)
     _lu_solve(K, piv, r, out)
 
 
@@ -207,7 +207,7 @@ def scatter_into_pattern(indptr, indices, data, p_indptr, p_indices, out):
 
 
 # -- Vanka on general CSR blocks: patches of one cell, local factors stored -------------------
-@njit
+@jitable(inline=False)
 def _lu_factor(K, piv, rel=1e-13):
     """LU with partial pivoting of ``K (n, n)`` in place (unit lower part below the diagonal),
     row swaps in ``piv (n,)``. A pivot below ``rel max|K|`` (a locally singular pressure mode)
@@ -241,7 +241,7 @@ def _lu_factor(K, piv, rel=1e-13):
                     K[i, j] -= f * K[k, j]
 
 
-@njit
+@jitable(inline=False)
 def _lu_solve(LU, piv, r, out):
     """Solve with the factors of :func:`_lu_factor`; ``r`` is overwritten, the result goes to
     ``out`` (zero for the unknowns of zeroed pivots). Both substitutions run along the rows of
@@ -402,32 +402,63 @@ def _row_product(q, x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, 
     return s
 
 
-@njit
-def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                  d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val):
-    """``K[S, S]`` into ``K (n, n)`` float64 (``loc``: global -> local position, -1 outside)."""
+@jitable(inline=False)
+def _bisect(S, q):
+    """The position of ``q`` in the ascending ``S``, -1 where it is not there."""
+    lo, hi = 0, S.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if S[mid] < q:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < S.shape[0] and S[lo] == q:
+        return lo
+    return -1
+
+
+@jitable
+def _position(S, loc, q):
+    """The position of unknown ``q`` in the patch ``S`` (ascending), -1 outside: ``loc[q]`` where
+    ``loc`` maps every unknown (the CPU's threads, one map each), by bisection where ``loc`` is
+    None (the GPU's threads, one per patch, hold no map of every unknown). The choice is made
+    when the caller compiles: a test of the map's length in the loop made the CPU's gather 2.7
+    times slower."""
+    if loc is None:
+        return _bisect(S, q)
+    return loc[q]
+
+
+@jitable
+def _gather_block(S, loc, K, n_v, n_u, op):
+    """``K[S, S]`` into ``K (n, n)`` float64 (:func:`_position` with ``loc``; ``op`` the
+    operator's 16 arrays, see above)."""
+    (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
+     k_idx, k_val) = op
     n = S.shape[0]
     npl, w = gt.shape[1], gt.shape[2]
     nl = w // (npl - 1)
-    K[:, :] = 0.0
+    for a in range(n):
+        for b in range(n):
+            K[a, b] = 0.0
     for a in range(n):
         q = S[a]
         if q < n_u and regular[q % n_v]:
             node, off = q % n_v, q - q % n_v
             for j in range(s_ptr[node], s_ptr[node + 1]):
-                col = loc[off + s_idx[j]]
+                col = _position(S, loc, off + s_idx[j])
                 if col >= 0:
                     K[a, col] += s_val[j]
             i = q // n_v
             for j in range(nc_ptr[node], nc_ptr[node + 1]):
                 c = nc_cell[j]
                 for m in range(npl):
-                    col = loc[n_u + c * npl + m]
+                    col = _position(S, loc, n_u + c * npl + m)
                     if col >= 0:
                         K[a, col] += gt[c, m, i * nl + nc_rank[j]]
         else:
             for j in range(k_ptr[q], k_ptr[q + 1]):
-                col = loc[k_idx[j]]
+                col = _position(S, loc, k_idx[j])
                 if col >= 0:
                     K[a, col] += k_val[j]
             if q >= n_u:
@@ -435,39 +466,110 @@ def _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_
                 o = d_pos[row]
                 if o >= 0:
                     for j in range(d_ptr[o], d_ptr[o + 1]):
-                        col = loc[d_idx[j]]
+                        col = _position(S, loc, d_idx[j])
                         if col >= 0:
                             K[a, col] += d_val[j]
                 else:
                     for j in range(w):
-                        col = loc[b_idx[row * w + j]]
+                        col = _position(S, loc, b_idx[row * w + j])
                         if col >= 0:
                             K[a, col] += gt[row // npl, row % npl, j]
 
 
-@njit
-def _inverse(K, piv, inv, rel):
+@jitable(inline=False)
+def _inverse(K, piv, inv, rel, e, col):
     """``inv = K^-1`` through :func:`_lu_factor` with pivot tolerance ``rel`` (``K``
-    overwritten; the unknowns of zeroed pivots get zero rows and columns)."""
+    overwritten; the unknowns of zeroed pivots get zero rows and columns; ``e``, ``col`` work of
+    ``K``'s size at least)."""
     n = K.shape[0]
     _lu_factor(K, piv, rel)
-    e = np.empty(n)
-    col = np.empty(n)
     for j in range(n):
-        e[:] = 0.0
+        for i in range(n):
+            e[i] = 0.0
         e[j] = 1.0
-        _lu_solve(K, piv, e, col)
+        _lu_solve(K, piv, e[:n], col[:n])
         for i in range(n):
             inv[i, j] = col[i]
+
+
+@jitable(inline=False)
+def factor_patch(k, patches, op, schur_tol, loc, work, A, Ainv, Y, Sc, Sinv, p_work, e, col):
+    """Patch ``k``'s local factors into ``store`` (see :func:`vanka_factor`; the CPU's set-up and
+    the GPU's, :mod:`fbmflow.gpu`, run this body). ``patches``, ``op``: the tuples of
+    :func:`vanka_patch`; ``loc``: int32 map of every unknown to -1 (restored on return) or
+    None (:func:`_position`); work arrays, float64 unless said: ``work (width, width)``, ``A
+    (nl, nl)``, ``Ainv (d, nl, nl)``, ``Y (d nl, d + 1)``, ``Sc``, ``Sinv (d + 1, d + 1)``,
+    ``p_work`` int32 and ``e``, ``col`` (width,)."""
+    ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u = patches
+    npl = d + 1
+    nu = d * nl
+    S = dofs[ptr[k]:ptr[k + 1]]
+    nk = S.shape[0]
+    if loc is not None:
+        for a in range(nk):
+            loc[S[a]] = a
+    K = work[:nk, :nk]
+    _gather_block(S, loc, K, n_v, n_u, op)
+    if loc is not None:
+        for a in range(nk):
+            loc[S[a]] = -1
+    base = lu_ptr[k]
+    nb = blocks[k]
+    if nb == 0:
+        _lu_factor(K, piv[ptr[k]:ptr[k + 1]], 1e-13)
+        for a in range(nk):
+            for b in range(nk):
+                store[base + a * nk + b] = K[a, b]
+        return
+    for i in range(nb):
+        for a in range(nl):
+            for b in range(nl):
+                A[a, b] = K[i * nl + a, i * nl + b]
+        _inverse(A, p_work[:nl], Ainv[i], 1e-13, e, col)
+    for i in range(d):
+        Ai = Ainv[i if nb > 1 else 0]
+        for a in range(nl):
+            for mm in range(npl):
+                s = 0.0
+                for b in range(nl):
+                    s += Ai[a, b] * K[i * nl + b, nu + mm]
+                Y[i * nl + a, mm] = s
+    for mm in range(npl):
+        for q in range(npl):
+            s = K[nu + mm, nu + q]
+            for j in range(nu):
+                s -= K[nu + mm, j] * Y[j, q]
+            Sc[mm, q] = s
+    _inverse(Sc, p_work[:npl], Sinv, schur_tol, e, col)
+    pos = base
+    for i in range(nb):
+        for a in range(nl):
+            for b in range(nl):
+                store[pos] = Ainv[i, a, b]
+                pos += 1
+    for j in range(nu):
+        for mm in range(npl):
+            store[pos] = Y[j, mm]
+            pos += 1
+    if not d_read[k]:
+        for mm in range(npl):
+            for j in range(nu):
+                store[pos] = K[nu + mm, j]
+                pos += 1
+    for mm in range(npl):
+        for q in range(npl):
+            store[pos] = Sinv[mm, q]
+            pos += 1
 
 
 @njit(parallel=True)
 def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks, width, schur_tol, n_v,
                  n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
                  b_idx, k_ptr, k_idx, k_val):
-    """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` of a factored Vanka operator
-    (see above), computed in float64 and stored in ``store`` (float64 or float32, patch ``k``'s at
-    ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at ``ptr[k]``):
+    """Local factors of the patches ``S_k = dofs[ptr[k]:ptr[k+1]]`` (ascending) of a factored
+    Vanka operator (see above), computed in float64 and stored in ``store`` (float64 or float32,
+    patch ``k``'s at ``lu_ptr[k]``), filled in place with ``piv`` (int32, patch ``k``'s at
+    ``ptr[k]``), by :func:`factor_patch` in ``n_chunks`` chunks of patches in parallel:
 
     * ``blocks[k]`` 0: the LU factors of ``K[S, S]`` (:func:`_lu_factor`), ``n_k^2`` values;
     * ``blocks[k]`` 1 or ``d``, a cell (``S`` = its ``nl`` nodes per component, then its
@@ -485,71 +587,22 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks,
     """
     m = ptr.shape[0] - 1
     npl = d + 1
-    nu = d * nl
+    patches = (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)
+    op = (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx,
+          k_ptr, k_idx, k_val)
     for t in prange(n_chunks):
         loc = np.full(k_ptr.shape[0] - 1, -1, dtype=np.int32)  # global -> local position in the patch
         work = np.empty((width, width))
         A = np.empty((nl, nl))
         Ainv = np.empty((d, nl, nl))
-        Y = np.empty((nu, npl))
+        Y = np.empty((d * nl, npl))
         Sc = np.empty((npl, npl))
         Sinv = np.empty((npl, npl))
         p_work = np.empty(width, dtype=np.int32)
+        e = np.empty(width)
+        col = np.empty(width)
         for k in range(t * m // n_chunks, (t + 1) * m // n_chunks):
-            S = dofs[ptr[k]:ptr[k + 1]]
-            nk = S.shape[0]
-            for a in range(nk):
-                loc[S[a]] = a
-            K = work[:nk, :nk]
-            _gather_block(S, loc, K, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt,
-                          d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
-            for a in range(nk):
-                loc[S[a]] = -1
-            base = lu_ptr[k]
-            nb = blocks[k]
-            if nb > 0:
-                for i in range(nb):
-                    A[:, :] = K[i * nl:(i + 1) * nl, i * nl:(i + 1) * nl]
-                    _inverse(A, p_work[:nl], Ainv[i], 1e-13)
-                for i in range(d):
-                    Ai = Ainv[i if nb > 1 else 0]
-                    for a in range(nl):
-                        for mm in range(npl):
-                            s = 0.0
-                            for b in range(nl):
-                                s += Ai[a, b] * K[i * nl + b, nu + mm]
-                            Y[i * nl + a, mm] = s
-                for mm in range(npl):
-                    for q in range(npl):
-                        s = K[nu + mm, nu + q]
-                        for j in range(nu):
-                            s -= K[nu + mm, j] * Y[j, q]
-                        Sc[mm, q] = s
-                _inverse(Sc, p_work[:npl], Sinv, schur_tol)
-                pos = base
-                for i in range(nb):
-                    for a in range(nl):
-                        for b in range(nl):
-                            store[pos] = Ainv[i, a, b]
-                            pos += 1
-                for j in range(nu):
-                    for mm in range(npl):
-                        store[pos] = Y[j, mm]
-                        pos += 1
-                if not d_read[k]:
-                    for mm in range(npl):
-                        for j in range(nu):
-                            store[pos] = K[nu + mm, j]
-                            pos += 1
-                for mm in range(npl):
-                    for q in range(npl):
-                        store[pos] = Sinv[mm, q]
-                        pos += 1
-            else:
-                _lu_factor(K, piv[ptr[k]:ptr[k + 1]])
-                for a in range(nk):
-                    for b in range(nk):
-                        store[base + a * nk + b] = K[a, b]
+            factor_patch(k, patches, op, schur_tol, loc, work, A, Ainv, Y, Sc, Sinv, p_work, e, col)
 
 
 @njit

@@ -116,7 +116,7 @@ class MultigridSettings(Section):
 
 class _Level:
     def __init__(self, system: SaddlePointSystem, settings: MultigridSettings, smoother: str, coarsest: bool,
-                 symmetric: bool = False):
+                 symmetric: bool = False, factor: bool = True):
         self.system = system
         self.n_u, self.n_p = system.n_u, system.n_p
         self.d = system.space.dim if system.space is not None else None
@@ -126,7 +126,8 @@ class _Level:
             return
         omega = settings.omega or VANKA_VARIANTS[smoother]
         if smoother == "vanka-factored":
-            self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric, order=settings.order)
+            self.smoother = FactoredVankaSmoother(system, omega, symmetric=symmetric, order=settings.order,
+                                                  factor=factor)
         else:
             self.smoother = VankaSmoother(system, smoother, omega, symmetric=symmetric)
         # prolongation truncated on the fine DOFs that are no PDE unknowns, restriction its
@@ -302,6 +303,9 @@ class MultigridSolver(LinearSolver):
     flow problem builds as :meth:`hierarchy` asks."""
 
     name = "multigrid"
+    #: whether the set-up computes the smoothers' local factors (the GPU's solver computes them
+    #: on the device, :mod:`fbmflow.gpu`)
+    host_factors = True
 
     def __init__(self, settings: MultigridSettings | None = None, rtol: float = 1e-8, **kwargs):
         self.settings = settings or MultigridSettings(**kwargs)
@@ -358,6 +362,6 @@ class MultigridSolver(LinearSolver):
             chain.append(chain[-1].coarser)
         smoother = self.smoother_for(base)
         symmetric = s.symmetric_sweeps(base.transient)
-        levels = [_Level(c, s, smoother, coarsest=(i == len(chain) - 1), symmetric=symmetric)
-                  for i, c in enumerate(chain)]
+        levels = [_Level(c, s, smoother, coarsest=(i == len(chain) - 1), symmetric=symmetric,
+                         factor=self.host_factors) for i, c in enumerate(chain)]
         return MultigridHierarchy(system, levels, s, smoother, self.rtol, time.perf_counter() - t0)

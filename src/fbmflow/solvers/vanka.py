@@ -261,11 +261,15 @@ class FactoredVankaSmoother:
         (:func:`~fbmflow.solvers.ordering.colour_phases`: a colour's patches at once, the far
         ones in colours of their own after them), the order in which the GPU sweeps
         (:mod:`fbmflow.gpu`), so that the CPU can reproduce its sweeps.
+    factor : bool
+        Compute the local factors here (True), or leave ``store`` and ``piv`` None for the GPU to
+        compute on the device (:class:`~fbmflow.gpu.vanka.DeviceVanka`; ``dtype`` and
+        ``schur_tol`` say how); such a smoother cannot sweep on the CPU.
     """
 
     def __init__(self, system: SaddlePointSystem, omega: float = 0.7, precision: str = "auto",
                  interface_sweeps: int = 2, symmetric: bool = False, component_blocks: bool = True,
-                 cells: np.ndarray | None = None, order: str = "slabs"):
+                 cells: np.ndarray | None = None, order: str = "slabs", factor: bool = True):
         if order not in ORDERS:
             raise ValueError(f"unknown patch order {order!r}; choose one of {ORDERS}")
         if precision == "auto":
@@ -389,11 +393,16 @@ class FactoredVankaSmoother:
         self.interface_phases = [(gptr, plain_interface[k]) for gptr, k in phased(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
         del G  # before the factors: the set-up's peak holds one of the two
+        #: the factors' storage dtype and the Schur complements' pivot tolerance
+        self.dtype = np.dtype(dtype)
+        self.schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
+        self.store = self.piv = None
+        if not factor:
+            return
         self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
         self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
-        schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
         _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.blocks,
-                              self.d_read, nl, d, 4 * numba_threads(), self.width, schur_tol, n_v, n_u,
+                              self.d_read, nl, d, 4 * numba_threads(), self.width, self.schur_tol, n_v, n_u,
                               *self.op)
 
     def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
