@@ -160,6 +160,8 @@ class MultigridHierarchy(Factorization):
         self.system, self.levels, self.settings, self.smoother, self.rtol = (system, levels, settings,
                                                                               smoother, rtol)
         self.sweeps_per_cycle = self._sweeps(0, settings.cycle)
+        #: of the set-up, the seconds of the smoothers' local factors
+        self.factor_time_s = sum(lv.smoother.factor_time_s for lv in levels[:-1])
 
     def _sweeps(self, depth: int, kind: str) -> int:
         """Smoothing sweeps of one ``kind`` cycle from level ``depth`` (all levels it visits)."""
@@ -270,7 +272,8 @@ class MultigridHierarchy(Factorization):
         converged = bool(residuals[-1] <= rtol * residuals[0])  # False for NaN as well
         report = LinearReport("multigrid", setup + time.perf_counter() - t0, iterations=cycles,
                               residuals=residuals, smoothing_sweeps=cycles * self.sweeps_per_cycle,
-                              setup_time_s=setup, converged=converged)
+                              setup_time_s=setup, factor_time_s=self.factor_time_s if setup else 0.0,
+                              converged=converged)
         return x[:system.n_u], x[system.n_u:], report
 
 

@@ -14,6 +14,7 @@ class LinearReport:
     residuals: list[float] = field(default_factory=list)
     smoothing_sweeps: int = 0
     setup_time_s: float = 0.0
+    factor_time_s: float = 0.0  # of the set-up: the smoothers' local factors (factored Vanka)
     converged: bool = True  # an iterative solver that missed its target says so here
 
 

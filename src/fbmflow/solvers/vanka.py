@@ -15,6 +15,8 @@ Variants (a registry):
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
@@ -36,6 +38,8 @@ class VankaSmoother:
     omega : float, damping of the corrections
     symmetric : bool, every second sweep backwards (symmetric Gauss–Seidel) instead of forwards
     """
+
+    factor_time_s = 0.0  # it stores no local factors
 
     def __init__(self, system: SaddlePointSystem, variant: str = "vanka-full", omega: float = 1.0,
                  symmetric: bool = False):
@@ -397,13 +401,17 @@ class FactoredVankaSmoother:
         self.dtype = np.dtype(dtype)
         self.schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
         self.store = self.piv = None
+        #: seconds spent computing the local factors (0 where ``factor`` is False)
+        self.factor_time_s = 0.0
         if not factor:
             return
+        t0 = time.perf_counter()
         self.store = np.empty(self.lu_ptr[-1], dtype=dtype)
         self.piv = np.zeros(self.ptr[-1], dtype=np.int32)
         _kernels.vanka_factor(self.store, self.lu_ptr, self.piv, self.ptr, self.dofs, self.blocks,
                               self.d_read, nl, d, 4 * numba_threads(), self.width, self.schur_tol, n_v, n_u,
                               *self.op)
+        self.factor_time_s = time.perf_counter() - t0
 
     def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
         """``patches`` (m,) int64 in colours: two patches of one colour never touch an unknown the
