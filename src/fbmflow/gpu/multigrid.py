@@ -10,10 +10,9 @@ device; the coarsest level's direct solve stays on the CPU, one transfer of its 
 and its solution per cycle. Particles, forces and contact stay on the CPU: a solve takes host
 vectors and returns host vectors.
 
-The cycle is the CPU's (:meth:`MultigridHierarchy.cycle
-<fbmflow.solvers.multigrid.MultigridHierarchy.cycle>`) operation for operation, so a solve on
-the device gives what the CPU gives with the same settings (``order = "colours"``) to the
-rounding of the sums' order, in as many cycles.
+The cycle is the CPU's own function (:func:`~fbmflow.solvers.multigrid.multigrid_cycle`) on the
+device's levels, so a solve on the device gives what the CPU gives with the same settings
+(``order = "colours"``) to the rounding of the sums' order, in as many cycles.
 """
 from __future__ import annotations
 
@@ -27,7 +26,7 @@ from ..config import ParamError
 from ..solvers.base import Factorization
 from ..solvers.choice import InsufficientMemory
 from ..solvers.krylov import fgmres
-from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border
+from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border, multigrid_cycle
 from ..solvers.reports import LinearReport
 from .device import Backend, gpu_backend, gpu_problem
 from .operator import DeviceOperator
@@ -59,12 +58,32 @@ class _DeviceLevel:
         self.nbytes = self.operator.nbytes + self.smoother.nbytes + sum(
             int(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes) for M in (self.P, self.R))
 
-    def restrict(self, r, n_u_coarse: int):
+    def smooth(self, b, x, sweeps: int) -> None:
+        self.smoother.smooth(b, x, sweeps)
+
+    def residual(self, b, x):
+        return b - self.operator.apply(x)
+
+    def restrict(self, r, coarse):
         rc = self.R @ r
         rc[self.coarse_fixed] = 0.0
         if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
-            rc[n_u_coarse:] -= self.coarse_orphans @ rc[n_u_coarse:]
+            rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]
         return rc
+
+    def prolongate(self, e, coarse):
+        return self.P @ e
+
+
+class _HostCoarsest:
+    """The coarsest level, solved on the CPU: its right-hand side brought over, its solution
+    sent back."""
+
+    def __init__(self, level, backend: Backend):
+        self.level, self.backend, self.n_u = level, backend, level.n_u
+
+    def solve(self, b):
+        return self.backend.put(self.level.solve(self.backend.get(b)))
 
 
 class DeviceHierarchy(Factorization):
@@ -77,6 +96,7 @@ class DeviceHierarchy(Factorization):
         self.host, self.backend = host, backend
         self.settings = host.settings
         self.levels = [_DeviceLevel(level, backend) for level in host.levels[:-1]]
+        self._cycle_levels = self.levels + [_HostCoarsest(host.levels[-1], backend)]
         system = host.system
         first = host.levels[0].system
         if self.levels and system is first:
@@ -91,34 +111,9 @@ class DeviceHierarchy(Factorization):
 
     def cycle(self, b, x, depth: int = 0, kind: str | None = None):
         """One cycle on level ``depth`` for ``K x = b`` from ``x`` (device vectors; ``x`` updated
-        and returned), the CPU's cycle step for step; the coarsest level solved on the CPU."""
-        kind = kind or self.settings.cycle
-        if depth == len(self.levels):
-            coarse = self.host.levels[-1]
-            host_b = self.backend.get(b)
-            u, p = coarse.direct(host_b[:coarse.n_u], host_b[coarse.n_u:])
-            return self.backend.put(np.concatenate([u, p]))
-        s = self.settings
-        level = self.levels[depth]
-        level.smoother.smooth(b, x, s.pre_smooth)
-        r = b - level.operator.apply(x)
-        n_u_coarse = self.host.levels[depth + 1].n_u
-        rc = level.restrict(r, n_u_coarse)
-        ec = self.backend.xp.zeros_like(rc)
-        last = depth + 1 == len(self.levels)
-        if kind == "V":
-            ec = self.cycle(rc, ec, depth + 1, "V")
-        elif kind == "W":
-            ec = self.cycle(rc, ec, depth + 1, "W")
-            if not last:
-                ec = self.cycle(rc, ec, depth + 1, "W")
-        else:  # F: an F-cycle then a V-cycle on the coarser level
-            ec = self.cycle(rc, ec, depth + 1, "F")
-            if not last:
-                ec = self.cycle(rc, ec, depth + 1, "V")
-        x += level.P @ ec
-        level.smoother.smooth(b, x, s.post_smooth)
-        return x
+        and returned): the CPU's cycle (:func:`~fbmflow.solvers.multigrid.multigrid_cycle`) on the
+        device's levels, the coarsest solved on the CPU."""
+        return multigrid_cycle(self._cycle_levels, self.settings, b, x, depth, kind)
 
     def _remove_pressure_mean(self, x) -> None:
         """:meth:`~fbmflow.solvers.system.SaddlePointSystem.remove_pressure_mean` on the device."""

@@ -7,6 +7,12 @@ from typing import Callable
 import numpy as np
 
 
+def array_module(a):
+    """The array module of ``a``: ``cupy`` for a CuPy array (imported already where one exists),
+    else ``numpy``."""
+    return sys.modules["cupy"] if type(a).__module__.startswith("cupy") else np
+
+
 def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndarray, rtol: float,
            max_iterations: int, restart: int = 40, project: Callable | None = None,
            augment: np.ndarray | None = None, inner: Callable | None = None):
@@ -37,7 +43,7 @@ def fgmres(apply_A: Callable, precondition: Callable, b: np.ndarray, x0: np.ndar
         every iteration
     iterations : int
     """
-    xp = sys.modules["cupy"] if type(b).__module__.startswith("cupy") else np
+    xp = array_module(b)
     if inner is None:
         def inner(v, w):
             return float(xp.dot(v, w))

@@ -31,7 +31,7 @@ from ..cores import FREE_CORES
 from .base import Factorization, Hierarchy, LinearSolver
 from .direct import factorize
 from .galerkin import truncated_prolongation
-from .krylov import fgmres
+from .krylov import array_module, fgmres
 from .reports import LinearReport
 from .system import SaddlePointSystem, expansion
 from .vanka import ORDERS, VANKA_VARIANTS, FactoredVankaSmoother, VankaSmoother
@@ -137,6 +137,17 @@ class _Level:
         self.coarse_fixed = coarse.fixed if coarse.fixed is not None else np.zeros(0, dtype=np.int64)
         self.coarse_orphans = coarse.orphans
 
+    def smooth(self, b: np.ndarray, x: np.ndarray, sweeps: int) -> None:
+        self.smoother.smooth(b, x, sweeps)
+
+    def residual(self, b: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return b - self.system.apply(x)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """The coarsest level's direct solve of ``K x = b``."""
+        u, p = self.direct(b[:self.n_u], b[self.n_u:])
+        return np.concatenate([u, p])
+
     def restrict(self, r: np.ndarray, coarse: "_Level") -> np.ndarray:
         rc = self.P.restrict(r)
         rc[self.coarse_fixed] = 0.0
@@ -146,6 +157,37 @@ class _Level:
 
     def prolongate(self, e: np.ndarray, coarse: "_Level") -> np.ndarray:
         return self.P.prolongate(e)
+
+
+def multigrid_cycle(levels: list, settings: MultigridSettings, b, x, depth: int = 0, kind: str | None = None):
+    """One ``kind`` cycle (V, W or F; None: the settings') on ``levels[depth]`` for ``K x = b``
+    from ``x`` (updated and returned): pre-smoothing, the restricted residual's correction from
+    the coarser level's cycles (the coarsest level solved directly), its prolongation, post-
+    smoothing. The levels' vectors are NumPy's or, on the GPU (:mod:`fbmflow.gpu`), CuPy's:
+    every level but the last offers ``smooth(b, x, sweeps)``, ``residual(b, x)``,
+    ``restrict(r, coarse)`` and ``prolongate(e, coarse)``, the last ``solve(b)`` and ``n_u``."""
+    kind = kind or settings.cycle
+    level = levels[depth]
+    if depth == len(levels) - 1:
+        return level.solve(b)
+    level.smooth(b, x, settings.pre_smooth)
+    coarse = levels[depth + 1]
+    rc = level.restrict(level.residual(b, x), coarse)
+    ec = array_module(rc).zeros_like(rc)
+    last = depth + 1 == len(levels) - 1
+    if kind == "V":
+        ec = multigrid_cycle(levels, settings, rc, ec, depth + 1, "V")
+    elif kind == "W":
+        ec = multigrid_cycle(levels, settings, rc, ec, depth + 1, "W")
+        if not last:
+            ec = multigrid_cycle(levels, settings, rc, ec, depth + 1, "W")
+    else:  # F: an F-cycle then a V-cycle on the coarser level
+        ec = multigrid_cycle(levels, settings, rc, ec, depth + 1, "F")
+        if not last:
+            ec = multigrid_cycle(levels, settings, rc, ec, depth + 1, "V")
+    x += level.prolongate(ec, coarse)
+    level.smooth(b, x, settings.post_smooth)
+    return x
 
 
 class MultigridHierarchy(Factorization):
@@ -175,31 +217,7 @@ class MultigridHierarchy(Factorization):
 
     def cycle(self, b: np.ndarray, x: np.ndarray, depth: int = 0, kind: str | None = None) -> np.ndarray:
         """One cycle on level ``depth`` for ``K x = b`` from ``x`` (updated and returned)."""
-        kind = kind or self.settings.cycle
-        levels = self.levels
-        level = levels[depth]
-        if depth == len(levels) - 1:
-            u, p = level.direct(b[:level.n_u], b[level.n_u:])
-            return np.concatenate([u, p])
-        s = self.settings
-        level.smoother.smooth(b, x, s.pre_smooth)
-        r = b - level.system.apply(x)
-        coarse = levels[depth + 1]
-        rc = level.restrict(r, coarse)
-        ec = np.zeros_like(rc)
-        if kind == "V":
-            ec = self.cycle(rc, ec, depth + 1, "V")
-        elif kind == "W":
-            ec = self.cycle(rc, ec, depth + 1, "W")
-            if depth + 1 < len(levels) - 1:
-                ec = self.cycle(rc, ec, depth + 1, "W")
-        else:  # F: an F-cycle then a V-cycle on the coarser level
-            ec = self.cycle(rc, ec, depth + 1, "F")
-            if depth + 1 < len(levels) - 1:
-                ec = self.cycle(rc, ec, depth + 1, "V")
-        x += level.prolongate(ec, coarse)
-        level.smoother.smooth(b, x, s.post_smooth)
-        return x
+        return multigrid_cycle(self.levels, self.settings, b, x, depth, kind)
 
     def aspreconditioner(self):
         """One cycle from zero as a ``scipy.sparse.linalg.LinearOperator`` on the whole system's
