@@ -36,11 +36,11 @@ log = logging.getLogger(__name__)
 
 #: device memory the GPU solver holds per unknown of the finest level [bytes]: the hierarchy's
 #: arrays (operators, smoothers' factors and colours, transfers of all levels but the coarsest;
-#: measured on a set-up's arrays: ten Cate 1 562 at level 1 and 1 563 at level 2,
-#: glowinski-free-fall 686 at level 3; ``python -m fbmbench gpu_solver --rows arrays``,
+#: measured on a set-up's arrays: ten Cate 1 325 at level 1 and 1 317 at level 2,
+#: glowinski-free-fall 596 at level 3; ``python -m fbmbench gpu_solver --rows arrays``,
 #: benchmarks/results/gpu_solver.md), FGMRES's basis (61 vectors, 488) and ten work vectors (80),
 #: rounded up
-DEVICE_BYTES = {2: 1260, 3: 2140}
+DEVICE_BYTES = {2: 1170, 3: 1900}
 
 
 class _DeviceLevel:
@@ -50,7 +50,8 @@ class _DeviceLevel:
         put = backend.put
         self.n_u, self.n_p = level.n_u, level.n_p
         self.operator = DeviceOperator(level.system, backend)
-        self.smoother = DeviceVanka(level.smoother, backend)
+        rows = self.operator.velocity_rows(level.smoother.op[3])  # held once for both
+        self.smoother = DeviceVanka(level.smoother, backend, rows)
         P = level.P.tocsr()
         self.P, self.R = backend.csr(P), backend.csr(P.T.tocsr())
         self.coarse_fixed = put(level.coarse_fixed)

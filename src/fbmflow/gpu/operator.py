@@ -41,6 +41,8 @@ class _Blocks:
         csr, self.xp = backend.csr, backend.xp
         self.n_u = system.n_u
         self.S = self.A = None
+        #: the host values of the velocity matrix held (``S``'s or ``A``'s)
+        self.values = getattr(A, "data", None)
         if isinstance(A, VelocityBlock):
             self.S, self.R = csr(A.scalar()), csr(A.rows)
             self.replaced = backend.put(A.dofs)
@@ -97,6 +99,15 @@ class DeviceOperator:
             self.all_colours = [put(c) for c in self._colours]
             self.constrained = put(A.constrained)
             self.refresh()
+
+    def velocity_rows(self, values):
+        """The device's velocity matrix (``S``, or ``A`` where the block is assembled) where its
+        host values are the array ``values`` itself (a smoother that reads its rows from the same
+        matrix), else None."""
+        blocks = self.blocks
+        if values is None or values is not blocks.values:
+            return None
+        return blocks.S if blocks.S is not None else blocks.A
 
     def refresh(self) -> None:
         """Copy the Newton block's coefficients (after it moved to another iterate); nothing for

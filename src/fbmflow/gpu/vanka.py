@@ -30,9 +30,13 @@ class DeviceVanka:
     smoother : FactoredVankaSmoother with ``order == "colours"``, its factors computed
         (copied to the device) or not (``factor=False``: computed on the device)
     backend : Backend, where the arrays go
+    rows : device CSR matrix or None
+        The matrix whose rows the smoother reads as its scalar rows (its operator's velocity
+        block or scalar block, the same host arrays) where the device holds it already (the
+        level's :class:`~fbmflow.gpu.operator.DeviceOperator`): read there, not copied again.
     """
 
-    def __init__(self, smoother: FactoredVankaSmoother, backend: Backend):
+    def __init__(self, smoother: FactoredVankaSmoother, backend: Backend, rows=None):
         if smoother.order != "colours":
             raise ValueError("the GPU sweeps a factored Vanka smoother set up in colours (order='colours'), "
                              f"not {smoother.order!r}")
@@ -48,7 +52,11 @@ class DeviceVanka:
             store, piv = put(s.store), put(s.piv)
         self.patches = (put(s.ptr), put(s.dofs), put(s.lu_ptr), store, piv, put(s.blocks), put(s.d_read),
                         nl, d, n_v, n_u)
-        self.op = tuple(put(a) for a in s.op)
+        if rows is None:
+            self.op = own = tuple(put(a) for a in s.op)
+        else:  # (held, s_ptr, s_idx, s_val, ...): the scalar rows are the operator's arrays
+            own = tuple(put(a) for a in s.op[:1] + s.op[4:])
+            self.op = own[:1] + (rows.indptr, rows.indices, rows.data) + own[1:]
         if s.store is None:
             self._factor(s.ptr, s.dofs, s.schur_tol, backend)
         self.omega = smoother.omega
@@ -63,7 +71,7 @@ class DeviceVanka:
         largest = max((c.shape[0] for c in self.sweeps[0] + self.interface + self.merged), default=1)
         self.work = (xp.empty((largest, width)), xp.empty((largest, width), dtype=s.dtype),
                      xp.empty((largest, width)), xp.empty((largest, width)))
-        self.nbytes = int(sum(a.nbytes for a in self.patches[:7] + self.op + self.work)
+        self.nbytes = int(sum(a.nbytes for a in self.patches[:7] + own + self.work)
                           + sum(c.nbytes for c in self.interface + self.merged)
                           + sum(c.nbytes for sweep in self.sweeps for c in sweep))
 
