@@ -25,8 +25,13 @@ import numpy as np
 from ..config import ParamError
 from ..solvers.base import Factorization
 from ..solvers.choice import InsufficientMemory
-from ..solvers.krylov import fgmres
-from ..solvers.multigrid import MultigridHierarchy, MultigridSolver, _border, multigrid_cycle
+from ..solvers.multigrid import (
+    MultigridHierarchy,
+    MultigridSolver,
+    _border,
+    multigrid_cycle,
+    multigrid_iterations,
+)
 from ..solvers.reports import LinearReport
 from .device import Backend, gpu_backend, gpu_problem
 from .operator import DeviceOperator
@@ -141,23 +146,8 @@ class DeviceHierarchy(Factorization):
             self._mean_constant = float(system.mean_weights[::self._npl].sum())
             project = self._remove_pressure_mean
         border = _border(system)
-        if s.krylov == "fgmres":
-            def precondition(r):
-                return self.cycle(r, backend.xp.zeros_like(r))
-
-            x, residuals, cycles = fgmres(self.operator.apply, precondition, b, x, rtol, s.max_iterations,
-                                          s.restart, project, None if border is None else backend.put(border))
-        else:
-            r0 = float(backend.xp.linalg.norm(b - self.operator.apply(x)))
-            residuals, cycles = [r0], 0
-            while residuals[-1] > rtol * r0 and cycles < s.max_iterations:
-                x = self.cycle(b, x)
-                if project is not None:
-                    project(x)
-                residuals.append(float(backend.xp.linalg.norm(b - self.operator.apply(x))))
-                cycles += 1
-        if project is not None:
-            project(x)
+        x, residuals, cycles = multigrid_iterations(self.operator.apply, self.cycle, b, x, rtol, s, project,
+                                                    None if border is None else backend.put(border))
         host_x = backend.get(x)
         converged = bool(residuals[-1] <= rtol * residuals[0])
         report = LinearReport("multigrid (GPU)", setup + time.perf_counter() - t0, iterations=cycles,

@@ -190,6 +190,35 @@ def multigrid_cycle(levels: list, settings: MultigridSettings, b, x, depth: int 
     return x
 
 
+def multigrid_iterations(apply, cycle, b, x, rtol: float, settings: MultigridSettings, project=None,
+                         border=None):
+    """Solve ``K x = b`` from ``x`` to the relative residual ``rtol``: FGMRES preconditioned by one
+    ``cycle(r, e)`` from zero each (``settings.krylov = "fgmres"``), or stand-alone cycles, at most
+    ``settings.max_iterations``; ``apply``: ``K x``; ``project`` (or None): the mean-pressure
+    projection after each cycle and at the end; ``border``: see
+    :func:`~fbmflow.solvers.krylov.fgmres`. Vectors NumPy's or CuPy's (:mod:`fbmflow.gpu`).
+    Returns ``x``, the residual norms and the cycles."""
+    xp = array_module(b)
+    if settings.krylov == "fgmres":
+        def precondition(r):
+            return cycle(r, xp.zeros_like(r))
+
+        x, residuals, cycles = fgmres(apply, precondition, b, x, rtol, settings.max_iterations,
+                                      settings.restart, project, border)
+    else:
+        r0 = float(xp.linalg.norm(b - apply(x)))
+        residuals, cycles = [r0], 0
+        while residuals[-1] > rtol * r0 and cycles < settings.max_iterations:
+            x = cycle(b, x)
+            if project is not None:
+                project(x)
+            residuals.append(float(xp.linalg.norm(b - apply(x))))
+            cycles += 1
+    if project is not None:
+        project(x)
+    return x, residuals, cycles
+
+
 class MultigridHierarchy(Factorization):
     """The multigrid hierarchy of one system (PyAMG's ``MultilevelSolver``): its levels, finest
     first, each with its system, smoother and transfers, the coarsest factorised. Re-entrant: a
@@ -268,23 +297,8 @@ class MultigridHierarchy(Factorization):
         if system.fixed is not None:
             x[system.fixed] = f[system.fixed]  # unit rows: the solution there is the rhs
         project = system.remove_pressure_mean if system.mean_weights is not None else None
-        if s.krylov == "fgmres":
-            def precondition(r):
-                return self.cycle(r, np.zeros_like(r))
-
-            x, residuals, cycles = fgmres(system.apply, precondition, b, x, rtol, s.max_iterations,
-                                          s.restart, project, _border(system))
-        else:
-            r0 = float(np.linalg.norm(b - system.apply(x)))
-            residuals, cycles = [r0], 0
-            while residuals[-1] > rtol * r0 and cycles < s.max_iterations:
-                x = self.cycle(b, x)
-                if project is not None:
-                    project(x)
-                residuals.append(float(np.linalg.norm(b - system.apply(x))))
-                cycles += 1
-        if project is not None:
-            project(x)
+        x, residuals, cycles = multigrid_iterations(system.apply, self.cycle, b, x, rtol, s, project,
+                                                    _border(system))
         log.debug("multigrid: %d cycles, residual %.2e -> %.2e, %.2f s", cycles, residuals[0], residuals[-1],
                   time.perf_counter() - t0)
         converged = bool(residuals[-1] <= rtol * residuals[0])  # False for NaN as well
