@@ -417,7 +417,7 @@ def _bisect(S, q):
     return -1
 
 
-@jitable
+@jitable(inline=False)
 def _position(S, loc, q):
     """The position of unknown ``q`` in the patch ``S`` (ascending), -1 outside: ``loc[q]`` where
     ``loc`` maps every unknown (the CPU's threads, one map each), by bisection where ``loc`` is
@@ -429,7 +429,7 @@ def _position(S, loc, q):
     return loc[q]
 
 
-@jitable
+@jitable(inline=False)
 def _gather_block(S, loc, K, n_v, n_u, op):
     """``K[S, S]`` into ``K (n, n)`` float64 (:func:`_position` with ``loc``; ``op`` the
     operator's 16 arrays, see above)."""
