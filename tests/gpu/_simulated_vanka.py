@@ -53,11 +53,14 @@ for name, system, device_factors in systems():
         if device_factors else smoother
     device = DeviceVanka(template, backend)
     factor_s = time.perf_counter() - t0
-    # the factors computed on the device, positions by bisection: the CPU's, to the last bits
+    # the factors computed on the device, positions by bisection: under the simulator the CPU's to
+    # the last bits; on a GPU, whose compiler fuses multiply-adds, they may differ there (and a
+    # near tie may pivot otherwise): the sweeps below, with these factors, decide
     store, piv = (backend.get(a) for a in device.patches[3:5])
     scale = np.abs(smoother.store).max()
     factors = float(np.abs(store.astype(np.float64) - smoother.store).max() / scale)
-    worst = max(worst, factors / 1e-12, float(not np.array_equal(piv, smoother.piv)))
+    if device_factors and backend.name == "numpy":
+        worst = max(worst, 2.0 * (factors > 0.0 or not np.array_equal(piv, smoother.piv)))
     rng = np.random.default_rng(1)
     b = rng.standard_normal(system.n_u + system.n_p)
     want = rng.standard_normal(b.size)

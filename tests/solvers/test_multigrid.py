@@ -351,6 +351,34 @@ def test_factored_vanka_smooths_the_sharp_boundary():
     assert max(np.array(norms[1:]) / np.array(norms[:-1])) < 1.0, norms
 
 
+def test_the_factors_by_bisection_are_the_factors_by_the_map():
+    """The local factors with each entry's place in its patch found by bisection (the GPU's way,
+    ``loc`` None, compiled here for the CPU) are those the set-up computes with its map, bit for
+    bit, on the sharp ball's patches (agglomerated LU ones and cell patches)."""
+    from fbmflow._jit import njit
+    from fbmflow.solvers._kernels import factor_patch
+    from fbmflow.solvers.vanka import FactoredVankaSmoother
+
+    @njit
+    def factors_by_bisection(patches, op, schur_tol, width):
+        nl, d = patches[7], patches[8]
+        npl = d + 1
+        work, A, Ainv = np.empty((width, width)), np.empty((nl, nl)), np.empty((d, nl, nl))
+        Y, Sc, Sinv = np.empty((d * nl, npl)), np.empty((npl, npl)), np.empty((npl, npl))
+        p_work, e, col = np.empty(width, dtype=np.int32), np.empty(width), np.empty(width)
+        for k in range(patches[0].shape[0] - 1):
+            factor_patch(k, patches, op, schur_tol, None, work, A, Ainv, Y, Sc, Sinv, p_work, e, col)
+
+    _, system, _ = _ball_system("sharp", linearisation="newton")
+    s = FactoredVankaSmoother(system)
+    assert s.merged.size > 0 and (s.blocks == 0).any()
+    store, piv = np.full_like(s.store, np.nan), np.zeros_like(s.piv)
+    nl, d, width, n_v, n_u = s.shape
+    factors_by_bisection((s.ptr, s.dofs, s.lu_ptr, store, piv, s.blocks, s.d_read, nl, d, n_v, n_u), s.op,
+                         s.schur_tol, width)
+    assert np.array_equal(store, s.store) and np.array_equal(piv, s.piv)
+
+
 @pytest.mark.parametrize("fbm", ["nodes", "sharp"])
 def test_block_transfers_are_the_truncated_block_matrix(fbm):
     """Prolongation and restriction from the scalar blocks equal the products with the

@@ -35,6 +35,11 @@ class Backend:
         return self.sparse.csr_matrix((self.put(M.data), self.put(M.indices, np.int32),
                                        self.put(M.indptr, np.int32)), shape=M.shape)
 
+    def synchronize(self) -> None:
+        """Wait for the device's kernels to finish (for timing; nothing on the host)."""
+        if self.name == "cupy":
+            self.xp.cuda.Device().synchronize()
+
     def free_bytes(self) -> int | None:
         """The device memory free now [bytes], None where the arrays live on the host."""
         if self.name != "cupy":

@@ -61,6 +61,7 @@ class _DeviceLevel:
         self.P, self.R = backend.csr(P), backend.csr(P.T.tocsr())
         self.coarse_fixed = put(level.coarse_fixed)
         self.coarse_orphans = None if level.coarse_orphans is None else backend.csr(level.coarse_orphans)
+        self.factor_time_s = self.smoother.factor_time_s
         self.nbytes = self.operator.nbytes + self.smoother.nbytes + sum(
             int(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes) for M in (self.P, self.R))
 
@@ -113,6 +114,7 @@ class DeviceHierarchy(Factorization):
             self.operator = DeviceOperator(system, backend, self.levels[0].operator if shares else None)
         self.nbytes = sum(lv.nbytes for lv in self.levels) + (
             0 if self.levels and self.operator is self.levels[0].operator else self.operator.nbytes)
+        self.factor_time_s = host.factor_time_s + sum(lv.factor_time_s for lv in self.levels)
         super().__init__(host.setup_time_s + time.perf_counter() - t0)
 
     def cycle(self, b, x, depth: int = 0, kind: str | None = None):
@@ -152,7 +154,8 @@ class DeviceHierarchy(Factorization):
         converged = bool(residuals[-1] <= rtol * residuals[0])
         report = LinearReport("multigrid (GPU)", setup + time.perf_counter() - t0, iterations=cycles,
                               residuals=residuals, smoothing_sweeps=cycles * self.host.sweeps_per_cycle,
-                              setup_time_s=setup, converged=converged)
+                              setup_time_s=setup, factor_time_s=self.factor_time_s if setup else 0.0,
+                              converged=converged)
         return host_x[:system.n_u], host_x[system.n_u:], report
 
 

@@ -8,9 +8,12 @@ running the body the CPU's set-up runs, ``fbmflow.solvers._kernels.factor_patch`
 with them on the device: one kernel launch per colour, one thread per patch, each thread running
 the body the CPU's sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU
 smoother's in the same order, to the rounding of the sums' order (the sweeps' kernel is compiled
-with fastmath, the CPU's triangular solves too; the factors are the CPU's to the last bits).
+with fastmath, the CPU's triangular solves too; the factors are the CPU's to the last bits under
+the simulator, and may differ in the last bits on a GPU, whose compiler fuses multiply-adds).
 """
 from __future__ import annotations
+
+import time
 
 import numpy as np
 
@@ -18,7 +21,7 @@ from ..solvers.vanka import FactoredVankaSmoother
 from .device import Backend
 
 #: the most device memory the factors' kernel takes for its threads' work arrays [bytes]: a
-#: launch factors as many patches as their work fits (a 3D cell patch, 85 unknowns: 61 kB each)
+#: launch factors as many patches as their work fits (a 3D cell patch, 85 unknowns: 86 kB each)
 FACTOR_SCRATCH = 2**30
 
 
@@ -57,8 +60,13 @@ class DeviceVanka:
         else:  # (held, s_ptr, s_idx, s_val, ...): the scalar rows are the operator's arrays
             own = tuple(put(a) for a in s.op[:1] + s.op[4:])
             self.op = own[:1] + (rows.indptr, rows.indices, rows.data) + own[1:]
+        #: seconds the device took for the local factors (0 where the CPU computed them)
+        self.factor_time_s = 0.0
         if s.store is None:
+            t0 = time.perf_counter()
             self._factor(s.ptr, s.dofs, s.schur_tol, backend)
+            backend.synchronize()
+            self.factor_time_s = time.perf_counter() - t0
         self.omega = smoother.omega
         self.interface_sweeps = smoother.interface_sweeps
 
@@ -82,9 +90,9 @@ class DeviceVanka:
         their work arrays."""
         from ._kernels import vanka_factors
 
-        inside = np.ones(dofs.size - 1, dtype=bool)
-        inside[ptr[1:-1] - 1] = False  # the steps from one patch to the next
-        if not (np.diff(dofs)[inside] > 0).all():
+        starts = np.zeros(dofs.size, dtype=bool)
+        starts[ptr[:-1][np.diff(ptr) > 0]] = True  # a patch's first unknown follows no other of it
+        if not (starts[1:] | (np.diff(dofs) > 0)).all():
             raise ValueError("the device factors patches whose unknowns ascend; these do not")
         sizes = np.diff(ptr)
         xp = backend.xp

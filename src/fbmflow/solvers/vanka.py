@@ -450,6 +450,9 @@ class FactoredVankaSmoother:
     @property
     def _patches(self) -> tuple:
         """The kernels' patch arguments (:func:`~fbmflow.solvers._kernels.vanka_sweep_groups`)."""
+        if self.store is None:
+            raise ValueError("this smoother's local factors were left to the GPU (factor=False): it cannot "
+                             "sweep on the CPU")
         nl, d, width, n_v, n_u = self.shape
         return (self.ptr, self.dofs, self.lu_ptr, self.store, self.piv, self.blocks, self.d_read, nl, d,
                 width, n_v, n_u)
