@@ -9,7 +9,7 @@ from pathlib import Path
 def test_the_gpu_sweeps_under_the_simulator_are_the_cpu_smoothers_in_colour_order():
     """``NUMBA_ENABLE_CUDASIM=1 python _simulated_vanka.py``: the local factors computed on the
     device (one thread per patch, positions by bisection) are the CPU's bit for bit, with the same
-    pivots (the 2D case and the 3D Picard case), and two symmetric sweeps of the GPU smoother (one
+    pivots (the 2D case: LU and Schur patches), and two symmetric sweeps of the GPU smoother (one
     thread per patch, a launch per colour) give the CPU's factored smoother's in the same colour
     order, to 1e-5 relative where the factors are single (the two sum in different
     orders in single precision) and 1e-12 where the patches solve in double, on a 2D sharp disk
