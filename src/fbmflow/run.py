@@ -50,8 +50,10 @@ class RunFiles:
     out : folder; checkpoint_every : steps between checkpoints (0: only on failure and stop);
     resume : the run continues from ``out/checkpoint.h5`` (``run.h5`` is cut after its step);
     fields_every : ParaView output every that many steps (0: none); fields_format : ``xdmf`` or
-    ``vtu``; meta : what identifies the run in its files (scene, level, params, version); setup :
-    what makes a script's simulation again (:func:`write_run_info`).
+    ``vtu``; meta : what identifies the run in its files (scene, level, params, version); carry :
+    what a resume does after the run as the run was asked to (a scene's ``estimate_error``),
+    written to ``run.json`` beside ``meta``; setup : what makes a script's simulation again
+    (:func:`write_run_info`).
     """
 
     out: Path | None = None
@@ -60,6 +62,7 @@ class RunFiles:
     fields_every: int = 0
     fields_format: str = "xdmf"
     meta: dict = field(default_factory=dict)
+    carry: dict = field(default_factory=dict)
     setup: dict | None = None  # a script's simulation arguments (setup.pickle; None for a scene)
 
 
@@ -292,7 +295,8 @@ def write_run_info(files: RunFiles, setup: dict | None = None) -> None:
     run of the Python API, its set-up ``setup`` (the simulation's arguments) as ``setup.pickle``.
     A set-up that cannot be pickled (a lambda as a boundary value) is left out with a warning:
     the run then resumes only from a simulation made again by its script."""
-    (files.out / "run.json").write_text(json.dumps({**files.meta, "checkpoint_every": files.checkpoint_every,
+    (files.out / "run.json").write_text(json.dumps({**files.meta, **files.carry,
+                                                    "checkpoint_every": files.checkpoint_every,
                                                     "fields_every": files.fields_every,
                                                     "fields_format": files.fields_format}, indent=1))
     if setup is None:

@@ -338,7 +338,7 @@ class Simulation:
             return run_loop(self, self.n_steps, dt, None, callback=callback, progress=progress).reports
         folder = on_first(lambda: output_folder(out), self.comm) or Path(out)
         files = RunFiles(folder, checkpoint_every, resume, fields_every, fields_format,
-                         {"kind": "simulation", "fbmflow_version": __version__}, self._setup)
+                         {"kind": "simulation", "fbmflow_version": __version__}, setup=self._setup)
         with claim_once(files.out, resume, overwrite, self.comm):
             resumed = None
             if resume:

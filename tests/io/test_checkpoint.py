@@ -213,3 +213,20 @@ def test_a_script_s_run_without_a_stored_set_up_says_how_to_resume(tmp_path, cap
     again = _disk_simulation(0.03)
     again.run(tmp_path, checkpoint_every=1, resume=True)
     assert again.step_count == 3
+
+
+def test_a_resumed_run_estimates_its_error_as_the_run_was_asked_to(tmp_path, monkeypatch):
+    """``--estimate-error`` is written to ``run.json``: a run interrupted before its end (the
+    long case: hours at the finest level) resumes, finishes and then runs the coarser level,
+    and its summary holds the estimate (a resume used to drop it)."""
+    from fbmflow import interrupt
+
+    monkeypatch.setattr(interrupt, "requested", lambda: signal.SIGTERM)  # as if it came in step 1
+    args = ["glowinski-free-fall", "--level", "1", "--estimate-error", "--set", "time.t_end=0.03", "--set",
+            "time.dt=0.005", "--quiet", "--no-plot"]
+    assert main(["run", *args, "--out", str(tmp_path)]) == 128 + signal.SIGTERM
+    assert json.loads((tmp_path / "run.json").read_text())["estimate_error"] is True
+    monkeypatch.undo()
+    assert main(["resume", str(tmp_path), "--quiet", "--no-plot"]) == 0
+    estimate = json.loads((tmp_path / "summary.json").read_text())["error_estimate"]
+    assert estimate["levels"] == [0, 1] and (tmp_path / "coarser" / "level-0" / "summary.json").is_file()

@@ -138,7 +138,8 @@ def run_scene(scene: Scene, params, level: int, out: Path, progress=None, plot: 
     with claim_once(out, resume, overwrite, comm):
         t0 = time.perf_counter()
         if isinstance(scene, SimulationScene):
-            files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta)
+            files = RunFiles(out, checkpoint_every, resume, fields_every, fields_format, meta,
+                             carry={"estimate_error": True} if estimate_error else {})
             result = scene.run(params, level, progress, files)
             on_first(lambda: _write(out / "particles.csv",
                                     lambda: export_csv(out / "run.h5", out / "particles.csv")), comm)
@@ -244,7 +245,8 @@ def _write(path: Path, action) -> None:
 
 
 def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
-    """Continue the scene run in ``out`` (written by :func:`run_scene`) from its checkpoint;
+    """Continue the scene run in ``out`` (written by :func:`run_scene`) from its checkpoint, and
+    then, where the run was asked for it, estimate its error (the coarser levels run whole);
     ParamError (CheckpointError) when there is nothing usable to resume."""
     out = Path(out)
     info, _ = read_run_info(out)
@@ -252,7 +254,7 @@ def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
         scene = get_scene(info["scene"])
         params = from_dict(scene.Params, info["params"])
         level, every, fields = info["level"], int(info["checkpoint_every"]), int(info.get("fields_every", 0))
-        fmt = str(info.get("fields_format", "xdmf"))
+        fmt, estimate = str(info.get("fields_format", "xdmf")), bool(info.get("estimate_error", False))
     except (KeyError, TypeError, ValueError) as err:
         raise ParamError(f"{out / 'run.json'} is damaged ({err!r}); start the run again") from None
     level = check_level(scene, level)
@@ -260,7 +262,7 @@ def resume_scene(out: Path, progress=None, plot: bool = True) -> dict:
         raise ParamError(f"{out / 'run.h5'} is missing: the resumed run would keep only the steps after its "
                          "checkpoint; restore the file or start the run again")
     return run_scene(scene, params, level, out, progress, plot, checkpoint_every=every, resume=True,
-                     fields_every=fields, fields_format=fmt)
+                     fields_every=fields, fields_format=fmt, estimate_error=estimate)
 
 
 def resume(out, progress=None, plot: bool = True):
