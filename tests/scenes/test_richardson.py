@@ -35,7 +35,7 @@ def test_two_levels_take_the_given_order_and_say_the_range_was_not_checked():
 
 def test_only_physical_scalars_are_estimated():
     q = {"drag": 1.0, "drag_error": 0.1, "time_step": 0.01, "courant_number": 0.2, "steps": 3, "t": [0.0],
-         "nan": float("nan")}
+         "nan": float("nan"), "gap_max_deviation": 0.2, "ghia_max_deviation_u": 0.01}
     assert estimated_quantities(q) == ["drag"]
     assert set(estimate([{"quantities": {"drag": 0.9}}, {"quantities": q}])) == {"drag"}
 

@@ -72,9 +72,11 @@ def richardson(values: list[float], order: float = 1.0) -> dict:
 
 def estimated_quantities(quantities: dict) -> list[str]:
     """The names of a summary's quantities that get an estimate: finite real scalars that are
-    no error against a reference (``*_error``) and no bookkeeping (:data:`BOOKKEEPING`)."""
+    no error or deviation against a reference (``*_error``, ``*deviation*``: their limit is the
+    model's distance to the reference, often a largest one over a curve, not a value that
+    converges like ``C h^p``) and no bookkeeping (:data:`BOOKKEEPING`)."""
     return [k for k, v in quantities.items() if isinstance(v, float) and math.isfinite(v)
-            and not k.endswith("_error") and k not in BOOKKEEPING]
+            and not k.endswith("_error") and "deviation" not in k and k not in BOOKKEEPING]
 
 
 def estimate(summaries: list[dict], order: float = 1.0) -> dict:
