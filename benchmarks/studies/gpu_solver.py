@@ -61,13 +61,16 @@ ROWS = {"slabs": ["solver.multigrid.order=slabs"], "colours": ["solver.multigrid
 def _count_device_arrays(record: dict) -> None:
     """Make ``solver.device = gpu`` build its device hierarchy from NumPy arrays (the simulator's
     backend; the smoothers' factors computed on the CPU, as many bytes) and solve on the CPU
-    hierarchy under it, recording the device bytes per unknown."""
+    hierarchy under it, its residuals on the CPU too, recording the device bytes per unknown
+    (the space's cells, which the residuals share with the Newton terms, counted once)."""
     import fbmflow.gpu.multigrid as gm
     from fbmflow.gpu.device import simulated_backend
+    from fbmflow.solvers.base import LinearSolver
 
     gm.gpu_problem = lambda: None
     gm.gpu_backend = simulated_backend
     gm.DeviceMultigridSolver.host_factors = True
+    gm.DeviceMultigridSolver.velocity_operator = LinearSolver.velocity_operator
 
     def solve(self, f, g, rtol=None):
         n = self.host.system.n_u + self.host.system.n_p

@@ -47,12 +47,13 @@ def test_a_problem_larger_than_the_free_device_memory_is_refused_with_the_figure
     import fbmflow.gpu.multigrid as gm
     from fbmflow.gpu.device import simulated_backend
 
-    class Small(type(simulated_backend())):
-        def free_bytes(self):
-            return 2 * 10**9
+    def small():
+        backend = simulated_backend()
+        backend.free_bytes = lambda: 2 * 10**9
+        return backend
 
     monkeypatch.setattr(gm, "gpu_problem", lambda: None)
-    monkeypatch.setattr(gm, "gpu_backend", lambda: Small(*vars(simulated_backend()).values()))
+    monkeypatch.setattr(gm, "gpu_backend", small)
     linear = SolverParams(device="gpu").linear_solver(3, 100_000)
     assert isinstance(gm.gpu_solver(linear, 3, 100_000), gm.DeviceMultigridSolver)
     with pytest.raises(InsufficientMemory, match=r"needs about \d+\.\d GB of device memory for 10000000 "

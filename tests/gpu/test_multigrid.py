@@ -12,7 +12,9 @@ def test_a_solve_on_the_device_under_the_simulator_is_the_cpus_in_colour_order()
     cycles as the CPU's multigrid with the smoothers in the same colour order and gives its
     velocity to 1e-10 relative, on a 2D sharp-boundary disk in a closed box (the Picard
     hierarchy, the mean-pressure border) and on a 3D Newton block moved to another iterate (the
-    Newton terms applied without a matrix on the device)."""
+    Newton terms applied without a matrix on the device); the flow problem with the device's
+    solver computes its Newton residual and its time step's mass and spatial terms on the device,
+    the CPU's to 1e-13 relative, from one copy of the space's cells that the Newton terms share."""
     script = Path(__file__).with_name("_simulated_multigrid.py")
     out = subprocess.run([sys.executable, str(script)], env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"),
                          capture_output=True, text=True, timeout=900)

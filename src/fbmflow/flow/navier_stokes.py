@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ..fem import FlowSpace, apply_mass_laplace, assemble_load
+from ..fem import FlowSpace, assemble_load
 from ..fem.constraints import DirichletConstraints
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
@@ -101,6 +101,9 @@ class NavierStokesProblem:
         self.extra_constraints = extra_constraints
         self.fine = self._fine_level(mesh, boundary, pressure_fixed, extra_constraints)
         self.space = self.fine.space
+        #: ``(alpha M + beta L + convection N(u)) u`` without a matrix, where the linear solver
+        #: applies it (:meth:`~fbmflow.solvers.base.LinearSolver.velocity_operator`)
+        self._mass_laplace = linear_solver.velocity_operator(self.space)
         self.BT = self.fine.BT
         self.mean_weights = self.fine.mean_weights
         self._pressure_fixed = pressure_fixed
@@ -227,13 +230,14 @@ class NavierStokesProblem:
     # -- operators ----------------------------------------------------------------------------
     def _apply_operator(self, u: np.ndarray, m: float, a: float) -> np.ndarray:
         """``(m rho M + a (mu L + rho N(u))) u`` for a velocity (dim * n_v,) -> (dim * n_v,), cell by
-        cell in one pass without a matrix (:func:`~fbmflow.fem.apply_mass_laplace`)."""
-        return apply_mass_laplace(self.space, m * self.rho, a * self.mu, u,
+        cell in one pass without a matrix (:func:`~fbmflow.fem.apply_mass_laplace`, or on the linear
+        solver's device)."""
+        return self._mass_laplace(m * self.rho, a * self.mu, u,
                                   convection=a * self.rho if self.convection else 0.0)
 
     def apply_mass(self, u: np.ndarray) -> np.ndarray:
         """``M u`` (no density) for a velocity (dim * n_v,) -> (dim * n_v,), without a matrix."""
-        return apply_mass_laplace(self.space, 1.0, 0.0, u)
+        return self._mass_laplace(1.0, 0.0, u)
 
     def apply_spatial(self, u: np.ndarray) -> np.ndarray:
         """``mu L u + rho N(u) u`` for a velocity (dim * n_v,) -> (dim * n_v,)."""

@@ -6,6 +6,7 @@ here."""
 from __future__ import annotations
 
 import importlib.util
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -18,6 +19,9 @@ class Backend:
 
     def __init__(self, xp, sparse, name: str, threads: int):
         self.xp, self.sparse, self.name, self.threads = xp, sparse, name, threads
+        #: the device copies of FlowSpaces' cell geometry (:func:`fbmflow.gpu.space.device_space`),
+        #: one per space, dropped with it
+        self.spaces = weakref.WeakKeyDictionary()
 
     def put(self, a, dtype=None):
         """A host array (or scalar sequence) as a contiguous device array: a copy, also under the

@@ -35,6 +35,7 @@ from ..solvers.multigrid import (
 from ..solvers.reports import LinearReport
 from .device import Backend, gpu_backend, gpu_problem
 from .operator import DeviceOperator
+from .space import device_space
 from .vanka import FACTOR_SCRATCH, DeviceVanka
 
 log = logging.getLogger(__name__)
@@ -178,6 +179,14 @@ class DeviceMultigridSolver(MultigridSolver):
 
     def describe(self, dim: int, n_unknowns: int) -> str:
         return "multigrid on the GPU"
+
+    def velocity_operator(self, space):
+        """The flow problem's ``(alpha M + beta L + convection N(u)) u`` on the device
+        (:meth:`DeviceSpace.apply_mass_laplace <fbmflow.gpu.space.DeviceSpace.apply_mass_laplace>`;
+        the space's cells copied once, shared with the Newton blocks' terms)."""
+        if self.backend is None:
+            self.backend = gpu_backend()
+        return device_space(space, self.backend).apply_mass_laplace
 
     def _factor(self, system) -> Factorization:
         host = super()._factor(system)

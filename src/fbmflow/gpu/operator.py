@@ -17,7 +17,8 @@ from __future__ import annotations
 from ..fem.velocity_block import VelocityBlock
 from ..solvers.system import SaddlePointSystem, as_csr
 from .device import Backend
-from .operators import apply_cell_operator, apply_reaction, cell_colours
+from .operators import apply_cell_operator, apply_reaction
+from .space import device_space
 
 
 def _matrix_free(A) -> bool:
@@ -89,15 +90,12 @@ class DeviceOperator:
             self.blocks = _Blocks(system, A.base if self.free else A, backend)
             self.nbytes = self.blocks.nbytes
         if self.free:
-            space = A.space
-            put = backend.put
-            self.d, self.n_v = space.dim, space.n_v
-            self.geometry = tuple(put(a) for a in (space.detJw, space.Jinv, space.V.cell_dofs, space.phi,
-                                                   space.dphi))
-            self.nbytes += sum(int(a.nbytes) for a in self.geometry)
-            self._colours = cell_colours(space.V.cell_dofs)
-            self.all_colours = [put(c) for c in self._colours]
-            self.constrained = put(A.constrained)
+            #: the space's cells on the device, shared with whatever else applies its operators
+            #: there (the flow problem's residuals): counted in ``nbytes`` all the same
+            self.space = device_space(A.space, backend)
+            self.d, self.n_v = self.space.dim, self.space.n_v
+            self.nbytes += self.space.nbytes
+            self.constrained = backend.put(A.constrained)
             self.refresh()
 
     def velocity_rows(self, values):
@@ -119,22 +117,23 @@ class DeviceOperator:
         self.drift = None if A.drift is None else put(A.drift)
         self.drift_colours = []
         if A.drift is not None:
-            self.drift_colours = [put(c[A.drift_cells[c]]) for c in self._colours if A.drift_cells[c].any()]
+            self.drift_colours = [put(c[A.drift_cells[c]]) for c in self.space.host_colours
+                                  if A.drift_cells[c].any()]
         self.scale = float(A.scale)
 
     def apply(self, x):
         """``K x`` for a device vector ``x`` (n_u + n_p,)."""
         y = self.blocks.apply(x)
         if self.free:
-            detJw, Jinv, cell_dofs, phi, dphi = self.geometry
+            space = self.space
             v = x[:self.n_u].reshape(self.d, self.n_v)
             extra = self.backend.xp.zeros((self.d, self.n_v))
             if self.react is not None:
-                apply_reaction(self.all_colours, self.react, cell_dofs, phi, v, self.scale, extra,
+                apply_reaction(space.colours, self.react, space.cell_dofs, space.phi, v, self.scale, extra,
                                threads=self.backend.threads)
             if self.drift is not None:
-                apply_cell_operator(self.drift_colours, detJw, Jinv, cell_dofs, phi, dphi, 0.0, 0.0,
-                                    self.scale, self.drift, v, extra, threads=self.backend.threads)
+                apply_cell_operator(self.drift_colours, *space.geometry, 0.0, 0.0, self.scale, self.drift, v,
+                                    extra, threads=self.backend.threads)
             extra = extra.reshape(-1)
             extra[self.constrained] = 0.0
             y[:self.n_u] += extra

@@ -31,15 +31,24 @@ def apply_cell_operator(colours, detJw, Jinv, cell_dofs, phi, dphi, alpha: float
     """Add ``(alpha M + beta L + gamma N(c)) w`` to ``out`` in place on the GPU, as
     ``fbmflow.fem._kernels.apply_cell_operator`` does on the CPU: the same arguments as
     device arrays (numba-cuda's, or CuPy's), the cells in ``colours``
-    (:func:`cell_colours`, on the device too) instead of groups; ``conv`` empty
-    (``(0, 0, 0)``): ``N(w) w``. One launch of ``threads`` per block per colour."""
+    (:func:`cell_colours`, on the device too) instead of groups; ``conv`` None (the CPU's
+    empty array): ``N(w) w``. One launch of ``threads`` per block per colour."""
     from ._kernels import apply_cells
 
-    own = conv.shape[0] == 0
+    own = conv is None
+    if own:  # a stand-in no thread reads (a CuPy array of size 0 has no address to pass)
+        conv = _no_convection()
     for cells in colours:
         blocks = max(1, -(-cells.shape[0] // threads))
         apply_cells[blocks, threads](cells, detJw, Jinv, cell_dofs, phi, dphi, float(alpha), float(beta),
                                      float(gamma), conv, own, w, out)
+
+
+def _no_convection():
+    """A (1, 1, 1) float64 device array, for ``conv`` where the kernel reads none."""
+    from .._jit import cuda_target
+
+    return cuda_target().device_array((1, 1, 1))
 
 
 def apply_reaction(colours, react, cell_dofs, phi, w, scale: float, out, threads: int = 128) -> None:

@@ -11,11 +11,14 @@ flow problem never probes the solver's attributes. The memory and cost models of
 """
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
+from ..fem import FlowSpace, apply_mass_laplace
 from .reports import LinearReport
 from .system import SaddlePointSystem
 
@@ -102,6 +105,14 @@ class LinearSolver(ABC):
     def describe(self, dim: int, n_unknowns: int) -> str:
         """The solver in words for reports, e.g. ``"direct (SuperLU)"`` or ``"multigrid"``."""
         return self.name
+
+    def velocity_operator(self, space: FlowSpace) -> Callable[..., np.ndarray]:
+        """``apply(alpha, beta, u, convection=0.0)``: ``(alpha M + beta L + convection N(u)) u``
+        on ``space`` for a velocity ``u (dim * n_v,)`` -> ``(dim * n_v,)`` float64, host arrays
+        in and out, which the flow problem's residuals and time-step right-hand sides apply. The
+        default is the CPU's (:func:`~fbmflow.fem.apply_mass_laplace`); a solver on a device
+        applies it there (:mod:`fbmflow.gpu`)."""
+        return functools.partial(apply_mass_laplace, space)
 
     def forget(self) -> None:
         """Drop what the solver keeps between factorisations (the default keeps nothing): the
