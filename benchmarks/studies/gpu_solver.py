@@ -109,7 +109,9 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
         out.append(dict(wall_s=time.perf_counter() - t0, solves=rep.linear.solves,
                         cycles=rep.linear.iterations, linear_s=rep.linear.time_s, setup_s=hierarchy[0],
                         factors_s=hierarchy[1]))
+    velocity = sim.particles.velocity
     return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
+                particle_velocity=[float(v) for v in velocity[0]] if len(velocity) else [],
                 solver=sim.flow.linear_solver_description,
                 peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9, **record)
 
@@ -126,8 +128,8 @@ def table(rows: list[dict]) -> str:
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
              "| device bytes per unknown (hierarchy + basis) "
-             "| peak host GB | machine | measured | tag |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| particle 0's vertical velocity after the steps | peak host GB | machine | measured | tag |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         later = r["steps"][1:] or r["steps"]
         step_s = sum(s["wall_s"] for s in later) / len(later)
@@ -148,9 +150,10 @@ def table(rows: list[dict]) -> str:
                          f"{step_s - cycles_s - setup_s:.2f}")
                 bound += f" / {step_s / (step_s - cycles_s - factors_s):.2f}"
         cycle_s = (linear_s - sum(s.get("setup_s", 0.0) for s in later)) / max(cycles, 1)
+        vertical = f"{r['particle_velocity'][-1]:.9g}" if r.get("particle_velocity") else "–"
         lines.append(f"| {r['scene']} | {r['level']} | {r['unknowns']} | {r['row']} | {r['solver']} | "
                      f"{len(r['steps'])} | {step_s:.2f} | {cycles / max(solves, 1):.2f} | {cycle_s:.3f} | "
-                     f"{split} | {bound} | {device} | {r['peak_rss_gb']:.2f} | {r['machine']} | "
+                     f"{split} | {bound} | {device} | {vertical} | {r['peak_rss_gb']:.2f} | {r['machine']} | "
                      f"{r['measured']} | {r['tag']} |")
     return "\n".join(lines) + "\n"
 

@@ -1,7 +1,8 @@
-"""A :class:`~fbmflow.fem.FlowSpace`'s cell geometry on the device, one copy per space and backend
-(:func:`device_space`), for everything that applies its matrix-free operators there: the flow
-problem's residuals and time-step right-hand sides (:meth:`DeviceSpace.apply_mass_laplace`, what
-:func:`fbmflow.fem.apply_mass_laplace` computes on the CPU) and a Newton block's terms
+"""A :class:`~fbmflow.fem.space.FlowSpace`'s cell geometry on the device, one copy per space and
+backend (:func:`~fbmflow.gpu.space.device_space`), for everything that applies its matrix-free
+operators there: the flow problem's residuals and time-step right-hand sides
+(:meth:`~fbmflow.gpu.space.DeviceSpace.apply_mass_laplace`, what
+:func:`fbmflow.fem.assembly.apply_mass_laplace` computes on the CPU) and a Newton block's terms
 (:class:`~fbmflow.gpu.operator.DeviceOperator`)."""
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ from .operators import apply_cell_operator, cell_colours
 class DeviceSpace:
     """The arrays of ``space``'s cells on the device of ``backend``: ``detJw (n_cells, nq)``,
     ``Jinv (n_cells, nq, d, d)``, ``cell_dofs (n_cells, nl)``, ``phi (nq, nl)``, ``dphi (nq, nl, d)``
-    (the CPU's), and the cells in ``colours`` that share no node (:func:`cell_colours`; the
-    host's in ``host_colours``). ``nbytes``: the device memory they take [bytes]."""
+    (the CPU's), and the cells in ``colours`` that share no node
+    (:func:`~fbmflow.gpu.operators.cell_colours`; the host's in ``host_colours``). ``nbytes``: the
+    device memory they take [bytes]."""
 
     def __init__(self, space, backend: Backend):
         put = backend.put
@@ -37,7 +39,7 @@ class DeviceSpace:
                            ) -> np.ndarray:
         """``(alpha M + beta L + convection N(u)) u`` for a host velocity ``u (d * n_v,)`` ->
         host ``(d * n_v,)`` float64, computed on the device: as
-        :func:`fbmflow.fem.apply_mass_laplace` (the same arguments but the space), the cells'
+        :func:`fbmflow.fem.assembly.apply_mass_laplace` (the same arguments but the space), the cells'
         sums in colours instead of the CPU's groups (equal to the rounding of the order)."""
         backend = self.backend
         w = backend.put(np.reshape(u, (self.dim, self.n_v)), np.float64)

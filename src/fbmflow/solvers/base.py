@@ -110,7 +110,7 @@ class LinearSolver(ABC):
         """``apply(alpha, beta, u, convection=0.0)``: ``(alpha M + beta L + convection N(u)) u``
         on ``space`` for a velocity ``u (dim * n_v,)`` -> ``(dim * n_v,)`` float64, host arrays
         in and out, which the flow problem's residuals and time-step right-hand sides apply. The
-        default is the CPU's (:func:`~fbmflow.fem.apply_mass_laplace`); a solver on a device
+        default is the CPU's (:func:`~fbmflow.fem.assembly.apply_mass_laplace`); a solver on a device
         applies it there (:mod:`fbmflow.gpu`)."""
         return functools.partial(apply_mass_laplace, space)
 
