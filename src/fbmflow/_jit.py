@@ -3,9 +3,9 @@
 ``njit`` is :func:`numba.njit` with ``cache=True`` so that a second process loads compiled
 kernels from disk (set ``NUMBA_CACHE_DIR`` to share the cache between CI runs). ``prange`` is
 re-exported so kernels never import numba themselves. ``jitable`` marks a helper that CPU
-kernels and GPU kernels (:mod:`fbmflow.gpu`, numba-cuda) both call, inlined into each caller:
-one body for both targets; it must take every scratch array from its caller and allocate
-nothing.
+kernels and GPU kernels (:mod:`fbmflow.gpu`, numba-cuda) both call: one body for both targets,
+inlined into the CPU's callers, compiled as a CUDA device function from a copy for the GPU's
+(:data:`JITABLE`); it must take every scratch array from its caller and allocate nothing.
 """
 from functools import partial
 
@@ -13,6 +13,12 @@ import numba
 
 njit = partial(numba.njit, cache=True)
 prange = numba.prange
+
+
+#: every function marked :func:`jitable`, with its jit options: the GPU's kernels compile copies
+#: of them (:func:`fbmflow.gpu._kernels.device_copy`), never these objects, whose overloads the
+#: CPU's kernels inline into their IR
+JITABLE: dict = {}
 
 
 def jitable(function=None, *, inline: bool = True, **options):
@@ -25,6 +31,7 @@ def jitable(function=None, *, inline: bool = True, **options):
     with arguments."""
     if function is None:
         return partial(jitable, inline=inline, **options)
+    JITABLE[function] = options
     if inline:
         return numba.extending.register_jitable(inline="always")(function)
     if not options:
@@ -44,6 +51,11 @@ def cuda_target():
     return numba.cuda
 
 
+def cuda_simulated() -> bool:
+    """Whether Numba's CUDA target is its simulator (``NUMBA_ENABLE_CUDASIM=1``)."""
+    return bool(numba.config.ENABLE_CUDASIM)
+
+
 def numba_threads() -> int:
     """Number of threads Numba's parallel loops use."""
     return numba.get_num_threads()
@@ -60,5 +72,5 @@ def set_threads(n: int) -> None:
     numba.set_num_threads(n)
 
 
-__all__ = ["njit", "prange", "jitable", "float64", "cuda_target", "numba_threads", "max_threads",
-           "set_threads"]
+__all__ = ["njit", "prange", "jitable", "JITABLE", "float64", "cuda_target", "cuda_simulated",
+           "numba_threads", "max_threads", "set_threads"]

@@ -1,11 +1,44 @@
 """The numba-cuda kernels (imported only when a GPU kernel is asked for: this module loads
 Numba's CUDA target). Each thread runs a body that the CPU kernels run too (``jitable`` in
-``fbmflow._jit``), with scratch arrays of the largest cell's sizes."""
-from .._jit import cuda_target, float64
-from ..fem._kernels import cell_operator, reaction_at, reaction_cell, velocity_at
-from ..solvers._kernels import factor_patch, vanka_patch
+``fbmflow._jit``), with scratch arrays of the largest cell's sizes: a copy of it compiled as a
+CUDA device function (:func:`device_copy`)."""
+import types
+
+from .._jit import JITABLE, cuda_simulated, cuda_target, float64
+from ..fem import _kernels as fem
+from ..solvers import _kernels as solvers
 
 cuda = cuda_target()
+
+
+def device_copy(function, copies: dict = {}):  # noqa: B006 (the copies made, kept for the process)
+    """A copy of the :func:`~fbmflow._jit.jitable` ``function`` compiled as a CUDA device function
+    (with its jit options), calling the copies of the jitable functions it calls.
+
+    The GPU's kernels call these copies, never the CPU's function objects: those are registered
+    for the CPU's kernels to inline into their IR (``inline="always"``), which numba-cuda cannot
+    compile (numba-cuda 0.30.4: an ``AssertionError`` in its IR post-processing, for any body with
+    a branch), and a typing of the CPU's, once cached, is reused for a GPU kernel whatever the
+    target. Under Numba's CUDA simulator the copies are plain Python functions (the simulator
+    calls them as the CPU's Python code would)."""
+    found = copies.get(function)
+    if found is not None:
+        return found
+    namespace = dict(function.__globals__)
+    for name in function.__code__.co_names:  # the globals its body reads: the jitable ones it calls
+        value = namespace.get(name)
+        if isinstance(value, types.FunctionType) and value in JITABLE:
+            namespace[name] = device_copy(value)
+    copy = types.FunctionType(function.__code__, namespace, function.__name__, function.__defaults__,
+                              function.__closure__)
+    copy.__doc__, copy.__qualname__ = function.__doc__, function.__qualname__
+    found = copies[function] = copy if cuda_simulated() else cuda.jit(device=True, **JITABLE[function])(copy)
+    return found
+
+
+cell_operator, reaction_at, reaction_cell, velocity_at = (
+    device_copy(f) for f in (fem.cell_operator, fem.reaction_at, fem.reaction_cell, fem.velocity_at))
+factor_patch, vanka_patch = device_copy(solvers.factor_patch), device_copy(solvers.vanka_patch)
 
 #: the largest Q2 cell (3D): nodes and quadrature points (3 x 3 x 3 Gauss), and axes; the
 #: threads' scratch arrays have these sizes whatever the mesh
