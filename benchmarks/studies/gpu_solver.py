@@ -30,7 +30,10 @@ defaults with multigrid (``solver.linear = multigrid``):
   arrays a device would hold, the same sizes) and its solves done by the CPU hierarchy it was
   built from: the device memory per unknown, the hierarchy's (operators, smoothers, transfers)
   and FGMRES's basis;
-* ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra).
+* ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra), counting the GPU
+  kernels' launches per step and the host's seconds in them (numba-cuda prepares a launch's
+  arguments on the host: where those seconds approach the cycles', the cycles are bound by the
+  launches, not by the GPU).
 
 Cycles: FGMRES iterations, one cycle each; per solve: over all the step's linear solves. The
 step's seconds split into the linear solves' cycles (FGMRES with its cycles), the set-up of their
@@ -82,6 +85,35 @@ def _count_device_arrays(record: dict) -> None:
     gm.DeviceHierarchy.solve = solve
 
 
+class _CountedKernel:
+    """A GPU kernel whose launches add to ``counts``: their number and the host's seconds in them
+    (a launch is asynchronous: the host's time is numba-cuda's preparation of its arguments)."""
+
+    def __init__(self, kernel, counts: dict):
+        self.kernel, self.counts = kernel, counts
+
+    def __getitem__(self, config):
+        launch = self.kernel[config]
+
+        def call(*args):
+            t0 = time.perf_counter()
+            launch(*args)
+            self.counts["launches"] += 1
+            self.counts["launch_s"] += time.perf_counter() - t0
+        return call
+
+
+def _count_launches() -> dict:
+    """Make every GPU kernel count its launches (:class:`_CountedKernel`); returns the counts."""
+    import fbmflow.gpu._kernels as kernels
+
+    counts = {"launches": 0, "launch_s": 0.0}
+    for name in ("apply_cells", "apply_reaction_cells", "velocity_rows", "reaction_rows", "vanka_patches",
+                 "vanka_factors"):
+        setattr(kernels, name, _CountedKernel(getattr(kernels, name), counts))
+    return counts
+
+
 def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
     """``steps`` steps of ``scene_name`` at ``level`` in this process, as row ``row`` says."""
     from fbmflow.scenes.registry import load_scene
@@ -91,6 +123,7 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
     if row == "arrays":
         settings = ["solver.linear=multigrid", "solver.device=gpu"]
         _count_device_arrays(record)
+    counts = _count_launches() if row == "gpu" else None
     scene, params, level = load_scene(scene_name, level, settings)
     setup = scene.build(params, level)
     sim = setup.sim
@@ -104,11 +137,14 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
     out = []
     for _ in range(steps):
         hierarchy[0] = hierarchy[1] = 0.0
+        before = dict(counts) if counts else None
         t0 = time.perf_counter()
         rep = sim.step(setup.dt)
         out.append(dict(wall_s=time.perf_counter() - t0, solves=rep.linear.solves,
                         cycles=rep.linear.iterations, linear_s=rep.linear.time_s, setup_s=hierarchy[0],
                         factors_s=hierarchy[1]))
+        if counts:
+            out[-1].update({key: counts[key] - before[key] for key in counts})
     velocity = sim.particles.velocity
     return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
                 particle_velocity=[float(v) for v in velocity[0]] if len(velocity) else [],
@@ -128,8 +164,9 @@ def table(rows: list[dict]) -> str:
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
              "| device bytes per unknown (hierarchy + basis) "
+             "| GPU kernel launches per step (host s in them) "
              "| particle 0's vertical velocity after the steps | peak host GB | machine | measured | tag |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         later = r["steps"][1:] or r["steps"]
         step_s = sum(s["wall_s"] for s in later) / len(later)
@@ -151,9 +188,14 @@ def table(rows: list[dict]) -> str:
                 bound += f" / {step_s / (step_s - cycles_s - factors_s):.2f}"
         cycle_s = (linear_s - sum(s.get("setup_s", 0.0) for s in later)) / max(cycles, 1)
         vertical = f"{r['particle_velocity'][-1]:.9g}" if r.get("particle_velocity") else "–"
+        launches = "–"
+        if "launches" in later[0]:
+            launches = (f"{sum(s['launches'] for s in later) / len(later):.0f} "
+                        f"({sum(s['launch_s'] for s in later) / len(later):.2f})")
         lines.append(f"| {r['scene']} | {r['level']} | {r['unknowns']} | {r['row']} | {r['solver']} | "
                      f"{len(r['steps'])} | {step_s:.2f} | {cycles / max(solves, 1):.2f} | {cycle_s:.3f} | "
-                     f"{split} | {bound} | {device} | {vertical} | {r['peak_rss_gb']:.2f} | {r['machine']} | "
+                     f"{split} | {bound} | {device} | {launches} | {vertical} | {r['peak_rss_gb']:.2f} | "
+                     f"{r['machine']} | "
                      f"{r['measured']} | {r['tag']} |")
     return "\n".join(lines) + "\n"
 

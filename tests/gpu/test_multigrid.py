@@ -20,3 +20,16 @@ def test_a_solve_on_the_device_under_the_simulator_is_the_cpus_in_colour_order()
                          capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count("cycles CPU") == 2
+
+
+def test_a_whole_step_on_the_device_under_the_simulator_is_the_cpus_in_colour_order():
+    """``NUMBA_ENABLE_CUDASIM=1 python _simulated_step.py``: one time step of a disk settling in a
+    closed box with ``solver.device = gpu`` (the Newton residuals, the solves, the rigid
+    responses of the implicit coupling) gives the disk the velocity the CPU's step gives with its
+    smoothers in the same colour order, to 1e-9 relative, in as many solves and cycles. With the
+    device's residual missing its convection the velocities differ by 4.2e-5 (checked by hand)."""
+    script = Path(__file__).with_name("_simulated_step.py")
+    out = subprocess.run([sys.executable, str(script)], env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"),
+                         capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "relative difference" in out.stdout
