@@ -14,7 +14,7 @@ pip install -q --no-index --no-deps --target /tmp/site out/whl/*.whl > "$OUT/pip
 export PYTHONPATH=/tmp/site:$PWD/src NUMBA_CACHE_DIR=/tmp/nc
 nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1
 # 1. every kernel on the GPU against the CPU's (the tests' scripts without the simulator)
-for script in _simulated_operator _simulated_vanka _simulated_multigrid; do
+for script in _simulated_operator _simulated_vanka _simulated_multigrid _simulated_step; do
     timeout 150 python "tests/gpu/$script.py" > "$OUT/$script.txt" 2>&1; echo "rc $?" >> "$OUT/$script.txt"
 done
 cd benchmarks || exit 1

@@ -1,10 +1,12 @@
-"""Run with ``NUMBA_ENABLE_CUDASIM=1``: one time step of a whole simulation with ``solver.device =
+"""Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU with the ``gpu`` extra,
+benchmarks/device/gpu.sh): one time step of a whole simulation with ``solver.device =
 gpu`` (its arrays NumPy's, its kernels run by Numba's CUDA simulator: the residuals, the solves of
 the Newton steps and of the particle's rigid responses, the coupling) against the same step on
 the CPU with multigrid's smoothers in the GPU's colour order: a disk settling in a closed 8 x 8
 box, backward Euler, the implicit coupling (a rigid response per free motion of the disk).
 Prints one line; exits 1 where the particle's velocity differs by more than 1e-9 relative
 (the two sum in different orders and the solves stop at 1e-8) or the cycles differ."""
+import os
 import sys
 
 import numpy as np
@@ -14,8 +16,9 @@ import fbmflow.gpu.multigrid as gpu_multigrid
 from fbmflow.gpu.device import simulated_backend
 from fbmflow.solvers.multigrid import MultigridSettings
 
-gpu_multigrid.gpu_problem = lambda: None  # the simulator is the GPU here
-gpu_multigrid.gpu_backend = simulated_backend
+if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":  # the simulator is the GPU here
+    gpu_multigrid.gpu_problem = lambda: None
+    gpu_multigrid.gpu_backend = simulated_backend
 
 
 def step(solver: fb.SolverParams):
