@@ -239,8 +239,8 @@ def write(rows: list[dict]) -> None:
         "residual reduction (the same peak to 3e-7 in E4 at level 0). 'curve to 0.3 s': the largest "
         "deviation of the velocity from the experiment's samples up to t = 0.3 s (or the run's end), over "
         "Table II's u_max: the acceleration (E1's first PIV samples scatter by about 15 %). "
-        "A time step with its Courant number followed the mesh (`--dt 0`, the scene's default: courant 0.25 at "
-        "the terminal velocity). Reproduce a row: `python -m fbmbench tencate --cases C "
+        "A time step with its Courant number followed the mesh (`--dt 0`, the scene's default: "
+        "courant 0.25 at the terminal velocity). Reproduce a row: `python -m fbmbench tencate --cases C "
         "--levels L --dt DT [--set KEY=VALUE ...]`, or `python -m pytest benchmarks -k tencate`.",
         "",
         "| case | level | settings | linear solver | cells/d | unknowns | dt s | steps | wall s | CPU s "

@@ -58,6 +58,7 @@ def run(*, levels: list[int] = (3, 4), meshes: list[str] = ("graded", "symmetric
         for boundary in boundaries:
             for level in levels:
                 q = scene.run(from_dict(scene.Params, {"fbm": {"boundary": boundary}}), level).quantities
-                print(f"{kind} {boundary} level {level} ({2**level} cells/D): C_D {q['drag_coefficient']:.5f} "
+                print(f"{kind} {boundary} level {level} ({2**level} cells/D): "
+                      f"C_D {q['drag_coefficient']:.5f} "
                       f"C_L {q['lift_coefficient']:+.5f} (reference {REFERENCE['lift_coefficient']:+.5f})",
                       flush=True)

@@ -36,7 +36,13 @@ from typing import Literal
 import numpy as np
 from fbmbench.common import RESULTS, merge_row, provenance, write_text
 
-from fbmflow.coupling import FixedObstacles, SurfaceForces, TestFunctionForces, hydrodynamic_forces, node_owner
+from fbmflow.coupling import (
+    FixedObstacles,
+    SurfaceForces,
+    TestFunctionForces,
+    hydrodynamic_forces,
+    node_owner,
+)
 from fbmflow.flow import Dirichlet, NoSlip
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
@@ -110,10 +116,11 @@ def run(*, dim: Literal[2, 3] = 3, cells: list[int] = (4, 6, 8), width: float = 
 
 def write(rows: list[dict]) -> None:
     lines = ["# Rotation: torque on a turning ball, torque-free rate in shear (rotation)", "",
-             "Ball of diameter 1 in the middle of a box (side in diameters), Stokes flow, one steady solve per "
-             "case. 'turning': torque on the ball turning at omega in the closed box over the unbounded value "
-             "(4 pi mu a^2 omega in 2D, 8 pi mu a^3 omega in 3D); the walls raise it by the factor between the "
-             "two 'container' values. 'free rate': the torque-free rotation rate in simple shear (moving walls "
+             "Ball of diameter 1 in the middle of a box (side in diameters), Stokes flow, one steady "
+             "solve per case. 'turning': torque on the ball turning at omega in the closed box over the "
+             "unbounded value (4 pi mu a^2 omega in 2D, 8 pi mu a^3 omega in 3D); the walls raise it by "
+             "the factor between the two 'container' values. 'free rate': the torque-free rotation rate "
+             "in simple shear (moving walls "
              "y = 0, L; periodic in x and z) over gamma / 2, exact in unbounded Stokes flow. Per force "
              "estimator: volume / test-function / surface. Reproduce: `python -m fbmbench rotation --dim D "
              "--cells N --width W --boundary B`.", "",
@@ -124,6 +131,7 @@ def write(rows: list[dict]) -> None:
         turn = " / ".join(f"{r['turning'][k]:.4f}" for k in ESTIMATORS if k in r["turning"])
         free = " / ".join(f"{r['free_rate'][k]:.4f}" for k in ESTIMATORS if k in r["free_rate"])
         lines.append(f"| {r['dim']} | {r['width']:g} | {r['boundary']} | {r['cells']} | {r['n_dofs']} | "
-                     f"{r['container'][1]:.4f}-{r['container'][0]:.4f} | {turn} | {free} | {r['wall_s']:.0f} | "
+                     f"{r['container'][1]:.4f}-{r['container'][0]:.4f} | {turn} | {free} | "
+                     f"{r['wall_s']:.0f} | "
                      f"{r['date']} {r['commit']} |")
     write_text(RESULTS / "rotation.md", "\n".join(lines) + "\n")
