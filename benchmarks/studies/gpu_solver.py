@@ -85,35 +85,6 @@ def _count_device_arrays(record: dict) -> None:
     gm.DeviceHierarchy.solve = solve
 
 
-class _CountedKernel:
-    """A GPU kernel whose launches add to ``counts``: their number and the host's seconds in them
-    (a launch is asynchronous: the host's time is numba-cuda's preparation of its arguments)."""
-
-    def __init__(self, kernel, counts: dict):
-        self.kernel, self.counts = kernel, counts
-
-    def __getitem__(self, config):
-        launch = self.kernel[config]
-
-        def call(*args):
-            t0 = time.perf_counter()
-            launch(*args)
-            self.counts["launches"] += 1
-            self.counts["launch_s"] += time.perf_counter() - t0
-        return call
-
-
-def _count_launches() -> dict:
-    """Make every GPU kernel count its launches (:class:`_CountedKernel`); returns the counts."""
-    import fbmflow.gpu._kernels as kernels
-
-    counts = {"launches": 0, "launch_s": 0.0}
-    for name in ("apply_cells", "apply_reaction_cells", "velocity_rows", "reaction_rows", "vanka_patches",
-                 "vanka_factors"):
-        setattr(kernels, name, _CountedKernel(getattr(kernels, name), counts))
-    return counts
-
-
 def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
     """``steps`` steps of ``scene_name`` at ``level`` in this process, as row ``row`` says."""
     from fbmflow.scenes.registry import load_scene
@@ -123,7 +94,11 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
     if row == "arrays":
         settings = ["solver.linear=multigrid", "solver.device=gpu"]
         _count_device_arrays(record)
-    counts = _count_launches() if row == "gpu" else None
+    counts = None
+    if row == "gpu":
+        from fbmflow.gpu.launches import count_launches
+
+        counts = count_launches()
     scene, params, level = load_scene(scene_name, level, settings)
     setup = scene.build(params, level)
     sim = setup.sim

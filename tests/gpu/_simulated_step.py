@@ -5,7 +5,8 @@ the Newton steps and of the particle's rigid responses, the coupling) against th
 the CPU with multigrid's smoothers in the GPU's colour order: a disk settling in a closed 8 x 8
 box, backward Euler, the implicit coupling (a rigid response per free motion of the disk).
 Prints one line; exits 1 where the particle's velocity differs by more than 1e-9 relative
-(the two sum in different orders and the solves stop at 1e-8) or the cycles differ."""
+(the two sum in different orders and the solves stop at 1e-8) or the cycles differ, or where no
+kernel launch was counted (:func:`fbmflow.gpu.launches.count_launches`)."""
 import os
 import sys
 
@@ -14,6 +15,7 @@ import numpy as np
 import fbmflow as fb
 import fbmflow.gpu.multigrid as gpu_multigrid
 from fbmflow.gpu.device import simulated_backend
+from fbmflow.gpu.launches import count_launches
 from fbmflow.solvers.multigrid import MultigridSettings
 
 if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":  # the simulator is the GPU here
@@ -33,10 +35,11 @@ def step(solver: fb.SolverParams):
 
 
 cpu, v_cpu = step(fb.SolverParams(linear="multigrid", multigrid=MultigridSettings(order="colours")))
+counts = count_launches()
 gpu, v_gpu = step(fb.SolverParams(device="gpu"))
 difference = float(np.abs(v_gpu - v_cpu).max() / np.abs(v_cpu).max())
 same = cpu.linear.iterations == gpu.linear.iterations and cpu.linear.solves == gpu.linear.solves
 print(f"one step: disk velocity CPU {v_cpu} / device {v_gpu}, relative difference {difference:.1e}; "
       f"linear solves {cpu.linear.solves} / {gpu.linear.solves}, cycles {cpu.linear.iterations} / "
-      f"{gpu.linear.iterations}", flush=True)
-sys.exit(0 if difference <= 1e-9 and same and v_cpu[1] < 0.0 else 1)
+      f"{gpu.linear.iterations}; {counts['launches']} kernel launches", flush=True)
+sys.exit(0 if difference <= 1e-9 and same and v_cpu[1] < 0.0 and counts["launches"] > 0 else 1)
