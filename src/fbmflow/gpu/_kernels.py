@@ -11,7 +11,11 @@ from ..solvers import _kernels as solvers
 cuda = cuda_target()
 
 
-def device_copy(function, copies: dict = {}):  # noqa: B006 (the copies made, kept for the process)
+#: the device copies made in this process, by the CPU's function
+_COPIES: dict = {}
+
+
+def device_copy(function):
     """A copy of the :func:`~fbmflow._jit.jitable` ``function`` compiled as a CUDA device function
     (with its jit options), calling the copies of the jitable functions it calls.
 
@@ -21,7 +25,7 @@ def device_copy(function, copies: dict = {}):  # noqa: B006 (the copies made, ke
     a branch), and a typing of the CPU's, once cached, is reused for a GPU kernel whatever the
     target. Under Numba's CUDA simulator the copies are plain Python functions (the simulator
     calls them as the CPU's Python code would)."""
-    found = copies.get(function)
+    found = _COPIES.get(function)
     if found is not None:
         return found
     namespace = dict(function.__globals__)
@@ -32,7 +36,7 @@ def device_copy(function, copies: dict = {}):  # noqa: B006 (the copies made, ke
     copy = types.FunctionType(function.__code__, namespace, function.__name__, function.__defaults__,
                               function.__closure__)
     copy.__doc__, copy.__qualname__ = function.__doc__, function.__qualname__
-    found = copies[function] = copy if cuda_simulated() else cuda.jit(device=True, **JITABLE[function])(copy)
+    found = _COPIES[function] = copy if cuda_simulated() else cuda.jit(device=True, **JITABLE[function])(copy)
     return found
 
 

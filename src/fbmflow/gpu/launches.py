@@ -1,13 +1,14 @@
-"""Counting the GPU kernels' launches (for studies: :func:`count_launches`). numba-cuda prepares
-a launch's arguments on the host, asynchronously to the GPU's work: where the host's seconds in the
-launches approach a cycle's, the cycles are bound by the launches, not by the GPU."""
+"""Counting the GPU kernels' launches (for studies:
+:func:`~fbmflow.gpu.launches.count_launches`). numba-cuda prepares a launch's arguments on the
+host, asynchronously to the GPU's work: where the host's seconds in the launches approach a
+cycle's, the cycles are bound by the launches, not by the GPU."""
 from __future__ import annotations
 
 import time
 
 from . import _kernels
 
-#: the kernels of :mod:`fbmflow.gpu._kernels`
+#: the kernels of ``fbmflow.gpu._kernels``
 KERNELS = ("apply_cells", "apply_reaction_cells", "velocity_rows", "reaction_rows", "vanka_patches",
            "vanka_factors")
 
