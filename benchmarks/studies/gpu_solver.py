@@ -198,10 +198,14 @@ def run(*, scenes: list[str] = ("ten-cate", "glowinski-free-fall"), levels: list
     stamp = f"{time.strftime('%Y-%m-%d')} {commit()}"
     for scene, level in zip(scenes, levels):
         for row in rows:
-            out = subprocess.run([sys.executable, "-m", "fbmbench", "gpu_solver", "--steps", str(steps),
-                                  "--one", scene, str(level), row], check=True, capture_output=True,
-                                 text=True, cwd=BENCHMARKS).stdout
-            result = json.loads(out.strip().splitlines()[-1])
+            done = subprocess.run([sys.executable, "-m", "fbmbench", "gpu_solver", "--steps", str(steps),
+                                   "--one", scene, str(level), row], capture_output=True, text=True,
+                                   cwd=BENCHMARKS)
+            if done.returncode != 0:  # say why, and go on with the other rows (a device session is short)
+                print(f"{scene} level {level} row {row} failed (exit {done.returncode}):\n"
+                      f"{done.stdout[-2000:]}{done.stderr[-4000:]}", flush=True)
+                continue
+            result = json.loads(done.stdout.strip().splitlines()[-1])
             result.update(machine=machine(), measured=stamp, tag=tag)
             kept.append(result)
             print(json.dumps(result), flush=True)
