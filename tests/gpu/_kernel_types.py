@@ -12,9 +12,8 @@ from pathlib import Path
 import numba
 
 import fbmflow.gpu._kernels as kernels
+from fbmflow.gpu.launches import KERNELS as NAMES
 
-NAMES = ("apply_cells", "apply_reaction_cells", "velocity_rows", "reaction_rows", "vanka_patches",
-         "vanka_factors")
 seen: dict[str, set] = {name: set() for name in NAMES}
 
 

@@ -7,6 +7,8 @@ or CuPy's) of the CPU kernels' shapes and types.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -44,8 +46,10 @@ def apply_cell_operator(colours, detJw, Jinv, cell_dofs, phi, dphi, alpha: float
                                      float(gamma), conv, own, w, out)
 
 
+@functools.cache
 def _no_convection():
-    """A (1, 1, 1) float64 device array, for ``conv`` where the kernel reads none."""
+    """A (1, 1, 1) float64 device array, for ``conv`` where the kernel reads none (one per
+    process)."""
     from .._jit import cuda_target
 
     return cuda_target().device_array((1, 1, 1))
