@@ -33,7 +33,10 @@ defaults with multigrid (``solver.linear = multigrid``):
 * ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra), counting the GPU
   kernels' launches per step and the host's seconds in them (numba-cuda prepares a launch's
   arguments on the host: where those seconds approach the cycles', the cycles are bound by the
-  launches, not by the GPU).
+  launches, not by the GPU). A smoother's sweep, and the Newton term's product, is one cooperative
+  launch (its colours in turn, the grid synchronised between them);
+* ``gpu-colours``: as ``gpu``, but those kernels launch once per colour (a sweep: 27 in 3D, and the
+  interface's): the launches' cost, against the ``gpu`` row.
 
 Cycles: FGMRES iterations, one cycle each; per solve: over all the step's linear solves. The
 step's seconds split into the linear solves' cycles (FGMRES with its cycles), the set-up of their
@@ -58,7 +61,8 @@ import time
 from studies.thread_scaling import BENCHMARKS, RESULTS, commit, machine
 
 ROWS = {"slabs": ["solver.multigrid.order=slabs"], "colours": ["solver.multigrid.order=colours"],
-        "arrays": ["solver.multigrid.order=colours"], "gpu": ["solver.device=gpu"]}
+        "arrays": ["solver.multigrid.order=colours"], "gpu": ["solver.device=gpu"],
+        "gpu-colours": ["solver.device=gpu"]}
 
 
 def _count_device_arrays(record: dict) -> None:
@@ -95,10 +99,12 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
         settings = ["solver.linear=multigrid", "solver.device=gpu"]
         _count_device_arrays(record)
     counts = None
-    if row == "gpu":
+    if row.startswith("gpu"):
+        from fbmflow.gpu import colours
         from fbmflow.gpu.launches import count_launches
 
         counts = count_launches()
+        colours.ONE_LAUNCH = row == "gpu"
     scene, params, level = load_scene(scene_name, level, settings)
     setup = scene.build(params, level)
     sim = setup.sim
@@ -185,7 +191,7 @@ def run(*, scenes: list[str] = ("ten-cate", "glowinski-free-fall"), levels: list
     ----------
     scenes : scenes to run
     levels : their levels, one per scene
-    rows : slabs, colours, arrays, gpu (see the module docstring)
+    rows : slabs, colours, arrays, gpu, gpu-colours (see the module docstring)
     steps : time steps per row
     tag : names this run's rows in the results
     one : internal: run SCENE LEVEL ROW in this process

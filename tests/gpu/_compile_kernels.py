@@ -3,7 +3,9 @@ _compile_kernels.py TYPES.json`` compiles every GPU kernel (:mod:`fbmflow.gpu._k
 list of argument types in ``TYPES.json`` (:file:`_kernel_types.py`) to PTX for compute capability
 9.0 (the lent H100/H200's), as a GPU would compile it at its first launch: what Numba's CUDA
 simulator, which runs the kernels as Python, cannot check (the kernels' typing and lowering for the
-CUDA target). Prints one line per kernel and type list; exits 1 where one fails, 3 where NVVM is
+CUDA target). A kernel that synchronises its grid (a cooperative launch) calls the CUDA device
+runtime, which a GPU links in at the first launch: it is linked here too, with nvJitLink, to a
+cubin. Prints one line per kernel and type list; exits 1 where one fails, 3 where NVVM is
 missing (no CUDA toolkit: ``pip install "numba-cuda[cu12]"``)."""
 import json
 import sys
@@ -26,6 +28,23 @@ except Exception as err:  # no NVVM: the CUDA toolkit's compiler is not installe
 
 import fbmflow.gpu._kernels as kernels  # noqa: E402
 
+
+def link(ptx: str) -> int:
+    """Bytes of the cubin that nvJitLink links from ``ptx`` and the CUDA device runtime
+    (``libcudadevrt.a``, which numba-cuda links for a kernel that synchronises its grid)."""
+    from cuda.bindings import nvjitlink
+    from numba.cuda.cudadrv.libs import get_cudalib
+
+    handle = nvjitlink.create(1, [f"-arch=sm_{CC[0]}{CC[1]}"])
+    try:
+        nvjitlink.add_data(handle, nvjitlink.InputType.PTX, ptx.encode(), len(ptx), "kernel.ptx")
+        nvjitlink.add_file(handle, nvjitlink.InputType.LIBRARY, get_cudalib("cudadevrt", static=True))
+        nvjitlink.complete(handle)
+        return nvjitlink.get_linked_cubin_size(handle)
+    finally:
+        nvjitlink.destroy(handle)
+
+
 namespace = dict(vars(types), bool=types.boolean)
 failed = 0
 for name, signatures in json.loads(open(sys.argv[1]).read()).items():
@@ -34,7 +53,10 @@ for name, signatures in json.loads(open(sys.argv[1]).read()).items():
         t0 = time.perf_counter()
         try:
             ptx, _ = cuda.compile_ptx(getattr(kernels, name).py_func, args, cc=CC)
-            print(f"{name}: {len(ptx)} characters of PTX in {time.perf_counter() - t0:.1f} s", flush=True)
+            cubin = link(ptx) if "cudaCG" in ptx else 0  # the grid's synchronisation
+            linked = f", linked with the device runtime: {cubin} bytes of cubin" if cubin else ""
+            print(f"{name}: {len(ptx)} characters of PTX in {time.perf_counter() - t0:.1f} s{linked}",
+                  flush=True)
         except Exception as err:
             failed += 1
             print(f"{name} {signature}: FAILED {type(err).__name__}: {str(err)[:4000]}", flush=True)

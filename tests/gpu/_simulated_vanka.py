@@ -1,6 +1,7 @@
 """Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU with the ``gpu`` extra: CuPy's arrays,
 benchmarks/device/gpu.sh): the GPU's Vanka smoother (:class:`fbmflow.gpu.vanka.DeviceVanka`,
-its local factors computed on the device, then its sweeps, one thread per patch of a colour)
+its local factors computed on the device, then its sweeps, a sweep's colours in one cooperative
+launch, and one launch per colour)
 under Numba's CUDA simulator against the CPU's factored smoother: the same factors, and the same
 sweeps in the same colour order, symmetric sweeps (forwards, then backwards): a 2D box with a
 sharp-boundary disk (far patches, agglomerated patches, interface sweeps) and a 3D box with a
@@ -18,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).parents[1]))
 from sharp_disk import sharp_disk_problem  # noqa: E402
 
 from fbmflow.flow import NavierStokesProblem, NoSlip  # noqa: E402
+from fbmflow.gpu import colours  # noqa: E402
 from fbmflow.gpu.device import gpu_backend, simulated_backend  # noqa: E402
 from fbmflow.gpu.vanka import DeviceVanka  # noqa: E402
 from fbmflow.mesh import StructuredMesh  # noqa: E402
@@ -66,10 +68,23 @@ for name, system, device_factors in systems():
     rng = np.random.default_rng(1)
     b = rng.standard_normal(system.n_u + system.n_p)
     want = rng.standard_normal(b.size)
+    x0 = want.copy()
     x = backend.put(want)  # a copy, as on a GPU
     smoother.smooth(b, want, 2)
-    device.smooth(backend.put(b), x, 2)
+    device.smooth(backend.put(b), x, 2)  # a sweep in one cooperative launch
     got = backend.get(x)
+    # the same sweeps with a launch per colour, and (the simulator) with the cooperative grid's threads
+    # taking several patches of a colour each: within a colour the order does not matter, bit for bit
+    launches = {"a launch per colour": (False, device.threads)}
+    if backend.name == "numpy":
+        launches["one launch of 4 threads"] = (True, 4)
+    alike = []
+    for label, (colours.ONE_LAUNCH, device.threads) in launches.items():
+        x = backend.put(x0)
+        device.smooth(backend.put(b), x, 2)
+        colours.ONE_LAUNCH, device.threads = True, backend.threads
+        alike.append(f"{label} {'alike' if np.array_equal(backend.get(x), got) else 'DIFFERENT'}")
+        worst = max(worst, 2.0 * (not np.array_equal(backend.get(x), got)))
     error = float(np.abs(got - want).max() / np.abs(want).max())
     tolerance = 1e-5 if smoother.store.dtype == np.float32 and 0 in smoother.blocks else 1e-12
     worst = max(worst, error / tolerance)
@@ -78,5 +93,6 @@ for name, system, device_factors in systems():
     print(f"{name}: {len(device.sweeps[0])} colours, far {far}, merged {smoother.merged.size}, interface "
           f"{smoother.interface.size}, factors {smoother.store.dtype}, patch kinds {kinds}: factors "
           f"{'on the device' if device_factors else 'copied'}, {factors:.1e} apart ({factor_s:.0f} s), "
-          f"pivots alike {np.array_equal(piv, smoother.piv)}; relative error {error:.1e}", flush=True)
+          f"pivots alike {np.array_equal(piv, smoother.piv)}; relative error {error:.1e}; {', '.join(alike)}",
+          flush=True)
 sys.exit(0 if worst <= 1.0 else 1)

@@ -17,10 +17,11 @@ def test_every_gpu_kernel_compiles_for_the_cuda_target(tmp_path):
     """Every kernel of :mod:`fbmflow.gpu._kernels`, with the argument types of its launches in the
     simulator scripts (the operators, the Vanka smoother's factors and sweeps, a solve on the
     device with the residuals: ``_kernel_types.py`` under ``NUMBA_ENABLE_CUDASIM=1``), compiles to
-    PTX for compute capability 9.0 (``_compile_kernels.py``). Before the kernels called copies of
-    the CPU's bodies (``fbmflow.gpu._kernels.device_copy``), the four operator kernels failed here
-    (numba-cuda 0.30.4: an AssertionError or a TypingError in the inlined bodies), which the
-    simulator could not show."""
+    PTX for compute capability 9.0 (``_compile_kernels.py``), and those that synchronise their grid
+    (the cooperative ``*_sweep`` kernels) link with the CUDA device runtime to a cubin. Before the
+    kernels called copies of the CPU's bodies (``fbmflow.gpu._kernels.device_copy``), the four
+    operator kernels failed here (numba-cuda 0.30.4: an AssertionError or a TypingError in the
+    inlined bodies), which the simulator could not show."""
     record = tmp_path / "types.json"
     scripts = ["_simulated_operator.py", "_simulated_vanka.py", "_simulated_multigrid.py:2D, sharp disk"]
     simulated = subprocess.run([sys.executable, str(HERE / "_kernel_types.py"), str(record), *scripts],
@@ -34,3 +35,5 @@ def test_every_gpu_kernel_compiles_for_the_cuda_target(tmp_path):
         pytest.skip(compiled.stdout.strip())
     assert compiled.returncode == 0, compiled.stdout[-6000:] + compiled.stderr[-3000:]
     assert compiled.stdout.count("characters of PTX") == sum(len(v) for v in kinds.values())
+    cooperative = sum(len(types) for name, types in kinds.items() if name.endswith("_sweep"))
+    assert compiled.stdout.count("linked with the device runtime") == cooperative > 0

@@ -50,29 +50,64 @@ MAX_NODES, MAX_POINTS, MAX_DIM = 27, 27, 3
 
 
 @cuda.jit
-def apply_cells(cells, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out):
-    """Thread ``t`` adds cell ``cells[t]``'s part of ``(alpha M + beta L + gamma N(c)) w`` to
-    ``out`` (``fbmflow.fem._kernels.cell_operator``); ``cells`` share no node."""
-    t = cuda.grid(1)
-    if t < cells.shape[0]:
-        wl = cuda.local.array((MAX_DIM, MAX_NODES), float64)
-        wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-        gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
-        value = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-        flux = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
-        cell_operator(cells[t], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out, wl,
+def apply_cells(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out):
+    """Adds the parts of ``(alpha M + beta L + gamma N(c)) w`` of the cells ``order[first:last]``
+    (one colour: they share no node) to ``out`` (``fbmflow.fem._kernels.cell_operator``), thread
+    ``t`` taking every ``gridsize``-th from ``first + t``."""
+    wl = cuda.local.array((MAX_DIM, MAX_NODES), float64)
+    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
+    value = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    flux = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
+    for k in range(first + cuda.grid(1), last, cuda.gridsize(1)):
+        cell_operator(order[k], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out, wl,
                       wq, gq, value, flux)
 
 
 @cuda.jit
-def apply_reaction_cells(cells, react, cell_dofs, phi, w, scale, out):
-    """Thread ``t`` adds cell ``cells[t]``'s part of ``scale R(u) w`` to ``out``
-    (``fbmflow.fem._kernels.reaction_cell``); ``cells`` share no node."""
-    t = cuda.grid(1)
-    if t < cells.shape[0]:
-        wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-        fq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-        reaction_cell(cells[t], react, cell_dofs, phi, w, scale, out, wq, fq)
+def apply_cells_sweep(order, starts, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w,
+                      out):
+    """:func:`apply_cells` for the colours ``order[starts[c]:starts[c + 1]]`` in turn, the whole
+    grid synchronised between them: one cooperative launch."""
+    wl = cuda.local.array((MAX_DIM, MAX_NODES), float64)
+    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
+    value = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    flux = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
+    grid = cuda.cg.this_grid()
+    colours = starts.shape[0] - 1
+    for c in range(colours):
+        for k in range(starts[c] + cuda.grid(1), starts[c + 1], cuda.gridsize(1)):
+            cell_operator(order[k], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out,
+                          wl, wq, gq, value, flux)
+        if c + 1 < colours:
+            grid.sync()
+
+
+@cuda.jit
+def apply_reaction_cells(order, first, last, react, cell_dofs, phi, w, scale, out):
+    """Adds the parts of ``scale R(u) w`` of the cells ``order[first:last]`` (one colour) to
+    ``out`` (``fbmflow.fem._kernels.reaction_cell``), thread ``t`` taking every ``gridsize``-th
+    from ``first + t``."""
+    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    fq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    for k in range(first + cuda.grid(1), last, cuda.gridsize(1)):
+        reaction_cell(order[k], react, cell_dofs, phi, w, scale, out, wq, fq)
+
+
+@cuda.jit
+def apply_reaction_sweep(order, starts, react, cell_dofs, phi, w, scale, out):
+    """:func:`apply_reaction_cells` for the colours ``order[starts[c]:starts[c + 1]]`` in turn,
+    the whole grid synchronised between them: one cooperative launch."""
+    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    fq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    grid = cuda.cg.this_grid()
+    colours = starts.shape[0] - 1
+    for c in range(colours):
+        for k in range(starts[c] + cuda.grid(1), starts[c + 1], cuda.gridsize(1)):
+            reaction_cell(order[k], react, cell_dofs, phi, w, scale, out, wq, fq)
+        if c + 1 < colours:
+            grid.sync()
 
 
 @cuda.jit
@@ -97,18 +132,40 @@ def reaction_rows(u, cell_dofs, phi, dphi, detJw, Jinv, react):
 
 
 @cuda.jit(fastmath=True)
-def vanka_patches(patches, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u,
-                  regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+def vanka_patches(order, first, last, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v,
+                  n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
                   b_idx, k_ptr, k_idx, k_val, r, w, w64, out):
-    """Thread ``t`` adds patch ``patches[t]``'s Vanka correction to ``x``
-    (``fbmflow.solvers._kernels.vanka_patch``), with the rows ``t`` of the work arrays ``r``,
-    ``w64``, ``out`` (float64) and ``w`` (the factors' dtype), (threads, width) each; ``patches``
-    touch nothing of each other."""
+    """Adds the Vanka corrections of the patches ``order[first:last]`` (one colour: they touch
+    nothing of each other) to ``x`` (``fbmflow.solvers._kernels.vanka_patch``): thread ``t`` takes
+    every ``gridsize``-th from ``first + t``, with the rows ``t`` of the work arrays ``r``,
+    ``w64``, ``out`` (float64) and ``w`` (the factors' dtype), (threads, width) each."""
     t = cuda.grid(1)
-    if t < patches.shape[0]:
-        vanka_patch(patches[t], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
+    for k in range(first + t, last, cuda.gridsize(1)):
+        vanka_patch(order[k], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
                     (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
                      b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])
+
+
+@cuda.jit(fastmath=True)
+def vanka_sweep(order, starts, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u,
+                regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx,
+                k_ptr, k_idx, k_val, r, w, w64, out):
+    """The colours ``order[starts[c]:starts[c + 1]]`` in turn, each as :func:`vanka_patches` sweeps
+    one, the whole grid synchronised between colours (``cuda.cg.this_grid().sync()``): a sweep in
+    one launch. Numba launches a kernel that synchronises its grid cooperatively: all its blocks
+    resident at once (at most ``max_cooperative_grid_blocks``)."""
+    grid = cuda.cg.this_grid()
+    t = cuda.grid(1)
+    n = cuda.gridsize(1)
+    colours = starts.shape[0] - 1
+    for c in range(colours):
+        for k in range(starts[c] + t, starts[c + 1], n):
+            vanka_patch(order[k], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v,
+                                                n_u),
+                        (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx,
+                         d_val, b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])
+        if c + 1 < colours:
+            grid.sync()
 
 
 @cuda.jit

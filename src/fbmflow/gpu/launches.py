@@ -9,8 +9,8 @@ import time
 from . import _kernels
 
 #: the kernels of ``fbmflow.gpu._kernels``
-KERNELS = ("apply_cells", "apply_reaction_cells", "velocity_rows", "reaction_rows", "vanka_patches",
-           "vanka_factors")
+KERNELS = ("apply_cells", "apply_cells_sweep", "apply_reaction_cells", "apply_reaction_sweep",
+           "velocity_rows", "reaction_rows", "vanka_patches", "vanka_sweep", "vanka_factors")
 
 
 class _Counted:
@@ -28,6 +28,9 @@ class _Counted:
             self.counts["launches"] += 1
             self.counts["launch_s"] += time.perf_counter() - t0
         return call
+
+    def __getattr__(self, name):  # the kernel's other attributes (``compile``, ``py_func``)
+        return getattr(self.kernel, name)
 
 
 def count_launches() -> dict:

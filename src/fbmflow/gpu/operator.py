@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from ..fem.velocity_block import VelocityBlock
 from ..solvers.system import SaddlePointSystem, as_csr
+from .colours import DeviceColours
 from .device import Backend
 from .operators import apply_cell_operator, apply_reaction
 from .space import device_space
@@ -115,10 +116,10 @@ class DeviceOperator:
         A, put = self.system.A, self.backend.put
         self.react = None if A.react is None else put(A.react)
         self.drift = None if A.drift is None else put(A.drift)
-        self.drift_colours = []
+        self.drift_colours = None
         if A.drift is not None:
-            self.drift_colours = [put(c[A.drift_cells[c]]) for c in self.space.host_colours
-                                  if A.drift_cells[c].any()]
+            self.drift_colours = DeviceColours([c[A.drift_cells[c]] for c in self.space.host_colours
+                                                if A.drift_cells[c].any()], put)
         self.scale = float(A.scale)
 
     def apply(self, x):

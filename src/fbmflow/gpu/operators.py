@@ -1,6 +1,7 @@
 """The matrix-free velocity operators on the GPU: ``alpha M + beta L + gamma N(c)`` and the Newton
 term ``R(u)``, and the per-point coefficients they read. One numba-cuda thread per cell; where
-threads add into a vector, the cells go in colours that share no node (no atomics). Each
+threads add into a vector, the cells go in colours that share no node (no atomics), all colours
+in one cooperative launch (:class:`~fbmflow.gpu.colours.DeviceColours`). Each
 thread runs the body the CPU kernel runs per cell (``fbmflow.fem._kernels``: ``cell_operator``,
 ``reaction_cell``, ``velocity_at``, ``reaction_at``). Arguments are device arrays (numba-cuda's
 or CuPy's) of the CPU kernels' shapes and types.
@@ -33,17 +34,14 @@ def apply_cell_operator(colours, detJw, Jinv, cell_dofs, phi, dphi, alpha: float
     """Add ``(alpha M + beta L + gamma N(c)) w`` to ``out`` in place on the GPU, as
     ``fbmflow.fem._kernels.apply_cell_operator`` does on the CPU: the same arguments as
     device arrays (numba-cuda's, or CuPy's), the cells in ``colours``
-    (:func:`cell_colours`, on the device too) instead of groups; ``conv`` None (the CPU's
-    empty array): ``N(w) w``. One launch of ``threads`` per block per colour."""
-    from ._kernels import apply_cells
-
+    (:class:`~fbmflow.gpu.colours.DeviceColours` of :func:`cell_colours`) instead of groups;
+    ``conv`` None (the CPU's empty array): ``N(w) w``. One launch of ``threads`` per block
+    (:meth:`DeviceColours.launch <fbmflow.gpu.colours.DeviceColours.launch>`)."""
     own = conv is None
     if own:  # a stand-in no thread reads (a CuPy array of size 0 has no address to pass)
         conv = _no_convection()
-    for cells in colours:
-        blocks = max(1, -(-cells.shape[0] // threads))
-        apply_cells[blocks, threads](cells, detJw, Jinv, cell_dofs, phi, dphi, float(alpha), float(beta),
-                                     float(gamma), conv, own, w, out)
+    colours.launch("apply_cells", "apply_cells_sweep", threads, detJw, Jinv, cell_dofs, phi, dphi,
+                   float(alpha), float(beta), float(gamma), conv, own, w, out)
 
 
 @functools.cache
@@ -57,12 +55,10 @@ def _no_convection():
 
 def apply_reaction(colours, react, cell_dofs, phi, w, scale: float, out, threads: int = 128) -> None:
     """Add ``scale R(u) w`` to ``out`` in place on the GPU, as ``fbmflow.fem._kernels.apply_reaction``
-    does on the CPU, the cells in ``colours`` (:func:`cell_colours`) instead of groups."""
-    from ._kernels import apply_reaction_cells
-
-    for cells in colours:
-        blocks = max(1, -(-cells.shape[0] // threads))
-        apply_reaction_cells[blocks, threads](cells, react, cell_dofs, phi, w, float(scale), out)
+    does on the CPU, the cells in ``colours`` (:class:`~fbmflow.gpu.colours.DeviceColours` of
+    :func:`cell_colours`) instead of groups."""
+    colours.launch("apply_reaction_cells", "apply_reaction_sweep", threads, react, cell_dofs, phi, w,
+                   float(scale), out)
 
 
 def velocity_coefficients(u, cell_dofs, phi, detJw, conv, threads: int = 128) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .colours import DeviceColours
 from .device import Backend
 from .operators import apply_cell_operator, cell_colours
 
@@ -16,7 +17,8 @@ class DeviceSpace:
     """The arrays of ``space``'s cells on the device of ``backend``: ``detJw (n_cells, nq)``,
     ``Jinv (n_cells, nq, d, d)``, ``cell_dofs (n_cells, nl)``, ``phi (nq, nl)``, ``dphi (nq, nl, d)``
     (the CPU's), and the cells in ``colours`` that share no node
-    (:func:`~fbmflow.gpu.operators.cell_colours`; the host's in ``host_colours``). ``nbytes``: the
+    (:class:`~fbmflow.gpu.colours.DeviceColours` of :func:`~fbmflow.gpu.operators.cell_colours`;
+    the host's list in ``host_colours``). ``nbytes``: the
     device memory they take [bytes]."""
 
     def __init__(self, space, backend: Backend):
@@ -26,9 +28,8 @@ class DeviceSpace:
         self.detJw, self.Jinv, self.cell_dofs, self.phi, self.dphi = (
             put(a) for a in (space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi))
         self.host_colours = cell_colours(space.V.cell_dofs)
-        self.colours = [put(c) for c in self.host_colours]
-        self.nbytes = sum(int(a.nbytes) for a in (self.detJw, self.Jinv, self.cell_dofs, self.phi, self.dphi,
-                                                  *self.colours))
+        self.colours = DeviceColours(self.host_colours, put)
+        self.nbytes = self.colours.nbytes + sum(int(a.nbytes) for a in self.geometry)
 
     @property
     def geometry(self) -> tuple:

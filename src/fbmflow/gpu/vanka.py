@@ -5,8 +5,10 @@ CPU in colour order (``order="colours"``: its patches, its copy of the operator 
 every phase a colour whose patches touch nothing of each other), computes the patches' local
 factors on the device where the CPU left them out (``factor=False``: one thread per patch, each
 running the body the CPU's set-up runs, ``fbmflow.solvers._kernels.factor_patch``) and sweeps
-with them on the device: one kernel launch per colour, one thread per patch, each thread running
-the body the CPU's sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU
+with them on the device: one kernel launch per sweep, its colours in turn with the whole grid
+synchronised between them (a cooperative launch, :class:`~fbmflow.gpu.colours.DeviceColours`; or
+one launch per colour), the threads taking a colour's patches, each running the body the CPU's
+sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU
 smoother's in the same order, to the rounding of the sums' order (the sweeps' kernel is compiled
 with fastmath, the CPU's triangular solves too; the factors are the CPU's to the last bits under
 the simulator, and may differ in the last bits on a GPU, whose compiler fuses multiply-adds).
@@ -18,6 +20,7 @@ import time
 import numpy as np
 
 from ..solvers.vanka import FactoredVankaSmoother
+from .colours import DeviceColours
 from .device import Backend
 
 #: the most device memory the factors' kernel takes for its threads' work arrays [bytes]: a
@@ -70,18 +73,17 @@ class DeviceVanka:
         self.omega = smoother.omega
         self.interface_sweeps = smoother.interface_sweeps
 
-        def colours(phases):
-            return [put(order[gptr[0]:gptr[-1]]) for gptr, order in phases]
+        def colours(phases):  # a sweep's colours, one after the other
+            return DeviceColours([order[gptr[0]:gptr[-1]] for gptr, order in phases], put)
 
         self.sweeps = [colours(phases) for phases, _ in smoother.sweeps]
-        self.interface = colours(smoother.interface_phases) + colours(smoother.interface_merged_phases)
+        self.interface = colours(smoother.interface_phases + smoother.interface_merged_phases)
         self.merged = colours(smoother.merged_phases)
-        largest = max((c.shape[0] for c in self.sweeps[0] + self.interface + self.merged), default=1)
+        largest = max(max(c.largest for c in self.sweeps + [self.interface, self.merged]), 1)
         self.work = (xp.empty((largest, width)), xp.empty((largest, width), dtype=s.dtype),
                      xp.empty((largest, width)), xp.empty((largest, width)))
         self.nbytes = int(sum(a.nbytes for a in self.patches[:7] + own + self.work)
-                          + sum(c.nbytes for c in self.interface + self.merged)
-                          + sum(c.nbytes for sweep in self.sweeps for c in sweep))
+                          + sum(c.nbytes for c in self.sweeps + [self.interface, self.merged]))
 
     def _factor(self, ptr: np.ndarray, dofs: np.ndarray, schur_tol: float, backend: Backend) -> None:
         """The local factors of the patches ``dofs[ptr[k]:ptr[k + 1]]`` (each ascending: the
@@ -112,14 +114,14 @@ class DeviceVanka:
                 launch = vanka_factors[max(1, -(-part.shape[0] // self.threads)), self.threads]
                 launch(part, float(schur_tol), *self.patches, *self.op, *work)
 
-    def sweep_colours(self, colours: list, b, x) -> None:
-        """The patches of every colour in turn, a colour's at once: ``x`` updated in place."""
-        from ._kernels import vanka_patches
-
-        for patches in colours:
-            blocks = max(1, -(-patches.shape[0] // self.threads))
-            vanka_patches[blocks, self.threads](patches, b, x, float(self.omega), *self.patches, *self.op,
-                                                *self.work)
+    def sweep_colours(self, colours, b, x) -> None:
+        """The patches of every colour of ``colours`` (:class:`~fbmflow.gpu.colours.DeviceColours`)
+        in turn, a colour's at once: ``x`` updated in place. One launch for all colours, the grid
+        synchronised between them, or one per colour
+        (:meth:`DeviceColours.launch <fbmflow.gpu.colours.DeviceColours.launch>`); the launch's
+        threads take a colour's patches, each with its rows of the work arrays."""
+        colours.launch("vanka_patches", "vanka_sweep", self.threads, b, x, float(self.omega), *self.patches,
+                       *self.op, *self.work)
 
     def smooth(self, b, x, sweeps: int, first: int = 0) -> None:
         """``sweeps`` sweeps on ``K x = b`` (device arrays), as
