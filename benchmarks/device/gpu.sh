@@ -25,8 +25,9 @@ if [ "$part" = 1 ]; then
         timeout 120 python "tests/gpu/$script.py" > "$OUT/$script.txt" 2>&1; echo "rc $?" >> "$OUT/$script.txt"
     done
     # 2. ten Cate level 2, the issue's target: the GPU against the CPU path on 16 cores; cycles per
-    #    solve, device bytes, the kernels' launches (host seconds in them)
-    bench --scenes ten-cate --levels 2 --rows gpu slabs --steps 2 --tag device-L2
+    #    solve, device bytes, the kernels' launches (host seconds in them); one more GPU step
+    #    under cProfile (gpu_solver.profile-*.txt: where the host's time goes)
+    bench --scenes ten-cate --levels 2 --rows gpu slabs --steps 2 --tag device-L2 --profile gpu
 else
     # 3. level 1, and the CPU in the GPU's colour order: its sphere's velocity after 3 steps is the
     #    GPU's to the solves' rounding where the whole step is the same; gpu-colours: the smoothers

@@ -18,7 +18,7 @@ Measured: 2026-11-30, commit ce687a0 (order), 5561688 (bytes, with the blocks on
 CPU), e1a47de (split), 5f0607f (split-factors) and the rows shared after 85226ef
 (bytes-rows-shared); quoted in
 docs/validation/gpu.md, "The same answer"
-Run: python -m fbmbench gpu_solver --rows slabs colours arrays
+Run: python -m fbmbench gpu_solver --rows slabs colours arrays (on a GPU: benchmarks/device/gpu.sh)
 
 Rows, each in a process of its own, one after the other, ``steps`` time steps of the scene at its
 defaults with multigrid (``solver.linear = multigrid``):
@@ -52,11 +52,15 @@ kept).
 """
 from __future__ import annotations
 
+import cProfile
+import io
 import json
+import pstats
 import resource
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from studies.thread_scaling import BENCHMARKS, RESULTS, commit, machine
 
@@ -89,8 +93,10 @@ def _count_device_arrays(record: dict) -> None:
     gm.DeviceHierarchy.solve = solve
 
 
-def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
-    """``steps`` steps of ``scene_name`` at ``level`` in this process, as row ``row`` says."""
+def measure(scene_name: str, level: int, row: str, steps: int, profile: Path | None = None) -> dict:
+    """``steps`` steps of ``scene_name`` at ``level`` in this process, as row ``row`` says;
+    ``profile``: a file for the cProfile of one more step, not in the record (its functions by own
+    and by cumulative time)."""
     from fbmflow.scenes.registry import load_scene
 
     record: dict = {}
@@ -127,10 +133,27 @@ def measure(scene_name: str, level: int, row: str, steps: int) -> dict:
         if counts:
             out[-1].update({key: counts[key] - before[key] for key in counts})
     velocity = sim.particles.velocity
+    if profile:
+        _profile_step(sim, setup.dt, profile, f"{scene_name} level {level}, row {row}: step {steps + 1}")
     return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
                 particle_velocity=[float(v) for v in velocity[0]] if len(velocity) else [],
                 solver=sim.flow.linear_solver_description,
                 peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9, **record)
+
+
+def _profile_step(sim, dt: float, path: Path, title: str) -> None:
+    """One step of ``sim`` under cProfile: its functions by own and by cumulative time into
+    ``path``."""
+    profiler = cProfile.Profile()
+    t0 = time.perf_counter()
+    profiler.enable()
+    sim.step(dt)
+    profiler.disable()
+    text = io.StringIO()
+    text.write(f"{title}, {time.perf_counter() - t0:.2f} s under cProfile\n")
+    for order in ("tottime", "cumulative"):
+        pstats.Stats(profiler, stream=text).sort_stats(order).print_stats(40)
+    path.write_text(text.getvalue())
 
 
 def table(rows: list[dict]) -> str:
@@ -183,7 +206,7 @@ def table(rows: list[dict]) -> str:
 
 def run(*, scenes: list[str] = ("ten-cate", "glowinski-free-fall"), levels: list[int] = (1, 3),
         rows: list[str] = ("slabs", "colours", "arrays"), steps: int = 3, tag: str = "",
-        one: list[str] = ()) -> None:
+        profile: list[str] = (), one: list[str] = ()) -> None:
     """Every scene (at the level in the same place of ``levels``) with every row, each in a
     process of its own.
 
@@ -194,19 +217,23 @@ def run(*, scenes: list[str] = ("ten-cate", "glowinski-free-fall"), levels: list
     rows : slabs, colours, arrays, gpu, gpu-colours (see the module docstring)
     steps : time steps per row
     tag : names this run's rows in the results
+    profile : rows that run one more step under cProfile, not in the record: its functions by own
+        and by cumulative time in benchmarks/results/gpu_solver.profile-TAG-SCENE-LEVEL-ROW.txt
     one : internal: run SCENE LEVEL ROW in this process
     """
     if one:
-        print(json.dumps(measure(one[0], int(one[1]), one[2], steps)))
+        where = RESULTS / f"gpu_solver.profile-{tag}-{one[0]}-{one[1]}-{one[2]}.txt"
+        print(json.dumps(measure(one[0], int(one[1]), one[2], steps, where if one[2] in profile else None)))
         return
     path = RESULTS / "gpu_solver.json"
     kept = [r for r in json.loads(path.read_text()) if r["tag"] != tag] if path.exists() else []
     stamp = f"{time.strftime('%Y-%m-%d')} {commit()}"
     for scene, level in zip(scenes, levels):
         for row in rows:
-            done = subprocess.run([sys.executable, "-m", "fbmbench", "gpu_solver", "--steps", str(steps),
-                                   "--one", scene, str(level), row], capture_output=True, text=True,
-                                   cwd=BENCHMARKS)
+            command = ["gpu_solver", "--steps", str(steps), "--tag", tag, "--one", scene, str(level), row]
+            command += [f"--profile={name}" for name in profile]
+            done = subprocess.run([sys.executable, "-m", "fbmbench", *command], capture_output=True,
+                                  text=True, cwd=BENCHMARKS)
             if done.returncode != 0:  # say why, and go on with the other rows (a device session is short)
                 print(f"{scene} level {level} row {row} failed (exit {done.returncode}):\n"
                       f"{done.stdout[-2000:]}{done.stderr[-4000:]}", flush=True)
