@@ -102,6 +102,21 @@ def test_a_failed_solve_is_taken_again_at_a_quarter_and_a_hopeless_one_stops():
     assert err.value.remedy
 
 
+def test_a_failure_no_shorter_step_helps_is_not_retried():
+    """A ConvergenceError whose ``retry`` is False (the GPU's memory ran out, say) stops the step at
+    once: no shorter step is tried."""
+
+    class OutOfMemory(ConvergenceError):
+        retry = False
+
+    sim = Relaxing()
+    sim.step = lambda dt: (_ for _ in ()).throw(OutOfMemory("out of memory", "use less"))
+    control = StepControl(_time(1e-2, dt=0.01), sim.particles)
+    with pytest.raises(OutOfMemory, match="out of memory"):
+        control.step(sim)
+    assert control.rejected == 0 and control.dt == 0.01
+
+
 def test_the_courant_cap_holds():
     sim = Relaxing()
     control = StepControl(_time(1.0, max_courant=0.5, dt=0.01), sim.particles)

@@ -116,6 +116,8 @@ class StepControl:
             try:
                 report = sim.step(dt)
             except ConvergenceError as err:
+                if not err.retry:  # no shorter step helps (the GPU's memory ran out, say)
+                    raise
                 if dt * RETRY < MIN_FRACTION * self.dt0:
                     why = f"the adaptive step cannot shrink further ({dt * RETRY:.3g} s would be below " \
                           f"{MIN_FRACTION:g} of time.dt)"

@@ -59,3 +59,40 @@ def test_a_problem_larger_than_the_free_device_memory_is_refused_with_the_figure
     with pytest.raises(InsufficientMemory, match=r"needs about \d+\.\d GB of device memory for 10000000 "
                        r"unknowns.*2\.0 GB free on the GPU.*a lower --level"):
         gm.gpu_solver(linear, 3, 10_000_000)
+
+
+def test_the_gpu_running_out_of_memory_fails_the_step_with_the_remedy_and_no_retry():
+    """Where the device's memory runs out during a run (its array module raising ``MemoryError``
+    or CuPy's ``OutOfMemoryError``): a :class:`~fbmflow.gpu.device.DeviceMemoryError`, which the
+    run treats as a failed step (a ConvergenceError: the last good state kept, a remedy printed)
+    but the adaptive step control does not retry with a shorter step; when the mesh's cells are
+    copied and when a hierarchy is set up."""
+    from fbmflow.flow import NavierStokesProblem, NoSlip
+    from fbmflow.gpu.device import DeviceMemoryError, simulated_backend
+    from fbmflow.gpu.multigrid import DeviceMultigridSolver
+    from fbmflow.mesh import StructuredMesh
+    from fbmflow.solvers import ConvergenceError, MultigridSolver
+
+    backend = simulated_backend()
+    backend.free_bytes = lambda: 3 * 10**9
+
+    def full(a, dtype=None):
+        raise MemoryError("Out of memory allocating 1,024 bytes")
+
+    backend.put = full
+    mesh = StructuredMesh.box((4, 4))
+    with pytest.raises(DeviceMemoryError, match=r"ran out of memory copying the mesh's cells \(Out of memory "
+                       r"allocating 1,024 bytes; 3\.0 GB free now\)") as err:
+        NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags},
+                            linear_solver=DeviceMultigridSolver(backend=backend), coarse_cells=2)
+    assert isinstance(err.value, ConvergenceError) and not err.value.retry
+    assert "a lower --level" in err.value.remedy and "solver.device = 'cpu'" in err.value.remedy
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, linear_solver=MultigridSolver(),
+                               coarse_cells=2)
+    system = prob.linear_system(prob.zero_state(), 100.0, 1.0, prob.constraints())
+    with pytest.raises(DeviceMemoryError, match="setting up the multigrid hierarchy") as err:
+        DeviceMultigridSolver(backend=backend).factor(system)
+    assert not err.value.with_remedy("another remedy", "step 3: ").retry  # (how a step adds its place)
+    with pytest.raises(ValueError, match="not the device's"):  # another error passes as it is
+        with backend.memory_guard("doing nothing"):
+            raise ValueError("not the device's")

@@ -5,11 +5,22 @@ without one). :func:`gpu_problem` says, before any work, why ``solver.device = "
 here."""
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import weakref
 
 import numpy as np
 import scipy.sparse as sp
+
+from ..solvers.newton import ConvergenceError
+
+
+class DeviceMemoryError(ConvergenceError):
+    """The GPU ran out of memory during a run (past the check before the first step): the run
+    stops as a failed step does, keeping its last good state, and a shorter time step is not
+    tried (it needs as much memory)."""
+
+    retry = False
 
 
 class Backend:
@@ -17,8 +28,10 @@ class Backend:
     ``scipy.sparse``) of a device solver, the moves between host and device, and the threads per
     block of the kernels' launches (the simulator runs a Python thread for each, idle or not)."""
 
-    def __init__(self, xp, sparse, name: str, threads: int):
+    def __init__(self, xp, sparse, name: str, threads: int, out_of_memory: type = MemoryError):
         self.xp, self.sparse, self.name, self.threads = xp, sparse, name, threads
+        #: the exception the array module raises when the device's memory runs out
+        self.out_of_memory = out_of_memory
         #: the device copies of FlowSpaces' cell geometry (:func:`fbmflow.gpu.space.device_space`),
         #: one per space, dropped with it
         self.spaces = weakref.WeakKeyDictionary()
@@ -44,6 +57,18 @@ class Backend:
         if self.name == "cupy":
             self.xp.cuda.Device().synchronize()
 
+    @contextlib.contextmanager
+    def memory_guard(self, what: str):
+        """Turn the device's running out of memory while doing ``what`` into a
+        :class:`DeviceMemoryError` that says so and names the remedies."""
+        try:
+            yield
+        except self.out_of_memory as err:
+            free = self.free_bytes()
+            now = "" if free is None else f"; {free / 1e9:.1f} GB free now"
+            remedy = "use a coarser mesh (a lower --level), or solver.device = 'cpu'"
+            raise DeviceMemoryError(f"the GPU ran out of memory {what} ({err}{now})", remedy) from None
+
     def free_bytes(self) -> int | None:
         """The device memory free now [bytes], None where the arrays live on the host."""
         if self.name != "cupy":
@@ -57,7 +82,7 @@ def gpu_backend() -> Backend:
     import cupy
     import cupyx.scipy.sparse
 
-    return Backend(cupy, cupyx.scipy.sparse, "cupy", 64)
+    return Backend(cupy, cupyx.scipy.sparse, "cupy", 64, cupy.cuda.memory.OutOfMemoryError)
 
 
 def simulated_backend() -> Backend:

@@ -131,7 +131,12 @@ class DeviceHierarchy(Factorization):
 
     def solve(self, f, g, rtol=None):
         """As :meth:`MultigridHierarchy.solve <fbmflow.solvers.multigrid.MultigridHierarchy.solve>`,
-        on the device: host vectors in and out, the report counting cycles and sweeps."""
+        on the device: host vectors in and out, the report counting cycles and sweeps;
+        :class:`~fbmflow.gpu.device.DeviceMemoryError` where the device's memory runs out."""
+        with self.backend.memory_guard("in a linear solve"):
+            return self._solve(f, g, rtol)
+
+    def _solve(self, f, g, rtol):
         system, s, backend = self.host.system, self.settings, self.backend
         t0 = time.perf_counter()
         setup = self._charge_setup()
@@ -186,7 +191,8 @@ class DeviceMultigridSolver(MultigridSolver):
         the space's cells copied once, shared with the Newton blocks' terms)."""
         if self.backend is None:
             self.backend = gpu_backend()
-        return device_space(space, self.backend).apply_mass_laplace
+        with self.backend.memory_guard("copying the mesh's cells"):
+            return device_space(space, self.backend).apply_mass_laplace
 
     def _factor(self, system) -> Factorization:
         host = super()._factor(system)
@@ -194,7 +200,8 @@ class DeviceMultigridSolver(MultigridSolver):
             raise ValueError("the GPU solver runs on one process")
         if self.backend is None:
             self.backend = gpu_backend()
-        device = DeviceHierarchy(host, self.backend)
+        with self.backend.memory_guard("setting up the multigrid hierarchy"):
+            device = DeviceHierarchy(host, self.backend)
         n = system.n_u + system.n_p
         log.info("GPU: %.2f GB on the device, %.0f bytes per unknown", device.nbytes / 1e9, device.nbytes / n)
         return device

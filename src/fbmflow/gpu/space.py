@@ -43,11 +43,12 @@ class DeviceSpace:
         :func:`fbmflow.fem.assembly.apply_mass_laplace` (the same arguments but the space), the cells'
         sums in colours instead of the CPU's groups (equal to the rounding of the order)."""
         backend = self.backend
-        w = backend.put(np.reshape(u, (self.dim, self.n_v)), np.float64)
-        out = backend.xp.zeros((self.dim, self.n_v))
-        apply_cell_operator(self.colours, *self.geometry, alpha, beta, convection, None, w, out,
-                            threads=backend.threads)
-        return backend.get(out).reshape(-1)
+        with backend.memory_guard("applying the flow's operator"):
+            w = backend.put(np.reshape(u, (self.dim, self.n_v)), np.float64)
+            out = backend.xp.zeros((self.dim, self.n_v))
+            apply_cell_operator(self.colours, *self.geometry, alpha, beta, convection, None, w, out,
+                                threads=backend.threads)
+            return backend.get(out).reshape(-1)
 
 
 def device_space(space, backend: Backend) -> DeviceSpace:

@@ -18,6 +18,10 @@ class ConvergenceError(RuntimeError):
     raising code knows it (None: the caller that knows the context adds one, :meth:`with_remedy`).
     """
 
+    #: whether a shorter time step may help: the adaptive step control retries only then
+    #: (:class:`~fbmflow.adaptive.StepControl`)
+    retry = True
+
     def __init__(self, message: str, remedy: str | None = None):
         super().__init__(message)
         self.remedy = remedy
