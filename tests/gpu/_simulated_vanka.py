@@ -1,7 +1,7 @@
 """Run with ``NUMBA_ENABLE_CUDASIM=1`` (or without it on a GPU with the ``gpu`` extra: CuPy's arrays,
 benchmarks/device/gpu.sh): the GPU's Vanka smoother (:class:`fbmflow.gpu.vanka.DeviceVanka`,
 its local factors computed on the device, then its sweeps, a sweep's colours in one cooperative
-launch, and one launch per colour)
+launch, and one launch per colour, one or several threads per patch)
 under Numba's CUDA simulator against the CPU's factored smoother: the same factors, and the same
 sweeps in the same colour order, symmetric sweeps (forwards, then backwards): a 2D box with a
 sharp-boundary disk (far patches, agglomerated patches, interface sweeps) and a 3D box with a
@@ -73,16 +73,17 @@ for name, system, device_factors in systems():
     smoother.smooth(b, want, 2)
     device.smooth(backend.put(b), x, 2)  # a sweep in one cooperative launch
     got = backend.get(x)
-    # the same sweeps with a launch per colour, and (the simulator) with the cooperative grid's threads
-    # taking several patches of a colour each: within a colour the order does not matter, bit for bit
-    launches = {"a launch per colour": (False, device.threads)}
+    # the same sweeps with a launch per colour, and (the simulator) with several threads sharing a
+    # patch's rows and a grid's groups taking several patches of a colour each: within a colour
+    # the order does not matter, and each row's sum is one thread's: bit for bit
+    launches = {"a launch per colour": (False, device.threads, device.lanes)}
     if backend.name == "numpy" and device_factors:  # the 2D case, every kind of patch (the simulator is slow)
-        launches["one launch of 4 threads"] = (True, 4)
+        launches["one launch, blocks of 4 threads, 2 per patch"] = (True, 4, 2)
     alike = []
-    for label, (colours.ONE_LAUNCH, device.threads) in launches.items():
+    for label, (colours.ONE_LAUNCH, device.threads, device.lanes) in launches.items():
         x = backend.put(x0)
         device.smooth(backend.put(b), x, 2)
-        colours.ONE_LAUNCH, device.threads = True, backend.threads
+        colours.ONE_LAUNCH, device.threads, device.lanes = True, backend.threads, backend.lanes
         alike.append(f"{label} {'alike' if np.array_equal(backend.get(x), got) else 'DIFFERENT'}")
         worst = max(worst, 2.0 * (not np.array_equal(backend.get(x), got)))
     error = float(np.abs(got - want).max() / np.abs(want).max())

@@ -42,7 +42,8 @@ def device_copy(function):
 
 cell_operator, reaction_at, reaction_cell, velocity_at = (
     device_copy(f) for f in (fem.cell_operator, fem.reaction_at, fem.reaction_cell, fem.velocity_at))
-factor_patch, vanka_patch = device_copy(solvers.factor_patch), device_copy(solvers.vanka_patch)
+factor_patch, vanka_residual, vanka_solve, vanka_update = (device_copy(f) for f in (
+    solvers.factor_patch, solvers.vanka_residual, solvers.vanka_solve, solvers.vanka_update))
 
 #: the largest Q2 cell (3D): nodes and quadrature points (3 x 3 x 3 Gauss), and axes; the
 #: threads' scratch arrays have these sizes whatever the mesh
@@ -131,39 +132,61 @@ def reaction_rows(u, cell_dofs, phi, dphi, detJw, Jinv, react):
         reaction_at(c, u, cell_dofs, phi, dphi, detJw, Jinv, react, ul, uq, gq)
 
 
-@cuda.jit(fastmath=True)
-def vanka_patches(order, first, last, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v,
-                  n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
-                  b_idx, k_ptr, k_idx, k_val, r, w, w64, out):
-    """Adds the Vanka corrections of the patches ``order[first:last]`` (one colour: they touch
-    nothing of each other) to ``x`` (``fbmflow.solvers._kernels.vanka_patch``): thread ``t`` takes
-    every ``gridsize``-th from ``first + t``, with the rows ``t`` of the work arrays ``r``,
-    ``w64``, ``out`` (float64) and ``w`` (the factors' dtype), (threads, width) each."""
-    t = cuda.grid(1)
-    for k in range(first + t, last, cuda.gridsize(1)):
-        vanka_patch(order[k], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
-                    (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
-                     b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])
+@cuda.jit(device=True)
+def _vanka_colour(order, first, last, lanes, b, x, omega, patches, op, r, w, w64, out):
+    """The Vanka corrections of the patches ``order[first:last]`` (one colour: they touch nothing
+    of each other) added to ``x``, every patch by ``lanes`` consecutive threads of a block (whose
+    size ``lanes`` divides): they take its residual's rows in turn, the first of them solves, they
+    take its update's entries in turn (``fbmflow.solvers._kernels``: ``vanka_residual``,
+    ``vanka_solve``, ``vanka_update``), the block synchronised between. Patch group ``g`` of the
+    grid works in the rows ``g`` of the work arrays ``r``, ``w64``, ``out`` (float64) and ``w``
+    (the factors' dtype), (groups, width) each; a grid with fewer groups than patches takes
+    them in turn."""
+    per = cuda.blockDim.x // lanes
+    group = cuda.threadIdx.x // lanes
+    lane = cuda.threadIdx.x - group * lanes
+    slot = cuda.blockIdx.x * per + group
+    for base in range(first + cuda.blockIdx.x * per, last, cuda.gridDim.x * per):  # alike in a block
+        e = base + group
+        if e < last:
+            vanka_residual(order[e], lane, lanes, b, x, patches, op, r[slot])
+        if lanes > 1:  # (alike in the block; a patch of one thread needs no barrier)
+            cuda.syncthreads()
+        if e < last and lane == 0:
+            vanka_solve(order[e], patches, op, r[slot], w[slot], w64[slot], out[slot])
+        if lanes > 1:
+            cuda.syncthreads()
+        if e < last:
+            vanka_update(order[e], lane, lanes, x, omega, patches, out[slot])
 
 
 @cuda.jit(fastmath=True)
-def vanka_sweep(order, starts, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u,
-                regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx,
-                k_ptr, k_idx, k_val, r, w, w64, out):
-    """The colours ``order[starts[c]:starts[c + 1]]`` in turn, each as :func:`vanka_patches` sweeps
-    one, the whole grid synchronised between colours (``cuda.cg.this_grid().sync()``): a sweep in
-    one launch. Numba launches a kernel that synchronises its grid cooperatively: all its blocks
-    resident at once (at most ``max_cooperative_grid_blocks``)."""
+def vanka_patches(order, first, last, lanes, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl,
+                  d, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr,
+                  d_idx, d_val, b_idx, k_ptr, k_idx, k_val, r, w, w64, out):
+    """The patches ``order[first:last]`` (one colour), ``lanes`` threads each
+    (:func:`_vanka_colour`)."""
+    _vanka_colour(order, first, last, lanes, b, x, omega,
+                  (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u),
+                  (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                   b_idx, k_ptr, k_idx, k_val), r, w, w64, out)
+
+
+@cuda.jit(fastmath=True)
+def vanka_sweep(order, starts, lanes, b, x, omega, ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v,
+                n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val,
+                b_idx, k_ptr, k_idx, k_val, r, w, w64, out):
+    """The colours ``order[starts[c]:starts[c + 1]]`` in turn, each as :func:`vanka_patches`
+    sweeps one, the whole grid synchronised between colours (``cuda.cg.this_grid().sync()``): a
+    sweep in one launch. Numba launches a kernel that synchronises its grid cooperatively: all its
+    blocks resident at once (at most ``max_cooperative_grid_blocks``)."""
     grid = cuda.cg.this_grid()
-    t = cuda.grid(1)
-    n = cuda.gridsize(1)
+    patches = (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)
+    op = (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx,
+          k_ptr, k_idx, k_val)
     colours = starts.shape[0] - 1
     for c in range(colours):
-        for k in range(starts[c] + t, starts[c + 1], n):
-            vanka_patch(order[k], b, x, omega, (ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v,
-                                                n_u),
-                        (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx,
-                         d_val, b_idx, k_ptr, k_idx, k_val), r[t], w[t], w64[t], out[t])
+        _vanka_colour(order, starts[c], starts[c + 1], lanes, b, x, omega, patches, op, r, w, w64, out)
         if c + 1 < colours:
             grid.sync()
 

@@ -49,17 +49,19 @@ class DeviceColours:
         """The number of colours."""
         return self.host_starts.size - 1
 
-    def launch(self, each: str, sweep: str, threads: int, *args) -> None:
+    def launch(self, each: str, sweep: str, threads: int, *args, per_block: int | None = None) -> None:
         """Run a kernel of ``fbmflow.gpu._kernels`` over every colour in turn: ``sweep(order,
         starts, *args)`` in one cooperative launch of ``threads`` per block (where
         :data:`ONE_LAUNCH`), else ``each(order, first, last, *args)`` once per colour, ``first``
-        and ``last`` its bounds in ``order``. The kernels are looked up at each call (so that
+        and ``last`` its bounds in ``order``; a block takes ``per_block`` items at once (default
+        ``threads``: one per thread). The kernels are looked up at each call (so that
         :func:`~fbmflow.gpu.launches.count_launches` counts them)."""
         from . import _kernels
 
         if not self.largest:
             return
-        blocks = -(-self.largest // threads)
+        per_block = per_block or threads
+        blocks = -(-self.largest // per_block)
         most = self._cooperative_blocks(sweep, threads, args) if ONE_LAUNCH and sweep not in _REFUSED else 0
         if most:
             getattr(_kernels, sweep)[min(blocks, most), threads](self.order, self.starts, *args)
@@ -67,7 +69,7 @@ class DeviceColours:
         kernel = getattr(_kernels, each)
         for first, last in zip(self.host_starts[:-1].tolist(), self.host_starts[1:].tolist()):
             if last > first:
-                kernel[-(-(last - first) // threads), threads](self.order, first, last, *args)
+                kernel[-(-(last - first) // per_block), threads](self.order, first, last, *args)
 
     def _cooperative_blocks(self, sweep: str, threads: int, args: tuple) -> int:
         """The most blocks of ``threads`` the kernel ``sweep`` can launch cooperatively with these

@@ -28,8 +28,13 @@ class Backend:
     ``scipy.sparse``) of a device solver, the moves between host and device, and the threads per
     block of the kernels' launches (the simulator runs a Python thread for each, idle or not)."""
 
-    def __init__(self, xp, sparse, name: str, threads: int, out_of_memory: type = MemoryError):
+    def __init__(self, xp, sparse, name: str, threads: int, lanes: int = 1,
+                 out_of_memory: type = MemoryError):
         self.xp, self.sparse, self.name, self.threads = xp, sparse, name, threads
+        if threads % lanes:
+            raise ValueError(f"the threads per block ({threads}) must be a multiple of the lanes ({lanes})")
+        #: threads that share one smoother patch (its residual's rows and its update): a warp on a GPU
+        self.lanes = lanes
         #: the exception the array module raises when the device's memory runs out
         self.out_of_memory = out_of_memory
         #: the device copies of FlowSpaces' cell geometry (:func:`fbmflow.gpu.space.device_space`),
@@ -82,7 +87,7 @@ def gpu_backend() -> Backend:
     import cupy
     import cupyx.scipy.sparse
 
-    return Backend(cupy, cupyx.scipy.sparse, "cupy", 64, cupy.cuda.memory.OutOfMemoryError)
+    return Backend(cupy, cupyx.scipy.sparse, "cupy", 128, 32, cupy.cuda.memory.OutOfMemoryError)
 
 
 def simulated_backend() -> Backend:

@@ -7,8 +7,9 @@ factors on the device where the CPU left them out (``factor=False``: one thread 
 running the body the CPU's set-up runs, ``fbmflow.solvers._kernels.factor_patch``) and sweeps
 with them on the device: one kernel launch per sweep, its colours in turn with the whole grid
 synchronised between them (a cooperative launch, :class:`~fbmflow.gpu.colours.DeviceColours`; or
-one launch per colour), the threads taking a colour's patches, each running the body the CPU's
-sweeps run (``fbmflow.solvers._kernels.vanka_patch``). The result is the CPU
+one launch per colour), ``lanes`` threads (a warp) per patch running the body the CPU's sweeps run
+(``fbmflow.solvers._kernels.vanka_patch``'s parts: the threads take the patch's residual rows in
+turn, the first solves, they add the update in turn). The result is the CPU
 smoother's in the same order, to the rounding of the sums' order (the sweeps' kernel is compiled
 with fastmath, the CPU's triangular solves too; the factors are the CPU's to the last bits under
 the simulator, and may differ in the last bits on a GPU, whose compiler fuses multiply-adds).
@@ -51,6 +52,8 @@ class DeviceVanka:
         s = smoother
         xp = backend.xp
         self.threads = backend.threads
+        #: threads per patch in the sweeps (dividing ``threads``): they share its residual's rows
+        self.lanes = backend.lanes
         if s.store is None:
             store = xp.empty(int(s.lu_ptr[-1]), dtype=s.dtype)
             piv = xp.zeros(int(s.ptr[-1]), dtype=np.int32)
@@ -120,8 +123,9 @@ class DeviceVanka:
         synchronised between them, or one per colour
         (:meth:`DeviceColours.launch <fbmflow.gpu.colours.DeviceColours.launch>`); the launch's
         threads take a colour's patches, each with its rows of the work arrays."""
-        colours.launch("vanka_patches", "vanka_sweep", self.threads, b, x, float(self.omega), *self.patches,
-                       *self.op, *self.work)
+        lanes = self.lanes
+        colours.launch("vanka_patches", "vanka_sweep", self.threads, lanes, b, x, float(self.omega),
+                       *self.patches, *self.op, *self.work, per_block=self.threads // lanes)
 
     def smooth(self, b, x, sweeps: int, first: int = 0) -> None:
         """``sweeps`` sweeps on ``K x = b`` (device arrays), as

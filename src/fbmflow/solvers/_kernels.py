@@ -723,13 +723,12 @@ def _schur_solve(store, base, nb, nl, d, r, w, out, p_row, gt, d_pos, d_ptr, d_v
         out[j] = s
 
 
-@jitable(inline=False)
-def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
-    """Add ``omega`` times patch ``k``'s correction ``K[S, S]^-1 (b - K x)[S]`` to ``x`` (the CPU's
-    sweeps and the GPU's, :mod:`fbmflow.gpu`, run this body). ``patches``: the tuple ``(ptr,
-    dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)``, ``op`` the operator's 16
-    arrays (see above; tuples: an inlined call takes at most 30 arguments); ``r``, ``w64``,
-    ``out`` float64 and ``w`` of the storage dtype, work of the patch's size at least."""
+@jitable
+def vanka_residual(k, lane, lanes, b, x, patches, op, r):
+    """Rows ``lane, lane + lanes, ...`` of patch ``k``'s residual ``(b - K x)[S]`` into ``r`` (a
+    Schur patch: its nodes ``lane, lane + lanes, ...``, each node's ``d`` rows, then so its
+    pressure rows); ``lanes`` threads that share a patch (the GPU's) take one ``lane`` each, the
+    CPU all (0, 1). ``patches``, ``op``: as :func:`vanka_patch` takes them."""
     ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u = patches
     (regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
      k_idx, k_val) = op
@@ -737,9 +736,8 @@ def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
     npl = d + 1
     S = dofs[ptr[k]:ptr[k + 1]]
     nk = S.shape[0]
-    nb = blocks[k]
-    if nb > 0:  # a Schur patch: the scalar row of a regular node serves its d components
-        for a in range(nl):
+    if blocks[k] > 0:  # a Schur patch: the scalar row of a regular node serves its d components
+        for a in range(lane, nl, lanes):
             node = S[a]
             if not regular[node]:
                 for i in range(d):
@@ -764,20 +762,50 @@ def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
                         r[i * nl + a] += gt[c, m, i * nl + rank] * pm
             for i in range(d):
                 r[i * nl + a] = b[i * n_v + node] - r[i * nl + a]
-        for a in range(nu, nk):
-            r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                          nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
-                                          k_idx, k_val)
-        _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, S[nu] - n_u if d_read[k] else -1, gt,
-                     d_pos, d_ptr, d_val)
+        first = nu
     else:
-        for a in range(nk):
-            r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr,
-                                          nc_cell, nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr,
-                                          k_idx, k_val)
-        _lu_solve_stored(store, lu_ptr[k], nk, piv[ptr[k]:ptr[k + 1]], r, w, out)
-    for a in range(nk):
-        x[S[a]] += omega * out[a]
+        first = 0
+    for a in range(first + lane, nk, lanes):
+        r[a] = b[S[a]] - _row_product(S[a], x, n_v, n_u, regular, s_ptr, s_idx, s_val, nc_ptr, nc_cell,
+                                      nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, k_ptr, k_idx, k_val)
+
+
+@jitable
+def vanka_solve(k, patches, op, r, w, w64, out):
+    """Patch ``k``'s correction before its damping, ``out = K[S, S]^-1 r`` (its stored factors:
+    LU, or a Schur patch's blocks), with the work ``w`` (the factors' dtype) and ``w64``."""
+    ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u = patches
+    gt, d_pos, d_ptr, d_val = op[7], op[8], op[9], op[11]
+    nb = blocks[k]
+    if nb > 0:
+        p_row = dofs[ptr[k] + d * nl] - n_u if d_read[k] else -1  # its first pressure row
+        _schur_solve(store, lu_ptr[k], nb, nl, d, r, w64, out, p_row, gt, d_pos, d_ptr, d_val)
+    else:
+        _lu_solve_stored(store, lu_ptr[k], ptr[k + 1] - ptr[k], piv[ptr[k]:ptr[k + 1]], r, w, out)
+
+
+@jitable
+def vanka_update(k, lane, lanes, x, omega, patches, out):
+    """``x[S[a]] += omega out[a]`` for patch ``k``'s entries ``a = lane, lane + lanes, ...``."""
+    ptr, dofs = patches[0], patches[1]
+    first = ptr[k]
+    for a in range(lane, ptr[k + 1] - first, lanes):
+        x[dofs[first + a]] += omega * out[a]
+
+
+@jitable(inline=False)
+def vanka_patch(k, b, x, omega, patches, op, r, w, w64, out):
+    """Add ``omega`` times patch ``k``'s correction ``K[S, S]^-1 (b - K x)[S]`` to ``x`` (the CPU's
+    sweeps run this body; the GPU's its three parts, :func:`vanka_residual`, :func:`vanka_solve`
+    and :func:`vanka_update`, a patch's rows shared among several threads). ``patches``: the
+    tuple ``(ptr, dofs, lu_ptr, store, piv, blocks, d_read, nl, d, n_v, n_u)``, ``op`` the
+    operator's 16 arrays (see above; tuples: an inlined call takes at most 30 arguments); ``r``,
+    ``w64``, ``out`` float64 and ``w`` of the storage dtype, work of the patch's size at least.
+    The parts are inlined here (one thread: ``lanes`` 1 known when compiled), so that the CPU's
+    sweeps run the one body they ran before the parts were split for the GPU."""
+    vanka_residual(k, 0, 1, b, x, patches, op, r)
+    vanka_solve(k, patches, op, r, w, w64, out)
+    vanka_update(k, 0, 1, x, omega, patches, out)
 
 
 @njit
