@@ -50,8 +50,9 @@ factor_patch, vanka_residual, vanka_solve, vanka_update = (device_copy(f) for f 
 MAX_NODES, MAX_POINTS, MAX_DIM = 27, 27, 3
 
 
-@cuda.jit
-def apply_cells(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out):
+@cuda.jit(device=True)
+def _cells_colour(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w,
+                  out):
     """Adds the parts of ``(alpha M + beta L + gamma N(c)) w`` of the cells ``order[first:last]``
     (one colour: they share no node) to ``out`` (``fbmflow.fem._kernels.cell_operator``), thread
     ``t`` taking every ``gridsize``-th from ``first + t``."""
@@ -66,27 +67,28 @@ def apply_cells(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, be
 
 
 @cuda.jit
+def apply_cells(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out):
+    """The cells ``order[first:last]`` (one colour) in one launch (:func:`_cells_colour`)."""
+    _cells_colour(order, first, last, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w,
+                  out)
+
+
+@cuda.jit
 def apply_cells_sweep(order, starts, detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w,
                       out):
-    """:func:`apply_cells` for the colours ``order[starts[c]:starts[c + 1]]`` in turn, the whole
+    """The colours ``order[starts[c]:starts[c + 1]]`` in turn (:func:`_cells_colour`), the whole
     grid synchronised between them: one cooperative launch."""
-    wl = cuda.local.array((MAX_DIM, MAX_NODES), float64)
-    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-    gq = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
-    value = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-    flux = cuda.local.array((MAX_POINTS, MAX_DIM, MAX_DIM), float64)
     grid = cuda.cg.this_grid()
     colours = starts.shape[0] - 1
     for c in range(colours):
-        for k in range(starts[c] + cuda.grid(1), starts[c + 1], cuda.gridsize(1)):
-            cell_operator(order[k], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma, conv, own, w, out,
-                          wl, wq, gq, value, flux)
+        _cells_colour(order, starts[c], starts[c + 1], detJw, Jinv, cell_dofs, phi, dphi, alpha, beta, gamma,
+                      conv, own, w, out)
         if c + 1 < colours:
             grid.sync()
 
 
-@cuda.jit
-def apply_reaction_cells(order, first, last, react, cell_dofs, phi, w, scale, out):
+@cuda.jit(device=True)
+def _reaction_colour(order, first, last, react, cell_dofs, phi, w, scale, out):
     """Adds the parts of ``scale R(u) w`` of the cells ``order[first:last]`` (one colour) to
     ``out`` (``fbmflow.fem._kernels.reaction_cell``), thread ``t`` taking every ``gridsize``-th
     from ``first + t``."""
@@ -97,16 +99,19 @@ def apply_reaction_cells(order, first, last, react, cell_dofs, phi, w, scale, ou
 
 
 @cuda.jit
+def apply_reaction_cells(order, first, last, react, cell_dofs, phi, w, scale, out):
+    """The cells ``order[first:last]`` (one colour) in one launch (:func:`_reaction_colour`)."""
+    _reaction_colour(order, first, last, react, cell_dofs, phi, w, scale, out)
+
+
+@cuda.jit
 def apply_reaction_sweep(order, starts, react, cell_dofs, phi, w, scale, out):
-    """:func:`apply_reaction_cells` for the colours ``order[starts[c]:starts[c + 1]]`` in turn,
-    the whole grid synchronised between them: one cooperative launch."""
-    wq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
-    fq = cuda.local.array((MAX_POINTS, MAX_DIM), float64)
+    """The colours ``order[starts[c]:starts[c + 1]]`` in turn (:func:`_reaction_colour`), the
+    whole grid synchronised between them: one cooperative launch."""
     grid = cuda.cg.this_grid()
     colours = starts.shape[0] - 1
     for c in range(colours):
-        for k in range(starts[c] + cuda.grid(1), starts[c + 1], cuda.gridsize(1)):
-            reaction_cell(order[k], react, cell_dofs, phi, w, scale, out, wq, fq)
+        _reaction_colour(order, starts[c], starts[c + 1], react, cell_dofs, phi, w, scale, out)
         if c + 1 < colours:
             grid.sync()
 
