@@ -6,18 +6,20 @@ once) instead of the CPU's slabs; does that order take more multigrid cycles per
 much device memory does the GPU solver hold per unknown? On a GPU: how fast is a step against the
 CPU path of the same machine?
 Answer: no more cycles: on the CPU in the GPU's colour order ten Cate level 1 takes 3.00 cycles per
-solve as in slab order, glowinski-free-fall level 3 10.93 against 10.79. The GPU solver holds 1 813
-bytes per unknown on the device in 3D (ten Cate level 1: 1 325 the hierarchy, 488 FGMRES's basis;
-level 2 1 805) and 1 084 in 2D (glowinski level 3), its smoothers reading the velocity rows from
-the operators' copy (2 050 and 1 174 with copies of their own). The speed on a GPU is not measured yet (no
-GPU was lent); the GPU takes over the cycles and the smoothers' local factors, and on this machine the
-rest of the set-up and the work outside the solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step,
+solve as in slab order, glowinski-free-fall level 3 10.93 against 10.79. The GPU solver holds 1 646
+bytes per unknown on the device in 3D (ten Cate level 1: 1 158 the hierarchy with the copies it
+keeps across set-ups and a Newton block's coefficients, 488 FGMRES's basis; level 2 1 599) and 992
+in 2D (glowinski level 3), its smoothers reading the velocity rows and the divergence from the
+operators' copies, its transfers held as scalar blocks (1 813 and 1 084 before those two, 2 050 and
+1 174 with the smoothers' own copies). The speed on a GPU is not measured yet (no GPU was lent);
+the GPU takes over the cycles and the smoothers' local factors, and on this machine the rest of
+the set-up and the work outside the solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step,
 of which the factors are 64 % of the set-up (4.16 of 6.54 s): free cycles and factors would make it at
 most about 5.7x faster (4.70x with the factors on the CPU; level 1: 5.2x and 4.40x).
 Measured: 2026-11-30, commit ce687a0 (order), 5561688 (bytes, with the blocks on the device as on the
 CPU), e1a47de (split), 5f0607f (split-factors) and the rows shared after 85226ef
-(bytes-rows-shared); quoted in
-docs/validation/gpu.md, "The same answer"
+(bytes-rows-shared); 2026-12-01, the copies kept across set-ups (kept, kept-L2, kept-2d; host-L2
+the level-2 profile before them); quoted in docs/validation/gpu.md, "Device memory"
 Run: python -m fbmbench gpu_solver --rows slabs colours arrays (on a GPU: benchmarks/device/gpu.sh)
 
 Rows, each in a process of its own, one after the other, ``steps`` time steps of the scene at its

@@ -10,8 +10,11 @@ mass and spatial terms on the device (:class:`fbmflow.gpu.space.DeviceSpace`, th
 copied once, shared with the Newton block's terms). Prints one line per case; exits 1 where the
 cycles differ or the velocities by more than 1e-10 relative (the two sum in different orders; a
 wrong operation shows at the solves' tolerance, 1e-6), where the residual and terms differ from
-the CPU's by more than 1e-13 relative or are not computed on the device, or where a level's
-smoother holds its own copy of the velocity rows its operator holds."""
+the CPU's by more than 1e-13 relative or are not computed on the device, where a level's
+smoother holds its own copy of the velocity rows or the divergence its operator holds, where a
+level's operator, prolongation or restriction differs from the CPU level's by more than 1e-14
+relative, or where a second set-up of the system copies a level's divergence or transfers
+again."""
 import os
 import sys
 
@@ -97,10 +100,28 @@ for name in sys.argv[1:] or cases:
     shared = all(lv.smoother.op[3] is (lv.operator.blocks.S if lv.operator.blocks.S is not None
                                         else lv.operator.blocks.A).data for lv in device.levels)
     worst = max(worst, error / 1e-10, 0.0 if same and shared else 2.0)
+    # every level's operator, prolongation and restriction against the CPU level's, and the
+    # level's divergence and transfers copied once: the smoother reads its gradient rows from
+    # the operator's copy, and a second set-up of the same system copies neither again
+    again = solver.factor(system)
+    reused = all(b.operator.blocks.D is a.operator.blocks.D and b.transfer.P_v is a.transfer.P_v
+                 and a.operator.blocks.divergence is not None
+                 and backend.xp.shares_memory(a.smoother.op[7], a.operator.blocks.D.data)
+                 for a, b in zip(device.levels, again.levels))
+    level_error = 0.0
+    for host, level in zip(device.host.levels, device.levels):
+        x = rng.standard_normal(host.n_u + host.n_p)
+        r, e = rng.standard_normal(host.P.shape[0]), rng.standard_normal(host.P.shape[1])
+        for want, got in ((host.system.apply(x), level.operator.apply(backend.put(x))),
+                          (host.P.prolongate(e), level.transfer.prolongate(backend.put(e))),
+                          (host.P.restrict(r), level.transfer.restrict(backend.put(r)))):
+            level_error = max(level_error, float(np.abs(backend.get(got) - want).max() / np.abs(want).max()))
+    worst = max(worst, level_error / 1e-14, 0.0 if reused else 2.0)
     per_unknown = device.nbytes / (system.n_u + system.n_p)
     print(f"{name}: {len(device.levels) + 1} levels, cycles CPU {cpu.iterations} / device {gpu.iterations}, "
           f"velocity relative difference {error:.1e}, device memory {per_unknown:.0f} bytes per unknown, "
           f"scalar rows shared {shared}; residual on the device {on_device} (cells copied once {one_copy}), "
-          f"relative difference {residual:.1e}",
+          f"relative difference {residual:.1e}; levels' operators and transfers {level_error:.1e} from the "
+          f"CPU's, divergence and transfers copied once {reused}",
           flush=True)
 sys.exit(0 if worst <= 1.0 else 1)

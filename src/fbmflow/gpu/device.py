@@ -37,14 +37,26 @@ class Backend:
         self.lanes = lanes
         #: the exception the array module raises when the device's memory runs out
         self.out_of_memory = out_of_memory
-        #: the device copies of FlowSpaces' cell geometry (:func:`fbmflow.gpu.space.device_space`),
-        #: one per space, dropped with it
-        self.spaces = weakref.WeakKeyDictionary()
+        #: device copies of host objects that nothing writes to, by the host object's identity
+        #: and what was made of it (:meth:`kept`)
+        self._kept: dict[tuple[int, str], object] = {}
 
     def put(self, a, dtype=None):
         """A host array (or scalar sequence) as a contiguous device array: a copy, also under the
         simulator, so that host and device arrays never alias, as on a GPU."""
         return self.xp.array(np.ascontiguousarray(a, dtype=dtype))
+
+    def kept(self, host, what: str, build):
+        """``build(host)``: a device copy of the host object ``host``, made at the first call for
+        ``host`` and ``what`` and kept while ``host`` lives. For what nothing writes to and many
+        set-ups read (a level's divergence and transfers, a space's cells): copied once, not
+        again by every set-up. ``what`` names what ``build`` makes of it."""
+        key = (id(host), what)
+        found = self._kept.get(key)
+        if found is None:
+            found = self._kept[key] = build(host)
+            weakref.finalize(host, self._kept.pop, key, None)  # before ``id(host)`` can be reused
+        return found
 
     def get(self, a) -> np.ndarray:
         """A device array back on the host (a copy)."""
@@ -80,6 +92,20 @@ class Backend:
             return None
         free, _ = self.xp.cuda.runtime.memGetInfo()
         return int(free)
+
+
+def nbytes(*held) -> int:
+    """The device memory of arrays, sparse matrices (their three arrays), objects with an
+    ``nbytes`` and tuples of these [bytes]; None counts nothing."""
+    total = 0
+    for a in held:
+        if isinstance(a, tuple):
+            total += nbytes(*a)
+        elif hasattr(a, "indptr"):
+            total += int(a.data.nbytes + a.indices.nbytes + a.indptr.nbytes)
+        elif a is not None:
+            total += int(a.nbytes)
+    return total
 
 
 def gpu_backend() -> Backend:

@@ -5,10 +5,13 @@ up, with the smoothers in colour order (``solver.multigrid.order = "colours"``) 
 local factors, and copied to the device: every level but the coarsest holds its operator
 (:class:`~fbmflow.gpu.operator.DeviceOperator`), its smoother's patches, colours and local
 factors, these computed on the device (:class:`~fbmflow.gpu.vanka.DeviceVanka`), and its
-transfers (the truncated prolongation and its transpose as CSR matrices). FGMRES and the cycles run on the
-device; the coarsest level's direct solve stays on the CPU, one transfer of its right-hand side
-and its solution per cycle. Particles, forces and contact stay on the CPU: a solve takes host
-vectors and returns host vectors.
+transfers (the prolongation's scalar blocks and their transposes). What every set-up of a level
+shares is copied once and kept (:meth:`Backend.kept <fbmflow.gpu.device.Backend.kept>`): the
+level's divergence, which the operator's gradient and continuity rows and the smoother read,
+its transfers' scalar blocks and its space's cells; a set-up copies the rest. FGMRES and the
+cycles run on the device; the coarsest level's direct solve stays on the CPU, one transfer of its
+right-hand side and its solution per cycle. Particles, forces and contact stay on the CPU: a
+solve takes host vectors and returns host vectors.
 
 The cycle is the CPU's own function (:func:`~fbmflow.solvers.multigrid.multigrid_cycle`) on the
 device's levels, so a solve on the device gives what the CPU gives with the same settings
@@ -33,7 +36,7 @@ from ..solvers.multigrid import (
     multigrid_iterations,
 )
 from ..solvers.reports import LinearReport
-from .device import Backend, gpu_backend, gpu_problem
+from .device import Backend, gpu_backend, gpu_problem, nbytes
 from .operator import DeviceOperator
 from .space import device_space
 from .vanka import FACTOR_SCRATCH, DeviceVanka
@@ -41,30 +44,71 @@ from .vanka import FACTOR_SCRATCH, DeviceVanka
 log = logging.getLogger(__name__)
 
 #: device memory the GPU solver holds per unknown of the finest level [bytes]: the hierarchy's
-#: arrays (operators, smoothers' factors and colours, transfers of all levels but the coarsest;
-#: measured on a set-up's arrays: ten Cate 1 325 at level 1 and 1 317 at level 2,
-#: glowinski-free-fall 596 at level 3; ``python -m fbmbench gpu_solver --rows arrays``,
-#: benchmarks/results/gpu_solver.md), FGMRES's basis (61 vectors, 488) and ten work vectors (80),
-#: rounded up
-DEVICE_BYTES = {2: 1170, 3: 1900}
+#: arrays (operators, smoothers' factors and colours, transfers of all levels but the coarsest,
+#: the kept copies they read, a Newton block's coefficients; measured on a set-up's arrays: ten
+#: Cate 1 158 at level 1 and 1 111 at level 2, glowinski-free-fall 504 at level 3;
+#: ``python -m fbmbench gpu_solver --rows arrays``, benchmarks/results/gpu_solver.md), FGMRES's
+#: basis (61 vectors, 488) and ten work vectors (80), rounded up
+DEVICE_BYTES = {2: 1100, 3: 1750}
+
+
+class _DeviceTransfer:
+    """A level's :class:`~fbmflow.solvers.transfer.BlockTransfer` on the device, applied from its
+    scalar blocks as the CPU applies it: ``P_v`` and its transpose on the ``d`` velocity
+    components at once (one sparse-times-dense product), ``P_p`` and its transpose on the
+    pressure, the DOFs the transfer drops zeroed. The scalar blocks are the level's, kept
+    (:meth:`Backend.kept <fbmflow.gpu.device.Backend.kept>`: copied once, with their transposes);
+    a set-up copies only the dropped DOFs. ``nbytes``: those [bytes]; ``kept``: the kept
+    matrices."""
+
+    def __init__(self, transfer, backend: Backend):
+        def pair(M):  # a scalar block and its transpose, CSR on the device
+            return backend.csr(M), backend.csr(M.T)
+
+        self.xp, self.d = backend.xp, transfer.dim
+        self.P_v, self.R_v = backend.kept(transfer.P_v, "transfer", pair)
+        self.P_p, self.R_p = backend.kept(transfer.P_p, "transfer", pair)
+        #: the kept device matrices it reads
+        self.kept = [self.P_v, self.R_v, self.P_p, self.R_p]
+        self.dropped = backend.put(np.flatnonzero(~transfer.keep), np.int32)
+        self.nbytes = int(self.dropped.nbytes)
+
+    def prolongate(self, e):
+        """``P e`` for a coarse device vector ``e`` -> the fine one."""
+        xp, d = self.xp, self.d
+        nf, nc = self.P_v.shape
+        E = self.P_v @ xp.ascontiguousarray(e[:d * nc].reshape(d, nc).T)
+        out = xp.concatenate([xp.ascontiguousarray(E.T).reshape(-1), self.P_p @ e[d * nc:]])
+        out[self.dropped] = 0.0
+        return out
+
+    def restrict(self, r):
+        """``P^T r`` for a fine device vector ``r`` -> the coarse one."""
+        xp, d = self.xp, self.d
+        nf, nc = self.P_v.shape
+        r = r.copy()
+        r[self.dropped] = 0.0
+        F = self.R_v @ xp.ascontiguousarray(r[:d * nf].reshape(d, nf).T)
+        return xp.concatenate([xp.ascontiguousarray(F.T).reshape(-1), self.R_p @ r[d * nf:]])
 
 
 class _DeviceLevel:
-    """One level's operator, smoother and transfers on the device."""
+    """One level's operator, smoother and transfers on the device. ``nbytes``: the device memory
+    it adds to what the backend keeps [bytes]."""
 
     def __init__(self, level, backend: Backend):
         put = backend.put
         self.n_u, self.n_p = level.n_u, level.n_p
         self.operator = DeviceOperator(level.system, backend)
-        rows = self.operator.velocity_rows(level.smoother.op[3])  # held once for both
-        self.smoother = DeviceVanka(level.smoother, backend, rows)
-        P = level.P.tocsr()
-        self.P, self.R = backend.csr(P), backend.csr(P.T.tocsr())
+        op = level.smoother.op
+        self.smoother = DeviceVanka(level.smoother, backend, self.operator.velocity_rows(op[3]),
+                                    self.operator.divergence_rows(op[7]))
+        self.transfer = _DeviceTransfer(level.P, backend)
         self.coarse_fixed = put(level.coarse_fixed)
         self.coarse_orphans = None if level.coarse_orphans is None else backend.csr(level.coarse_orphans)
         self.factor_time_s = self.smoother.factor_time_s
-        self.nbytes = self.operator.nbytes + self.smoother.nbytes + sum(
-            int(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes) for M in (self.P, self.R))
+        self.nbytes = nbytes(self.operator, self.smoother, self.transfer, self.coarse_fixed,
+                             self.coarse_orphans)
 
     def smooth(self, b, x, sweeps: int) -> None:
         self.smoother.smooth(b, x, sweeps)
@@ -73,14 +117,14 @@ class _DeviceLevel:
         return b - self.operator.apply(x)
 
     def restrict(self, r, coarse):
-        rc = self.R @ r
+        rc = self.transfer.restrict(r)
         rc[self.coarse_fixed] = 0.0
         if self.coarse_orphans is not None:  # modes no coarse velocity sees: no correction
             rc[coarse.n_u:] -= self.coarse_orphans @ rc[coarse.n_u:]
         return rc
 
     def prolongate(self, e, coarse):
-        return self.P @ e
+        return self.transfer.prolongate(e)
 
 
 class _HostCoarsest:
@@ -97,7 +141,8 @@ class _HostCoarsest:
 class DeviceHierarchy(Factorization):
     """A :class:`~fbmflow.solvers.multigrid.MultigridHierarchy` (set up on the CPU, smoothers in
     colour order) with its cycles and its FGMRES on the device of ``backend``. ``nbytes``:
-    the device memory it holds [bytes]."""
+    the device memory it holds, the copies it reads that the backend keeps for every set-up
+    (the levels' divergences and transfers, the space's cells) included [bytes]."""
 
     def __init__(self, host: MultigridHierarchy, backend: Backend):
         t0 = time.perf_counter()
@@ -113,7 +158,9 @@ class DeviceHierarchy(Factorization):
             shares = (self.levels and system.preconditioner is first
                       and getattr(system.A, "base", None) is first.A)
             self.operator = DeviceOperator(system, backend, self.levels[0].operator if shares else None)
-        self.nbytes = sum(lv.nbytes for lv in self.levels) + (
+        parts = [self.operator] + [p for lv in self.levels for p in (lv.operator, lv.transfer)]
+        kept = {id(k): k for part in parts for k in part.kept}
+        self.nbytes = sum(lv.nbytes for lv in self.levels) + nbytes(*kept.values()) + (
             0 if self.levels and self.operator is self.levels[0].operator else self.operator.nbytes)
         self.factor_time_s = host.factor_time_s + sum(lv.factor_time_s for lv in self.levels)
         super().__init__(host.setup_time_s + time.perf_counter() - t0)

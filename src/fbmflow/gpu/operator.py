@@ -10,14 +10,22 @@ its Newton terms without a matrix (the flow problem's ``NewtonBlock``: an assemb
 the reaction term ``s R(u)`` and the drift's convection ``s N(u - u0)``) keeps that form on the
 device: its assembled part as above, the two terms by the matrix-free kernels
 (:mod:`fbmflow.gpu.operators`) from its coefficient arrays, which :meth:`DeviceOperator.refresh`
-copies again when the block has moved to another Newton iterate.
+copies again when the block has moved to another Newton iterate. The continuity rows and the
+gradient are read from the level's divergence, which every set-up of the level shares and the
+device holds once (:meth:`~fbmflow.gpu.device.Backend.kept`): the continuity rows as that
+matrix with the rows that differ written over its products (a
+:class:`~fbmflow.fem.continuity_block.ContinuityBlock`), the gradient as its transpose with the
+constrained rows zeroed (a system with ``gradient_BT``); a set-up copies only what differs.
 """
 from __future__ import annotations
 
+import numpy as np
+
+from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
 from ..solvers.system import SaddlePointSystem, as_csr
 from .colours import DeviceColours
-from .device import Backend
+from .device import Backend, nbytes
 from .operators import apply_cell_operator, apply_reaction
 from .space import device_space
 
@@ -28,19 +36,18 @@ def _matrix_free(A) -> bool:
     return hasattr(A, "base") and hasattr(A, "react") and hasattr(A, "drift")
 
 
-def _nbytes(*matrices) -> int:
-    """Device bytes of CSR matrices (None: none)."""
-    return int(sum(M.data.nbytes + M.indices.nbytes + M.indptr.nbytes for M in matrices if M is not None))
-
-
 class _Blocks:
     """The assembled blocks of ``system`` on the device, ``A`` its velocity block (or a Newton
     block's assembled part): ``A`` as ``S`` and its replaced rows where it is a
     :class:`~fbmflow.fem.velocity_block.VelocityBlock`, else as a CSR matrix; the gradient
-    ``B``, the continuity rows ``B^T``, the pressure block ``C`` (None where there is none)."""
+    ``B`` (the transpose of ``gradient_BT``, kept, its rows ``zero`` zeroed in the product; else
+    a CSR matrix), the continuity rows ``D`` (a continuity block's divergence, kept, its rows
+    ``changed`` those of ``changed_rows``; else a CSR matrix), the pressure block ``C`` (None
+    where there is none). ``nbytes``: the device memory of what is not kept [bytes]; ``kept``:
+    the kept device matrices read."""
 
     def __init__(self, system: SaddlePointSystem, A, backend: Backend):
-        csr, self.xp = backend.csr, backend.xp
+        csr, put, self.xp = backend.csr, backend.put, backend.xp
         self.n_u = system.n_u
         self.S = self.A = None
         #: the host values of the velocity matrix held (``S``'s or ``A``'s)
@@ -51,10 +58,35 @@ class _Blocks:
             self.d, self.n_v = A.space.dim, A.space.n_v
         else:
             self.A = csr(A)
+        own = [self.S, self.A] + ([] if self.S is None else [self.R, self.replaced])
+        self.kept = []
+        self.zero = None
+        if system.gradient_BT is not None:
+            self.B = backend.kept(system.gradient_BT, "transposed", lambda M: csr(M.T))
+            self.kept.append(self.B)
+            zero = system.gradient_zero
+            if zero is not None and zero.size:
+                self.zero = put(zero)
+                own.append(self.zero)
+        else:
+            self.B = csr(system.gradient)
+            own.append(self.B)
+        D = system.BT
+        #: the host matrix whose device copy ``D`` is, kept (a continuity block's divergence) or None
+        self.divergence = D.base if isinstance(D, ContinuityBlock) else None
+        self.changed = self.changed_rows = None
+        if self.divergence is not None:
+            self.D = backend.kept(D.base, "csr", csr)
+            self.kept.append(self.D)
+            if D.dofs.size:
+                self.changed, self.changed_rows = put(D.dofs), csr(D.rows)
+                own += [self.changed, self.changed_rows]
+        else:
+            self.D = csr(as_csr(D))
+            own.append(self.D)
         C = system.pressure_block
-        self.B, self.D, self.C = csr(system.gradient), csr(as_csr(system.BT)), None if C is None else csr(C)
-        self.nbytes = _nbytes(self.S, self.A, self.B, self.D, self.C) + (
-            0 if self.S is None else _nbytes(self.R) + int(self.replaced.nbytes))
+        self.C = None if C is None else csr(C)
+        self.nbytes = nbytes(*own, self.C)
 
     def apply(self, x):
         """``K x`` of the assembled blocks for a device vector ``x`` (n_u + n_p,)."""
@@ -67,8 +99,13 @@ class _Blocks:
                 yu[self.replaced] = self.R @ u
         else:
             yu = self.A @ u
-        yu += self.B @ p
+        gradient = self.B @ p
+        if self.zero is not None:
+            gradient[self.zero] = 0.0
+        yu += gradient
         yp = self.D @ u
+        if self.changed is not None:
+            yp[self.changed] = self.changed_rows @ u
         if self.C is not None:
             yp += self.C @ p
         return xp.concatenate([yu, yp])
@@ -78,26 +115,37 @@ class DeviceOperator:
     """``K x`` of ``system`` on the device of ``backend`` (device vectors (n_u + n_p,)).
     ``shared``: a device operator whose blocks are this one's assembled part (a Newton
     system's preconditioner, whose blocks it shares): used, not copied again; ``nbytes``
-    counts only what this one adds."""
+    counts only what this one adds; ``kept``: what it reads of the copies the backend keeps
+    (:meth:`Backend.kept <fbmflow.gpu.device.Backend.kept>`), shared by every set-up."""
 
     def __init__(self, system: SaddlePointSystem, backend: Backend, shared: "DeviceOperator | None" = None):
         self.system, self.backend = system, backend
         self.n_u = system.n_u
         A = system.A
         self.free = _matrix_free(A)
-        if shared is not None:
-            self.blocks, self.nbytes = shared.blocks, 0
-        else:
-            self.blocks = _Blocks(system, A.base if self.free else A, backend)
-            self.nbytes = self.blocks.nbytes
+        self.shares = shared is not None
+        self.blocks = shared.blocks if self.shares else _Blocks(system, A.base if self.free else A, backend)
         if self.free:
-            #: the space's cells on the device, shared with whatever else applies its operators
-            #: there (the flow problem's residuals): counted in ``nbytes`` all the same
+            #: the space's cells on the device, kept, shared with whatever else applies its
+            #: operators there (the flow problem's residuals)
             self.space = device_space(A.space, backend)
             self.d, self.n_v = self.space.dim, self.space.n_v
-            self.nbytes += self.space.nbytes
             self.constrained = backend.put(A.constrained)
             self.refresh()
+
+    @property
+    def kept(self) -> list:
+        """The kept device objects this operator reads (its blocks', the space's cells)."""
+        return self.blocks.kept + ([self.space] if self.free else [])
+
+    @property
+    def nbytes(self) -> int:
+        """The device memory this operator adds [bytes]: its blocks (unless shared), and a Newton
+        block's constrained rows and coefficients."""
+        own = 0 if self.shares else self.blocks.nbytes
+        if self.free:
+            own += nbytes(self.constrained, self.react, self.drift, self.drift_colours)
+        return own
 
     def velocity_rows(self, values):
         """The device's velocity matrix (``S``, or ``A`` where the block is assembled) where its
@@ -107,6 +155,15 @@ class DeviceOperator:
         if values is None or values is not blocks.values:
             return None
         return blocks.S if blocks.S is not None else blocks.A
+
+    def divergence_rows(self, values):
+        """The device's copy of the level's divergence (kept) where its host values hold the
+        array ``values`` (a smoother that reads the gradient and continuity rows from the same
+        matrix), else None."""
+        host = self.blocks.divergence
+        if host is None or not np.shares_memory(values, host.data):
+            return None
+        return self.blocks.D
 
     def refresh(self) -> None:
         """Copy the Newton block's coefficients (after it moved to another iterate); nothing for

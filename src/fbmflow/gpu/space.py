@@ -53,8 +53,5 @@ class DeviceSpace:
 
 def device_space(space, backend: Backend) -> DeviceSpace:
     """``space``'s :class:`DeviceSpace` on ``backend``, copied at the first call and kept as long
-    as ``space`` lives (:attr:`Backend.spaces <fbmflow.gpu.device.Backend.spaces>`)."""
-    found = backend.spaces.get(space)
-    if found is None:
-        found = backend.spaces[space] = DeviceSpace(space, backend)
-    return found
+    as ``space`` lives (:meth:`Backend.kept <fbmflow.gpu.device.Backend.kept>`)."""
+    return backend.kept(space, "cells", lambda host: DeviceSpace(host, backend))

@@ -41,9 +41,13 @@ class DeviceVanka:
         The matrix whose rows the smoother reads as its scalar rows (its operator's velocity
         block or scalar block, the same host arrays) where the device holds it already (the
         level's :class:`~fbmflow.gpu.operator.DeviceOperator`): read there, not copied again.
+    divergence : device CSR matrix or None
+        The same for the divergence whose values the smoother reads as its gradient rows, and
+        whose column indices as its continuity rows' (the level's, which the device keeps,
+        :meth:`DeviceOperator.divergence_rows <fbmflow.gpu.operator.DeviceOperator.divergence_rows>`).
     """
 
-    def __init__(self, smoother: FactoredVankaSmoother, backend: Backend, rows=None):
+    def __init__(self, smoother: FactoredVankaSmoother, backend: Backend, rows=None, divergence=None):
         if smoother.order != "colours":
             raise ValueError("the GPU sweeps a factored Vanka smoother set up in colours (order='colours'), "
                              f"not {smoother.order!r}")
@@ -61,11 +65,19 @@ class DeviceVanka:
             store, piv = put(s.store), put(s.piv)
         self.patches = (put(s.ptr), put(s.dofs), put(s.lu_ptr), store, piv, put(s.blocks), put(s.d_read),
                         nl, d, n_v, n_u)
-        if rows is None:
-            self.op = own = tuple(put(a) for a in s.op)
-        else:  # (held, s_ptr, s_idx, s_val, ...): the scalar rows are the operator's arrays
-            own = tuple(put(a) for a in s.op[:1] + s.op[4:])
-            self.op = own[:1] + (rows.indptr, rows.indices, rows.data) + own[1:]
+        # the operator's arrays (the kernels' "op": held, s_ptr, s_idx, s_val, nc_ptr, nc_cell,
+        # nc_rank, gt, d_pos, d_ptr, d_idx, d_val, b_idx, the other rows), read where the device
+        # holds them already
+        held = {}
+        if rows is not None:
+            held.update({1: rows.indptr, 2: rows.indices, 3: rows.data})
+        if divergence is not None:
+            held[7] = divergence.data.reshape(s.op[7].shape)
+            if s.op[12].size:
+                held[12] = divergence.indices
+        own = tuple(put(a) for k, a in enumerate(s.op) if k not in held)
+        mine = iter(own)
+        self.op = tuple(held[k] if k in held else next(mine) for k in range(len(s.op)))
         #: seconds the device took for the local factors (0 where the CPU computed them)
         self.factor_time_s = 0.0
         if s.store is None:

@@ -102,7 +102,7 @@ class SaddlePointSystem:
     def __post_init__(self):
         if self.orphans is None and self.space is not None:
             seen = as_csr(self.BT if self.gradient_BT is None else self.gradient_BT)
-            self.orphans = orphan_pressure_modes(seen, self.space.dim + 1, zero=self._gradient_zero,
+            self.orphans = orphan_pressure_modes(seen, self.space.dim + 1, zero=self.gradient_zero,
                                                  closed=self.mean_weights is not None)
             if self.extension is not None:  # continued cells' pressures are constrained instead
                 self.orphans = self.extension.exclude(self.orphans)
@@ -124,13 +124,13 @@ class SaddlePointSystem:
         if self._gradient is not None:
             return self._gradient
         source = self.BT if self.gradient_BT is None else self.gradient_BT
-        B = zero_columns(as_csr(source), self._gradient_zero).T.tocsr()
+        B = zero_columns(as_csr(source), self.gradient_zero).T.tocsr()
         if self.gradient_BT is None:
             self._gradient = B
         return B
 
     @cached_property
-    def _gradient_zero(self) -> np.ndarray | None:
+    def gradient_zero(self) -> np.ndarray | None:
         """The velocity DOFs whose rows of ``B`` are zero, (k,) int64, or None: those of
         ``rows``, and those of ``fixed`` where ``gradient_BT`` (whose columns are not zeroed)
         stands for ``B``."""
@@ -145,8 +145,8 @@ class SaddlePointSystem:
         if self.gradient_BT is None or self.space is None:
             return matvec(self.gradient, p)
         out = cell_transposed_matvec(self.gradient_BT, p, self.space.colour_groups, self.space.dim + 1)
-        if self._gradient_zero is not None:
-            out[self._gradient_zero] = 0.0
+        if self.gradient_zero is not None:
+            out[self.gradient_zero] = 0.0
         return out
 
     @property

@@ -84,7 +84,10 @@ class BlockTransfer:
     """
 
     def __init__(self, P_v: sp.csr_matrix, P_p: sp.csr_matrix, keep: np.ndarray, dim: int):
-        self.P_v, self.P_p, self.keep, self.dim = sp.csr_matrix(P_v), sp.csr_matrix(P_p), keep, dim
+        # the level's own matrices where they are CSR (the GPU keeps its copies by their identity)
+        self.P_v, self.P_p = (M if sp.issparse(M) and M.format == "csr" else sp.csr_matrix(M)
+                              for M in (P_v, P_p))
+        self.keep, self.dim = keep, dim
         self.shape = (dim * P_v.shape[0] + P_p.shape[0], dim * P_v.shape[1] + P_p.shape[1])
 
     def _blocks(self) -> list[tuple[sp.csr_matrix, slice, slice]]:
