@@ -13,8 +13,9 @@ wrong operation shows at the solves' tolerance, 1e-6), where the residual and te
 the CPU's by more than 1e-13 relative or are not computed on the device, where a level's
 smoother holds its own copy of the velocity rows or the divergence its operator holds, where a
 level's operator, prolongation or restriction differs from the CPU level's by more than 1e-14
-relative, or where a second set-up of the system copies a level's divergence or transfers
-again."""
+relative, where a second set-up of the system copies a level's divergence or transfers again,
+or where a moved Newton block's coefficients are not computed on the device alone or differ from
+the CPU's by more than 1e-14 relative."""
 import os
 import sys
 
@@ -92,6 +93,18 @@ for name in sys.argv[1:] or cases:
     on_device = isinstance(getattr(prob._mass_laplace, "__self__", None), DeviceSpace)
     # one copy of the space's cells on the device: the Newton block's terms use the residual's
     one_copy = not device.operator.free or device.operator.space is device_space(prob.space, backend)
+    # a moved Newton block's coefficients computed on the device, the CPU's left unmade, equal
+    # to the CPU's when it makes them
+    coefficients = "-"
+    if device.operator.free:
+        A = device.operator.system.A
+        unmade = A._react is None and A._drift is None
+        made = [(device.operator.react, A.react), (device.operator.drift, A.drift)]
+        unmade = unmade and all((d is None) == (h is None) for d, h in made)
+        coefficients = max([float(np.abs(backend.get(d).astype(float) - h).max() / np.abs(h).max())
+                            for d, h in made if d is not None and h is not None] + [0.0])
+        worst = max(worst, coefficients / 1e-14, 0.0 if unmade else 2.0)
+        coefficients = f"{coefficients:.1e} (on the device only {unmade})"
     residual = float(np.abs(ops_gpu - ops_cpu).max() / np.abs(ops_cpu).max())
     worst = max(worst, residual / 1e-13, 0.0 if on_device and one_copy else 2.0)
     error = float(np.abs(x_gpu[:system.n_u] - x_cpu[:system.n_u]).max() / np.abs(x_cpu[:system.n_u]).max())
@@ -122,6 +135,6 @@ for name in sys.argv[1:] or cases:
           f"velocity relative difference {error:.1e}, device memory {per_unknown:.0f} bytes per unknown, "
           f"scalar rows shared {shared}; residual on the device {on_device} (cells copied once {one_copy}), "
           f"relative difference {residual:.1e}; levels' operators and transfers {level_error:.1e} from the "
-          f"CPU's, divergence and transfers copied once {reused}",
+          f"CPU's, divergence and transfers copied once {reused}; Newton coefficients {coefficients}",
           flush=True)
 sys.exit(0 if worst <= 1.0 else 1)

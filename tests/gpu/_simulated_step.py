@@ -5,14 +5,17 @@ the Newton steps and of the particle's rigid responses, the coupling) against th
 the CPU with multigrid's smoothers in the GPU's colour order: a disk settling in a closed 8 x 8
 box, backward Euler, the implicit coupling (a rigid response per free motion of the disk).
 Prints one line; exits 1 where the particle's velocity differs by more than 1e-9 relative
-(the two sum in different orders and the solves stop at 1e-8) or the cycles differ, or where no
-kernel launch was counted (:func:`fbmflow.gpu.launches.count_launches`)."""
+(the two sum in different orders and the solves stop at 1e-8) or the cycles differ, where no
+kernel launch was counted (:func:`fbmflow.gpu.launches.count_launches`), or where the step on the
+device computes the Newton blocks' coefficients on the CPU as often as the CPU's step does (the
+device computes them; the CPU only for its own products, the rigid responses' right-hand sides)."""
 import os
 import sys
 
 import numpy as np
 
 import fbmflow as fb
+import fbmflow.flow.levels as levels
 import fbmflow.gpu.multigrid as gpu_multigrid
 from fbmflow.gpu.device import simulated_backend
 from fbmflow.gpu.launches import count_launches
@@ -34,12 +37,25 @@ def step(solver: fb.SolverParams):
     return report, sim.particles.velocity[0].copy()
 
 
+made = {"coefficients": 0}  # the Newton blocks' coefficients computed on the CPU
+host_coefficients = levels.reaction_coefficients
+
+
+def counted(*args):
+    made["coefficients"] += 1
+    return host_coefficients(*args)
+
+
+levels.reaction_coefficients = counted
 cpu, v_cpu = step(fb.SolverParams(linear="multigrid", multigrid=MultigridSettings(order="colours")))
+on_cpu, made["coefficients"] = made["coefficients"], 0
 counts = count_launches()
 gpu, v_gpu = step(fb.SolverParams(device="gpu"))
 difference = float(np.abs(v_gpu - v_cpu).max() / np.abs(v_cpu).max())
 same = cpu.linear.iterations == gpu.linear.iterations and cpu.linear.solves == gpu.linear.solves
 print(f"one step: disk velocity CPU {v_cpu} / device {v_gpu}, relative difference {difference:.1e}; "
       f"linear solves {cpu.linear.solves} / {gpu.linear.solves}, cycles {cpu.linear.iterations} / "
-      f"{gpu.linear.iterations}; {counts['launches']} kernel launches", flush=True)
-sys.exit(0 if difference <= 1e-9 and same and v_cpu[1] < 0.0 and counts["launches"] > 0 else 1)
+      f"{gpu.linear.iterations}; {counts['launches']} kernel launches; Newton coefficients computed on the "
+      f"CPU {on_cpu} / {made['coefficients']} times", flush=True)
+sys.exit(0 if difference <= 1e-9 and same and v_cpu[1] < 0.0 and counts["launches"] > 0
+         and made["coefficients"] < on_cpu else 1)

@@ -74,6 +74,8 @@ class NewtonBlock:
         self.newton_base = newton_base
         self.shape = base.shape
         self.dtype = base.dtype
+        #: how many times the block has moved (a copy elsewhere follows it)
+        self.moves = -1
         self.relinearise(u0)
 
     def relinearise(self, u: np.ndarray, max_abs=None) -> None:
@@ -85,7 +87,11 @@ class NewtonBlock:
         this block is one process's slab (:meth:`~fbmflow.flow.navier_stokes.NavierStokesProblem.max_abs`;
         a slab's own largest drift, far from a particle, let its every cell in: measured, the
         drift's convection took 2.0 s of a ten Cate level-1 run on the slab without the sphere
-        against 1.1 s on the whole mesh)."""
+        against 1.1 s on the whole mesh).
+
+        The terms' coefficients (:attr:`react`, :attr:`drift`) are computed at the first product
+        on the CPU after the move, not here: a solver that applies the block elsewhere (the
+        GPU's, from ``reacting`` and ``drifting``) leaves the CPU's unmade."""
         s = self.space
         drift = u - self.u0
         size = np.abs(drift).reshape(s.dim, s.n_v).max(axis=0)
@@ -93,15 +99,38 @@ class NewtonBlock:
         if max_abs is not None:
             largest = max_abs(drift)
         # the previous coefficients go before the new ones are made (not both held at once)
-        self.react = self.drift = self.drift_groups = self.drift_cells = None
-        if self.newton_base:
-            self.react = reaction_coefficients(s, drift) if largest > 0.0 else None
-        else:
-            self.react = reaction_coefficients(s, u)
+        self._react = self._drift = self._drift_groups = self.drift_cells = None
+        #: the velocity whose Newton term ``R`` the block adds (``u``, or the drift where
+        #: ``newton_base``), (n_u,), or None where it adds none
+        self.reacting = (drift if largest > 0.0 else None) if self.newton_base else u.copy()
+        #: the drift whose convection the block adds on ``drift_cells``, or None
+        self.drifting = drift if largest > 0.0 else None
         if largest > 0.0:
             self.drift_cells = (size > DRIFT_CUTOFF * largest)[s.V.cell_dofs].any(axis=1)
-            self.drift = velocity_coefficients(s, drift)
-            self.drift_groups = s.cell_groups(self.drift_cells)
+        self.moves += 1
+
+    @property
+    def react(self) -> np.ndarray | None:
+        """:func:`~fbmflow.fem.assembly.reaction_coefficients` of ``reacting``, made at the
+        first call after a move."""
+        if self._react is None and self.reacting is not None:
+            self._react = reaction_coefficients(self.space, self.reacting)
+        return self._react
+
+    @property
+    def drift(self) -> np.ndarray | None:
+        """:func:`~fbmflow.fem.assembly.velocity_coefficients` of ``drifting``, made at the
+        first call after a move."""
+        if self._drift is None and self.drifting is not None:
+            self._drift = velocity_coefficients(self.space, self.drifting)
+        return self._drift
+
+    @property
+    def drift_groups(self) -> list[np.ndarray] | None:
+        """``drift_cells`` in the space's parallel groups, made at the first call after a move."""
+        if self._drift_groups is None and self.drift_cells is not None:
+            self._drift_groups = self.space.cell_groups(self.drift_cells)
+        return self._drift_groups
 
     def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
         """What the Newton block adds to ``A v``, with the constrained rows zero, (n_u,)."""

@@ -26,14 +26,14 @@ from ..fem.velocity_block import VelocityBlock
 from ..solvers.system import SaddlePointSystem, as_csr
 from .colours import DeviceColours
 from .device import Backend, nbytes
-from .operators import apply_cell_operator, apply_reaction
+from .operators import apply_cell_operator, apply_reaction, reaction_coefficients, velocity_coefficients
 from .space import device_space
 
 
 def _matrix_free(A) -> bool:
     """Whether the velocity block ``A`` applies Newton terms without a matrix (duck-typed: the
     flow problem's ``NewtonBlock`` lives in a layer above)."""
-    return hasattr(A, "base") and hasattr(A, "react") and hasattr(A, "drift")
+    return hasattr(A, "base") and hasattr(A, "reacting") and hasattr(A, "drifting")
 
 
 class _Blocks:
@@ -131,6 +131,9 @@ class DeviceOperator:
             self.space = device_space(A.space, backend)
             self.d, self.n_v = self.space.dim, self.space.n_v
             self.constrained = backend.put(A.constrained)
+            #: the Newton block's :attr:`~fbmflow.flow.levels.NewtonBlock.moves` when its
+            #: coefficients were computed here
+            self.moves = None
             self.refresh()
 
     @property
@@ -166,18 +169,32 @@ class DeviceOperator:
         return self.blocks.D
 
     def refresh(self) -> None:
-        """Copy the Newton block's coefficients (after it moved to another iterate); nothing for
-        an assembled block."""
-        if not self.free:
+        """Compute the Newton block's coefficients on the device (after it moved to another
+        iterate: :attr:`NewtonBlock.moves <fbmflow.flow.levels.NewtonBlock.moves>`), from the
+        velocities it holds (``reacting``, ``drifting``) by the kernels whose threads run the
+        CPU's per-cell bodies (:func:`~fbmflow.gpu.operators.reaction_coefficients`,
+        :func:`~fbmflow.gpu.operators.velocity_coefficients`): a copy of each velocity, not of
+        the coefficients (about four times their bytes in 3D), and the CPU computes none of
+        them. Nothing for an assembled block."""
+        if not self.free or self.moves == self.system.A.moves:
             return
-        A, put = self.system.A, self.backend.put
-        self.react = None if A.react is None else put(A.react)
-        self.drift = None if A.drift is None else put(A.drift)
-        self.drift_colours = None
-        if A.drift is not None:
-            self.drift_colours = DeviceColours([c[A.drift_cells[c]] for c in self.space.host_colours
+        A, put, xp, space = self.system.A, self.backend.put, self.backend.xp, self.space
+        threads = self.backend.threads
+        self.react = self.drift = self.drift_colours = None  # the old go before the new are made
+        n_cells, nq = space.detJw.shape
+        d, n_v = self.d, self.n_v
+        if A.reacting is not None:
+            self.react = xp.empty((n_cells, nq, d, d), dtype=np.float32)
+            reaction_coefficients(put(A.reacting.reshape(d, n_v)), space.cell_dofs, space.phi, space.dphi,
+                                  space.detJw, space.Jinv, self.react, threads=threads)
+        if A.drifting is not None:
+            self.drift = xp.empty((n_cells, nq, d))
+            velocity_coefficients(put(A.drifting.reshape(d, n_v)), space.cell_dofs, space.phi, space.detJw,
+                                  self.drift, threads=threads)
+            self.drift_colours = DeviceColours([c[A.drift_cells[c]] for c in space.host_colours
                                                 if A.drift_cells[c].any()], put)
         self.scale = float(A.scale)
+        self.moves = A.moves
 
     def apply(self, x):
         """``K x`` for a device vector ``x`` (n_u + n_p,)."""
