@@ -73,13 +73,23 @@ ROWS = {"slabs": ["solver.multigrid.order=slabs"], "colours": ["solver.multigrid
 
 def _count_device_arrays(record: dict) -> None:
     """Make ``solver.device = gpu`` build its device hierarchy from NumPy arrays (the simulator's
-    backend; the smoothers' factors computed on the CPU, as many bytes) and solve on the CPU
+    backend; the smoothers' factors and a Newton block's coefficients computed by the CPU's
+    kernels, as many bytes) and solve on the CPU
     hierarchy under it, its residuals on the CPU too, recording the device bytes per unknown
     (the space's cells, which the residuals share with the Newton terms, counted once)."""
     import fbmflow.gpu.multigrid as gm
+    import fbmflow.gpu.operator as go
+    from fbmflow.fem import _kernels as cpu
     from fbmflow.gpu.device import simulated_backend
     from fbmflow.solvers.base import LinearSolver
 
+    def react(u, cell_dofs, phi, dphi, detJw, Jinv, out, threads):  # the CPU's kernel, no GPU here
+        out[...] = cpu.reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv)
+
+    def drift(u, cell_dofs, phi, detJw, out, threads):
+        out[...] = cpu.velocity_coefficients(u, cell_dofs, phi, detJw)
+
+    go.reaction_coefficients, go.velocity_coefficients = react, drift
     gm.gpu_problem = lambda: None
     gm.gpu_backend = simulated_backend
     gm.DeviceMultigridSolver.host_factors = True
