@@ -31,7 +31,8 @@ defaults with multigrid (``solver.linear = multigrid``):
 * ``arrays``: the GPU solver set up with NumPy arrays in place of CuPy's (no GPU needed: the
   arrays a device would hold, the same sizes) and its solves done by the CPU hierarchy it was
   built from: the device memory per unknown, the hierarchy's (operators, smoothers, transfers)
-  and FGMRES's basis;
+  and FGMRES's basis; and the seconds per step left on the CPU, the step less the work a GPU
+  does (the solves, the flow problem's residuals and the smoothers' factors, timed);
 * ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra), counting the GPU
   kernels' launches per step and the host's seconds in them (numba-cuda prepares a launch's
   arguments on the host: where those seconds approach the cycles', the cycles are bound by the
@@ -66,6 +67,9 @@ from pathlib import Path
 
 from studies.thread_scaling import BENCHMARKS, RESULTS, commit, machine
 
+#: the profiler of :func:`_profile_step` while it runs (the arrays row leaves the GPU's work out of it)
+_PROFILER: cProfile.Profile | None = None
+
 ROWS = {"slabs": ["solver.multigrid.order=slabs"], "colours": ["solver.multigrid.order=colours"],
         "arrays": ["solver.multigrid.order=colours"], "gpu": ["solver.device=gpu"],
         "gpu-colours": ["solver.device=gpu"]}
@@ -81,6 +85,7 @@ def _count_device_arrays(record: dict) -> None:
     import fbmflow.gpu.operator as go
     from fbmflow.fem import _kernels as cpu
     from fbmflow.gpu.device import simulated_backend
+    from fbmflow.solvers import _kernels as vanka_kernels
     from fbmflow.solvers.base import LinearSolver
 
     def react(u, cell_dofs, phi, dphi, detJw, Jinv, out, threads):  # the CPU's kernel, no GPU here
@@ -93,7 +98,25 @@ def _count_device_arrays(record: dict) -> None:
     gm.gpu_problem = lambda: None
     gm.gpu_backend = simulated_backend
     gm.DeviceMultigridSolver.host_factors = True
-    gm.DeviceMultigridSolver.velocity_operator = LinearSolver.velocity_operator
+    record["device_work_s"] = 0.0
+
+    def device_work(work):
+        """``work`` timed as the GPU's, out of a profile of the step (:func:`_profile_step`)."""
+        def timed(*args, **kwargs):
+            if _PROFILER is not None:
+                _PROFILER.disable()
+            t0 = time.perf_counter()
+            try:
+                return work(*args, **kwargs)
+            finally:
+                record["device_work_s"] += time.perf_counter() - t0
+                if _PROFILER is not None:
+                    _PROFILER.enable()
+        return timed
+
+    gm.DeviceMultigridSolver.velocity_operator = (
+        lambda self, space: device_work(LinearSolver.velocity_operator(self, space)))
+    vanka_kernels.vanka_factor = device_work(vanka_kernels.vanka_factor)
 
     def solve(self, f, g, rtol=None):
         n = self.host.system.n_u + self.host.system.n_p
@@ -102,7 +125,7 @@ def _count_device_arrays(record: dict) -> None:
         record["krylov_bytes"] = 8.0 * krylov
         return self.host.solve(f, g, rtol)
 
-    gm.DeviceHierarchy.solve = solve
+    gm.DeviceHierarchy.solve = device_work(solve)
 
 
 def measure(scene_name: str, level: int, row: str, steps: int, profile: Path | None = None) -> dict:
@@ -136,33 +159,47 @@ def measure(scene_name: str, level: int, row: str, steps: int, profile: Path | N
     out = []
     for _ in range(steps):
         hierarchy[0] = hierarchy[1] = 0.0
+        if "device_work_s" in record:
+            record["device_work_s"] = 0.0
         before = dict(counts) if counts else None
         t0 = time.perf_counter()
         rep = sim.step(setup.dt)
         out.append(dict(wall_s=time.perf_counter() - t0, solves=rep.linear.solves,
                         cycles=rep.linear.iterations, linear_s=rep.linear.time_s, setup_s=hierarchy[0],
                         factors_s=hierarchy[1]))
+        if "device_work_s" in record:  # the step less what the GPU would do: the CPU's share
+            out[-1]["host_s"] = out[-1]["wall_s"] - record["device_work_s"]
         if counts:
             out[-1].update({key: counts[key] - before[key] for key in counts})
     velocity = sim.particles.velocity
     if profile:
-        _profile_step(sim, setup.dt, profile, f"{scene_name} level {level}, row {row}: step {steps + 1}")
+        _profile_step(sim, setup.dt, profile, f"{scene_name} level {level}, row {row}: step {steps + 1}",
+                      record)
+    record.pop("device_work_s", None)
     return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
                 particle_velocity=[float(v) for v in velocity[0]] if len(velocity) else [],
                 solver=sim.flow.linear_solver_description,
                 peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9, **record)
 
 
-def _profile_step(sim, dt: float, path: Path, title: str) -> None:
+def _profile_step(sim, dt: float, path: Path, title: str, record: dict) -> None:
     """One step of ``sim`` under cProfile: its functions by own and by cumulative time into
-    ``path``."""
-    profiler = cProfile.Profile()
+    ``path``; in the arrays row without the work a GPU does (its seconds in the title)."""
+    global _PROFILER
+    profiler = _PROFILER = cProfile.Profile()
+    record["device_work_s"] = 0.0
     t0 = time.perf_counter()
     profiler.enable()
     sim.step(dt)
     profiler.disable()
+    _PROFILER = None
+    wall = time.perf_counter() - t0
     text = io.StringIO()
-    text.write(f"{title}, {time.perf_counter() - t0:.2f} s under cProfile\n")
+    text.write(f"{title}, {wall:.2f} s under cProfile")
+    if record["device_work_s"]:
+        text.write(f", {record['device_work_s']:.2f} s of it the GPU's work (solves, residuals, factors), "
+                   f"not profiled: {wall - record['device_work_s']:.2f} s left on the CPU")
+    text.write("\n")
     for order in ("tottime", "cumulative"):
         pstats.Stats(profiler, stream=text).sort_stats(order).print_stats(40)
     path.write_text(text.getvalue())
@@ -179,10 +216,11 @@ def table(rows: list[dict]) -> str:
              "| scene | level | unknowns | row | solver | steps | s per step | cycles per solve "
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
+             "| s per step left on the CPU (arrays: the step less its solves, residuals and factors) "
              "| device bytes per unknown (hierarchy + basis) "
              "| GPU kernel launches per step (host s in them) "
              "| particle 0's vertical velocity after the steps | peak host GB | machine | measured | tag |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         later = r["steps"][1:] or r["steps"]
         step_s = sum(s["wall_s"] for s in later) / len(later)
@@ -202,6 +240,8 @@ def table(rows: list[dict]) -> str:
                 split = (f"{cycles_s:.2f} / {setup_s:.2f} (factors {factors_s:.2f}) / "
                          f"{step_s - cycles_s - setup_s:.2f}")
                 bound += f" / {step_s / (step_s - cycles_s - factors_s):.2f}"
+        host = (f"{sum(s['host_s'] for s in later) / len(later):.2f}"
+                if all("host_s" in s for s in later) else "–")
         cycle_s = (linear_s - sum(s.get("setup_s", 0.0) for s in later)) / max(cycles, 1)
         vertical = f"{r['particle_velocity'][-1]:.9g}" if r.get("particle_velocity") else "–"
         launches = "–"
@@ -210,8 +250,8 @@ def table(rows: list[dict]) -> str:
                         f"({sum(s['launch_s'] for s in later) / len(later):.2f})")
         lines.append(f"| {r['scene']} | {r['level']} | {r['unknowns']} | {r['row']} | {r['solver']} | "
                      f"{len(r['steps'])} | {step_s:.2f} | {cycles / max(solves, 1):.2f} | {cycle_s:.3f} | "
-                     f"{split} | {bound} | {device} | {launches} | {vertical} | {r['peak_rss_gb']:.2f} | "
-                     f"{r['machine']} | "
+                     f"{split} | {bound} | {host} | {device} | {launches} | {vertical} | "
+                     f"{r['peak_rss_gb']:.2f} | {r['machine']} | "
                      f"{r['measured']} | {r['tag']} |")
     return "\n".join(lines) + "\n"
 

@@ -591,6 +591,22 @@ def test_assemble_mass_laplace(case):
     assert_rel(K, 2.0 * ref.mass() - 0.5 * ref.laplace())
 
 
+@pytest.mark.parametrize("axes", [([0.0, 0.3, 1.0], [0.0, 0.2, 0.3, 0.75]),
+                                  ([0.0, 0.3, 1.0], [0.0, 0.5, 0.75], [0.0, 0.1, 0.4, 1.25])],
+                         ids=["2d", "3d"])
+def test_assemble_mass_laplace_on_axis_aligned_cells(axes):
+    """Graded box cells take the few-coefficient table (``cell_axes``); the result is the dense
+    reference's. The deformed meshes of ``case`` take the general one (the test above)."""
+    from fbmflow.fem import assemble_mass, assemble_mass_laplace
+    space = FlowSpace(StructuredMesh.rectilinear(axes))
+    ref = DenseReference(space)
+    assert space.cell_axes is not None and space.cell_axes.shape == (space.mesh.n_cells, 1 + space.dim)
+    K = _dense_scalar(space, assemble_mass_laplace(space, 2.0, -0.5))
+    assert_rel(K, 2.0 * ref.mass() - 0.5 * ref.laplace())
+    assert_rel(_dense_scalar(space, assemble_mass(space)), ref.mass())
+    assert FlowSpace(deformed_mesh(space.dim, seed=3)).cell_axes is None
+
+
 def test_apply_reaction_is_the_newton_term(case):
     """``R(u) w`` without a matrix equals the assembled Newton blocks times ``w``, over all cells
     and over only the cells that touch the support of ``w``."""

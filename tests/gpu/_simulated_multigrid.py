@@ -13,7 +13,8 @@ wrong operation shows at the solves' tolerance, 1e-6), where the residual and te
 the CPU's by more than 1e-13 relative or are not computed on the device, where a level's
 smoother holds its own copy of the velocity rows or the divergence its operator holds, where a
 level's operator, prolongation or restriction differs from the CPU level's by more than 1e-14
-relative, where a second set-up of the system copies a level's divergence or transfers again,
+relative, where a second set-up of the system copies a level's divergence, transfers or scalar
+pattern again,
 or where a moved Newton block's coefficients are not computed on the device alone or differ from
 the CPU's by more than 1e-14 relative."""
 import os
@@ -114,10 +115,13 @@ for name in sys.argv[1:] or cases:
                                         else lv.operator.blocks.A).data for lv in device.levels)
     worst = max(worst, error / 1e-10, 0.0 if same and shared else 2.0)
     # every level's operator, prolongation and restriction against the CPU level's, and the
-    # level's divergence and transfers copied once: the smoother reads its gradient rows from
-    # the operator's copy, and a second set-up of the same system copies neither again
+    # level's divergence, transfers and scalar pattern copied once: the smoother reads its
+    # gradient rows from the operator's copy, and a second set-up of the same system copies none
+    # of them again
     again = solver.factor(system)
     reused = all(b.operator.blocks.D is a.operator.blocks.D and b.transfer.P_v is a.transfer.P_v
+                 and (a.operator.blocks.S is None
+                      or backend.xp.shares_memory(b.operator.blocks.S.indices, a.operator.blocks.S.indices))
                  and a.operator.blocks.divergence is not None
                  and backend.xp.shares_memory(a.smoother.op[7], a.operator.blocks.D.data)
                  for a, b in zip(device.levels, again.levels))
@@ -135,6 +139,7 @@ for name in sys.argv[1:] or cases:
           f"velocity relative difference {error:.1e}, device memory {per_unknown:.0f} bytes per unknown, "
           f"scalar rows shared {shared}; residual on the device {on_device} (cells copied once {one_copy}), "
           f"relative difference {residual:.1e}; levels' operators and transfers {level_error:.1e} from the "
-          f"CPU's, divergence and transfers copied once {reused}; Newton coefficients {coefficients}",
+          f"CPU's, divergence, transfers and pattern copied once {reused}; "
+          f"Newton coefficients {coefficients}",
           flush=True)
 sys.exit(0 if worst <= 1.0 else 1)

@@ -48,32 +48,33 @@ def single_threaded_blas():
     return _threadpool_controller().limit(limits=1, user_api="blas")
 
 
-def _assemble_scalar(space: FlowSpace, coeff: np.ndarray, table: np.ndarray) -> np.ndarray:
-    data = np.zeros(space.nnz)
-    with single_threaded_blas():
-        for cells in space.batches:
-            local = coeff[cells.ravel()] @ table
-            _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
-    return data
-
-
 def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.ndarray:
-    """Data (nnz,) of ``alpha M + beta L`` on ``space``'s scalar pattern, one GEMM per batch
-    (:attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace`: the Laplacian's symmetric pairs of
-    axes folded, 7 rows per point in 3D instead of the 10 of a mass and a Laplace table)."""
+    """Data (nnz,) of ``alpha M + beta L`` on ``space``'s scalar pattern, one GEMM per batch: the
+    cells' weights of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace_axes` (``1 + d``
+    per cell) where the cells are axis-aligned boxes (:attr:`~fbmflow.fem.space.FlowSpace.cell_axes`),
+    else the coefficients of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace` at every
+    point (the Laplacian's symmetric pairs of axes folded, 7 rows per point in 3D)."""
     data = np.zeros(space.nnz)
-    table = space.table_mass_laplace
+    axes = space.cell_axes
+    if axes is not None:
+        table = space.table_mass_laplace_axes
+        scale = np.array([alpha] + [beta] * space.dim)
+    else:
+        table = space.table_mass_laplace
     with single_threaded_blas():
         for cells in space.batches:
             c = cells.ravel()
-            local = _kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta) @ table
+            if axes is not None:
+                local = (axes[c] * scale) @ table
+            else:
+                local = _kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta) @ table
             _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
     return data
 
 
 def assemble_mass(space: FlowSpace) -> np.ndarray:
     """Data (nnz,) of the scalar Q2 mass matrix on ``space``'s pattern."""
-    return _assemble_scalar(space, space.detJw, space.table_mass)
+    return assemble_mass_laplace(space, 1.0, 0.0)
 
 
 def assemble_laplace(space: FlowSpace) -> np.ndarray:

@@ -216,6 +216,38 @@ class FlowSpace:
         folded = np.stack(rows, axis=1)  # (nq, pairs, nl, nl)
         return np.vstack([self.table_mass, folded.reshape(folded.shape[0] * folded.shape[1], -1)])
 
+    @cached_property
+    def cell_axes(self) -> np.ndarray | None:
+        """Where every cell's map is affine and axis-aligned (a box or rectilinear mesh: ``d xi /
+        d x`` one diagonal matrix per cell), per cell ``det J`` and ``det J (d xi_l / d x_l)^2``
+        for every axis ``l``: (n_cells, 1 + d) float64, the cell's weights of the rows of
+        :attr:`table_mass_laplace_axes`; else None."""
+        J = self.Jinv
+        if J.shape[1] > 1 and J.strides[1] != 0:  # not one matrix per cell: not affine
+            return None
+        J = J[:, 0]
+        diagonal = np.einsum("cll->cl", J)
+        size = np.abs(diagonal).sum(axis=1)
+        if (np.abs(J).sum(axis=(1, 2)) - size > 1e-13 * size).any():  # a cell's axes turned
+            return None
+        det = self.detJw[:, 0] / self.weights[0]
+        return np.column_stack([det, det[:, None] * diagonal**2])
+
+    @cached_property
+    def table_mass_laplace_axes(self) -> np.ndarray:
+        """:attr:`table_mass_laplace` summed over the points for a cell of :attr:`cell_axes`
+        (``det J`` the same at every point, the Laplacian's pairs ``l != m`` zero): the mass
+        table's rows weighted, then for every axis ``l`` the Laplacian's ``(l, l)`` rows
+        weighted, (1 + d, nl * nl). The local ``alpha M + beta L`` of such a cell is its
+        :attr:`cell_axes` row, the first entry times ``alpha`` and the others ``beta``, times
+        this table: ``1 + d`` products per entry instead of ``nq (1 + d (d + 1) / 2)``."""
+        d, w = self.dim, self.weights
+        nq, pairs = w.size, d * (d + 1) // 2
+        table = self.table_mass_laplace
+        diagonal = [k for k, (a, b) in enumerate((a, b) for a in range(d) for b in range(a, d)) if a == b]
+        laplace = table[nq:].reshape(nq, pairs, -1)
+        return np.vstack([w @ table[:nq]] + [w @ laplace[:, k] for k in diagonal])
+
     # -- helpers ------------------------------------------------------------------------------
     def free_node_components(self, free: np.ndarray) -> np.ndarray:
         """Labels (n_v,) int64 of the connected components of the ``free`` (n_v,) bool velocity

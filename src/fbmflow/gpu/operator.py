@@ -39,7 +39,8 @@ def _matrix_free(A) -> bool:
 class _Blocks:
     """The assembled blocks of ``system`` on the device, ``A`` its velocity block (or a Newton
     block's assembled part): ``A`` as ``S`` and its replaced rows where it is a
-    :class:`~fbmflow.fem.velocity_block.VelocityBlock`, else as a CSR matrix; the gradient
+    :class:`~fbmflow.fem.velocity_block.VelocityBlock` (its values copied, the space's pattern
+    kept), else as a CSR matrix; the gradient
     ``B`` (the transpose of ``gradient_BT``, kept, its rows ``zero`` zeroed in the product; else
     a CSR matrix), the continuity rows ``D`` (a continuity block's divergence, kept, its rows
     ``changed`` those of ``changed_rows``; else a CSR matrix), the pressure block ``C`` (None
@@ -52,14 +53,20 @@ class _Blocks:
         self.S = self.A = None
         #: the host values of the velocity matrix held (``S``'s or ``A``'s)
         self.values = getattr(A, "data", None)
-        if isinstance(A, VelocityBlock):
-            self.S, self.R = csr(A.scalar()), csr(A.rows)
+        self.kept = []
+        if isinstance(A, VelocityBlock):  # the values copied, the space's pattern kept
+            space = A.space
+            pattern = backend.kept(space, "scalar pattern",
+                                   lambda s: (put(s.indices, np.int32), put(s.indptr, np.int32)))
+            self.kept.append(pattern)
+            self.S = backend.sparse.csr_matrix((put(A.data), *pattern), shape=(space.n_v, space.n_v))
+            self.R = csr(A.rows)
             self.replaced = backend.put(A.dofs)
-            self.d, self.n_v = A.space.dim, A.space.n_v
+            self.d, self.n_v = space.dim, space.n_v
+            own = [self.S.data, self.R, self.replaced]
         else:
             self.A = csr(A)
-        own = [self.S, self.A] + ([] if self.S is None else [self.R, self.replaced])
-        self.kept = []
+            own = [self.A]
         self.zero = None
         if system.gradient_BT is not None:
             self.B = backend.kept(system.gradient_BT, "transposed", lambda M: csr(M.T))
