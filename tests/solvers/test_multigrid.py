@@ -328,6 +328,29 @@ def test_a_picard_hierarchy_preconditions_the_newton_time_step(dim, n):
     assert prob.linear_system(x, 0.0, 1.0, con).A.newton_base  # steady: auto keeps Newton
 
 
+@pytest.mark.parametrize("dim, n", [(2, 16), (3, 6)])
+def test_a_moved_newton_block_times_a_sparse_matrix_makes_coefficients_near_its_columns(dim, n):
+    """The rigid responses' product ``A W`` with a sparse ``W`` (a few nodes' columns): the
+    Newton terms' coefficients computed on the cells the columns touch only, the whole mesh's
+    left unmade (a GPU's solves need none on the CPU), and the product the dense one's."""
+    prob, mg, x, con, F = _cavity_system(n, dim, re=100, smoother="vanka-factored", krylov="fgmres")
+    system = prob.linear_system(x, 100.0, 1.0, con)
+    A, space = system.A, prob.space
+    assert isinstance(A, NewtonBlock)
+    rng = np.random.default_rng(5)
+    A.relinearise(x[:system.n_u] + rng.standard_normal(system.n_u))  # Newton term and drift
+    nodes = np.flatnonzero(np.all(np.abs(space.V.coordinates - 0.5) < 0.2, axis=1))
+    rows = np.concatenate([nodes + k * space.n_v for k in range(dim)])
+    W = sp.csc_matrix((rng.standard_normal(rows.size), (rows, rng.integers(0, 3, rows.size))),
+                      shape=(system.n_u, 3))
+    sparse = A @ W
+    assert A._react is None and A._drift is None  # nothing made on the whole mesh
+    dense = A @ W.toarray()  # the whole mesh's coefficients
+    assert A._react is not None and A._drift is not None
+    assert np.abs(sparse - dense).max() <= 1e-13 * np.abs(dense).max()
+    assert np.abs(A @ W - dense).max() <= 1e-13 * np.abs(dense).max()  # from the whole mesh's now
+
+
 def test_factored_vanka_takes_the_cycles_of_vanka_full():
     counts = {s: _solve(*_cavity_system(32, re=100, smoother=s, krylov="fgmres"))[0].iterations
               for s in ("vanka-full", "vanka-factored")}

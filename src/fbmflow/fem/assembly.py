@@ -159,11 +159,24 @@ def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
     return np.einsum("cq,cqm->cm", space.detJw, space.psi).ravel()
 
 
-def velocity_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
+def velocity_coefficients(space: FlowSpace, u: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
     """``|det J| w_q u_k`` at every quadrature point, (n_cells, nq, dim) float64: what
-    :func:`apply_convection` needs of a convecting velocity ``u`` (dim * n_v,)."""
+    :func:`apply_convection` needs of a convecting velocity ``u`` (dim * n_v,). ``cells`` (m,)
+    int64: computed on these cells only, zero on the others (:func:`_on_cells`)."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
-    return _kernels.velocity_coefficients(uu, space.V.cell_dofs, space.phi, space.detJw)
+    if cells is None:
+        return _kernels.velocity_coefficients(uu, space.V.cell_dofs, space.phi, space.detJw)
+    return _on_cells(space, cells, _kernels.velocity_coefficients(uu, space.V.cell_dofs[cells], space.phi,
+                                                                  space.detJw[cells]))
+
+
+def _on_cells(space: FlowSpace, cells: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per-cell ``values`` (m, ...) of ``cells`` (m,) in an array of every cell, zero on the
+    others: a few cells' coefficients for the kernels that index them by cell (the pages of the
+    others are never written, and the system commits no memory to them)."""
+    out = np.zeros((space.mesh.n_cells,) + values.shape[1:], dtype=values.dtype)
+    out[cells] = values
+    return out
 
 
 def apply_convection(space: FlowSpace, u: np.ndarray, scale: float, out: np.ndarray,
@@ -200,13 +213,17 @@ def _apply_cells(space: FlowSpace, alpha: float, beta: float, gamma: float, u: n
                                      alpha, beta, gamma, conv, uu, target)
 
 
-def reaction_coefficients(space: FlowSpace, u: np.ndarray) -> np.ndarray:
+def reaction_coefficients(space: FlowSpace, u: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
     """``|det J| w_q d u_i / d x_k`` at every quadrature point, (n_cells, nq, dim, dim) float32
     (a Jacobian's term: half the bytes, ten Cate level 2 67 -> 33 per unknown): what
-    :func:`apply_reaction` needs of the velocity ``u`` (dim * n_v,)."""
+    :func:`apply_reaction` needs of the velocity ``u`` (dim * n_v,). ``cells`` (m,) int64:
+    computed on these cells only, zero on the others (:func:`_on_cells`)."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
-    return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
-                                          space.Jinv)
+    if cells is None:
+        return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
+                                              space.Jinv)
+    return _on_cells(space, cells, _kernels.reaction_coefficients(
+        uu, space.V.cell_dofs[cells], space.phi, space.dphi, space.detJw[cells], space.Jinv[cells]))
 
 
 def apply_mass_laplace(space: FlowSpace, alpha: float, beta: float, u: np.ndarray,

@@ -90,8 +90,9 @@ class NewtonBlock:
         against 1.1 s on the whole mesh).
 
         The terms' coefficients (:attr:`react`, :attr:`drift`) are computed at the first product
-        on the CPU after the move, not here: a solver that applies the block elsewhere (the
-        GPU's, from ``reacting`` and ``drifting``) leaves the CPU's unmade."""
+        with a vector on the CPU after the move, not here: a solver that applies the block
+        elsewhere (the GPU's, from ``reacting`` and ``drifting``) leaves the CPU's unmade; a
+        product with a sparse matrix makes them on the cells its columns touch only."""
         s = self.space
         drift = u - self.u0
         size = np.abs(drift).reshape(s.dim, s.n_v).max(axis=0)
@@ -132,13 +133,17 @@ class NewtonBlock:
             self._drift_groups = self.space.cell_groups(self.drift_cells)
         return self._drift_groups
 
-    def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
-        """What the Newton block adds to ``A v``, with the constrained rows zero, (n_u,)."""
+    def _newton_terms(self, v: np.ndarray, cells: np.ndarray | None = None,
+                      coefficients: tuple | None = None) -> np.ndarray:
+        """What the Newton block adds to ``A v``, with the constrained rows zero, (n_u,):
+        on ``cells`` only where given, from ``coefficients`` (``(react, drift)``, which hold
+        those cells' at least) where given, else from :attr:`react` and :attr:`drift`."""
+        react, drift = coefficients or (self.react, self.drift)
         out = np.zeros(v.size)
-        if self.react is not None:
-            apply_reaction(self.space, self.react, v, self.scale, out, cells=cells)
-        if self.drift is not None:
-            apply_convection(self.space, v, self.scale, out, conv=self.drift, groups=self.drift_groups,
+        if react is not None:
+            apply_reaction(self.space, react, v, self.scale, out, cells=cells)
+        if drift is not None:
+            apply_convection(self.space, v, self.scale, out, conv=drift, groups=self.drift_groups,
                              cells=None if cells is None else cells[self.drift_cells[cells]])
         out[self.constrained] = 0.0
         return out
@@ -154,14 +159,28 @@ class NewtonBlock:
         return matvec(self.base, v) + self._newton_terms(v)
 
     def _sparse(self, W: sp.csc_matrix) -> np.ndarray:
+        """``self @ W`` column by column on the cells each column touches. The coefficients
+        where the CPU has made them, else on those cells only (the rigid responses' right-hand
+        sides, where the solves apply the block on a GPU: ten Cate level 2, 0.5 s of whole-mesh
+        coefficients per step on 2 cores otherwise)."""
         out = (self.base @ W).toarray()
         s = self.space
+
+        def touched(rows):  # the cells that hold the nodes of the unknowns ``rows``
+            return np.unique(s.node_cells[np.unique(rows % s.n_v)].indices)
+
+        near = touched(W.indices)
+        react = self._react
+        if react is None and self.reacting is not None:
+            react = reaction_coefficients(s, self.reacting, cells=near)
+        drift = self._drift
+        if drift is None and self.drifting is not None:
+            drift = velocity_coefficients(s, self.drifting, cells=near[self.drift_cells[near]])
         for k in range(W.shape[1]):
             rows = W.indices[W.indptr[k]:W.indptr[k + 1]]
             if rows.size == 0:
                 continue
-            cells = np.unique(s.node_cells[np.unique(rows % s.n_v)].indices)
-            out[:, k] += self._newton_terms(W[:, k].toarray().ravel(), cells)
+            out[:, k] += self._newton_terms(W[:, k].toarray().ravel(), touched(rows), (react, drift))
         return out
 
 
