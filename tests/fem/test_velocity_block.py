@@ -86,6 +86,9 @@ def test_products_match_the_assembled_block(case):
     assert np.allclose(block @ X, ref @ X, rtol=1e-14, atol=1e-14)
     W = sp.random(space.n_u, 4, density=0.05, random_state=3, format="csc")
     assert abs(block @ W - ref @ W).max() < 1e-14
+    local = [1, space.n_v + 1, 2 * space.n_v - 1]  # two nodes' columns: the rows near them only
+    W = sp.csc_matrix((rng.standard_normal(3), (local, [0, 1, 1])), shape=(space.n_u, 2))
+    assert abs(block @ W - ref @ W).max() == 0.0 and (block @ W).nnz > 0
     assert np.array_equal(block.diagonal(), ref.diagonal())
 
 

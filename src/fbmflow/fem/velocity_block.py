@@ -108,9 +108,18 @@ class VelocityBlock:
         return out
 
     def _sparse(self, W: sp.csr_matrix) -> sp.csr_matrix:
+        """``self @ W`` from the rows of ``S`` that reach ``W``'s non-zero rows only: the
+        pattern is symmetric (nodes that share a cell), so those are the rows of the nodes in
+        theirs (a rigid response's liftings, on one particle's nodes: ten Cate level 2, 0.38 s
+        of a step on the whole ``S`` otherwise)."""
         s = self.space
         S = self.scalar()
-        out = sp.vstack([S @ W[i * s.n_v:(i + 1) * s.n_v] for i in range(s.dim)], format="csr")
+        nodes = np.unique(np.flatnonzero(np.diff(W.indptr)) % s.n_v)
+        near = np.unique(S[nodes].indices)
+        local = sp.vstack([S[near] @ W[i * s.n_v:(i + 1) * s.n_v] for i in range(s.dim)], format="csr")
+        rows = np.concatenate([i * s.n_v + near for i in range(s.dim)])
+        out = sp.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))),
+                            shape=(self.shape[0], rows.size)) @ local
         keep = np.ones(self.shape[0])
         keep[self.dofs] = 0.0
         embed = sp.csr_matrix((np.ones(self.dofs.size), (self.dofs, np.arange(self.dofs.size))),
