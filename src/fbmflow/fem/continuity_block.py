@@ -149,17 +149,15 @@ class ContinuityBlock:
 
     def __matmul__(self, v):
         """Product with a vector (n_u,) (float64 result, rows in parallel), a dense matrix
-        (n_u, k) (dense) or a sparse one (CSR)."""
+        (n_u, k) (dense, column by column) or a sparse one (CSR)."""
         if sp.issparse(v):
             out = sp.csr_matrix(self.base @ v)
             keep = np.ones(self.shape[0])
             keep[self.dofs] = 0.0
             return (sp.diags(keep) @ out + self.changed_rows() @ v).tocsr()
         v = np.asarray(v, dtype=np.float64)
-        if v.ndim == 2:
-            out = np.asarray(self.base @ v)
-            out[self.dofs] = self.rows @ v
-            return out
+        if v.ndim == 2:  # column by column, each in parallel
+            return np.column_stack([self @ v[:, k] for k in range(v.shape[1])]).reshape(self.shape[0], -1)
         out = np.empty(self.shape[0])
         _kernels.uniform_rows_apply(self.base.indices, self.base.data, self.width, np.ascontiguousarray(v),
                                     out)

@@ -22,12 +22,14 @@ import scipy.sparse as sp
 
 from ..fem import FlowSpace, assemble_load
 from ..fem.constraints import DirichletConstraints
+from ..fem.continuity_block import ContinuityBlock
 from ..mesh import StructuredMesh
 from ..solvers import ConvergenceError, NewtonSettings, SaddlePointSystem, solve_newton
 from ..solvers.base import Factorization, LinearSolver
 from ..solvers.choice import choose_linear_solver
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.reports import LinearWork
+from ..solvers.sparse import cell_transposed_matvec
 from ..solvers.system import balance_volume, orphan_pressure_modes
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, NewtonBlock, coarse_levels, inject_velocity
@@ -255,7 +257,8 @@ class NavierStokesProblem:
         """
         n_u = self.space.n_u
         u, p = x[:n_u], x[n_u:]
-        Fu = self._apply_operator(u, m, a) + self.BT.T @ p - rhs
+        gradient = cell_transposed_matvec(self.BT, p, self.space.colour_groups, self.space.dim + 1)
+        Fu = self._apply_operator(u, m, a) + gradient - rhs
         Fu[con.dofs] = 0.0
         Fp = self._continuity(u[:, None], con, orphans)[:, 0]
         if con.rows is not None:  # row constraints, scaled as in the linear system
@@ -272,8 +275,7 @@ class NavierStokesProblem:
         box, the volume defect of the prescribed velocities taken out as the linear solvers do
         (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense."""
         if con.continuity is None:
-            Fp = self.BT @ U
-            Fp = Fp.toarray() if sp.issparse(Fp) else Fp
+            Fp = (self.BT @ U).toarray() if sp.issparse(U) else ContinuityBlock(self.BT) @ U
         else:  # without a copy of B^T, which would raise the Newton iteration's peak
             Fp = con.continuity.product(self.BT, U)
         if con.extension is not None:
