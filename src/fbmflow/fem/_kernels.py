@@ -616,25 +616,29 @@ def _root(parent, i):
 
 
 @njit
-def free_components(indptr, indices, free):
-    """Connected components of the ``free`` nodes of a symmetric sparsity pattern
-    ``(indptr, indices)`` (two free nodes are joined where the pattern links them): a label per
-    node, the smallest node index of its component, -1 for nodes that are not free. Union-find
-    over the pattern's entries, O(nnz)."""
+def free_components(cell_dofs, free):
+    """Connected components of the ``free`` nodes, two free nodes joined where they share a cell
+    (``cell_dofs`` (n_cells, nl)): a label per node, the smallest node index of its component, -1
+    for nodes that are not free. Union-find joining every cell's free nodes to its first free one
+    (the same components as joining every pair), O(n_cells nl): ten Cate level 2 5.5 M unions
+    instead of the scalar pattern's 36 M entries."""
     n = free.size
     parent = np.arange(n)
-    for i in range(n):
-        if not free[i]:
-            continue
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            if j > i and free[j]:
-                a, b = _root(parent, i), _root(parent, j)
-                if a != b:
-                    if a < b:
-                        parent[b] = a
-                    else:
-                        parent[a] = b
+    for c in range(cell_dofs.shape[0]):
+        first = -1
+        for a in range(cell_dofs.shape[1]):
+            j = cell_dofs[c, a]
+            if not free[j]:
+                continue
+            if first < 0:
+                first = _root(parent, j)
+                continue
+            b = _root(parent, j)
+            if b < first:
+                parent[first] = b
+                first = b
+            elif b > first:
+                parent[b] = first
     labels = np.full(n, -1, dtype=np.int64)
     for i in range(n):
         if free[i]:

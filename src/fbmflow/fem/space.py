@@ -253,7 +253,7 @@ class FlowSpace:
         """Labels (n_v,) int64 of the connected components of the ``free`` (n_v,) bool velocity
         nodes, two nodes joined where they share a cell (the smallest node index of the
         component); -1 where not free."""
-        return _kernels.free_components(self.indptr, self.indices, np.asarray(free, dtype=np.bool_))
+        return _kernels.free_components(self.V.cell_dofs, np.asarray(free, dtype=np.bool_))
 
     def scalar_matrix(self, data: np.ndarray) -> sp.csr_matrix:
         """CSR matrix on the scalar Q2 pattern with the given data (no copy)."""
