@@ -162,7 +162,7 @@ def pressure_mean_weights(space: FlowSpace) -> np.ndarray:
 def velocity_coefficients(space: FlowSpace, u: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
     """``|det J| w_q u_k`` at every quadrature point, (n_cells, nq, dim) float64: what
     :func:`apply_convection` needs of a convecting velocity ``u`` (dim * n_v,). ``cells`` (m,)
-    int64: computed on these cells only, zero on the others (:func:`_on_cells`)."""
+    int64: computed on these cells only, zero on the others (whose memory is never written)."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     if cells is None:
         return _kernels.velocity_coefficients(uu, space.V.cell_dofs, space.phi, space.detJw)
@@ -217,7 +217,7 @@ def reaction_coefficients(space: FlowSpace, u: np.ndarray, cells: np.ndarray | N
     """``|det J| w_q d u_i / d x_k`` at every quadrature point, (n_cells, nq, dim, dim) float32
     (a Jacobian's term: half the bytes, ten Cate level 2 67 -> 33 per unknown): what
     :func:`apply_reaction` needs of the velocity ``u`` (dim * n_v,). ``cells`` (m,) int64:
-    computed on these cells only, zero on the others (:func:`_on_cells`)."""
+    computed on these cells only, zero on the others (whose memory is never written)."""
     uu = np.ascontiguousarray(u.reshape(space.dim, space.n_v))
     if cells is None:
         return _kernels.reaction_coefficients(uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw,
