@@ -294,6 +294,17 @@ def test_mass_laplace_coefficients(space):
     assert_rel(out[:, nq:], ref[:, :, upper[0], upper[1]].reshape(n, -1))
 
 
+@pytest.mark.parametrize("chunks", [1, 3, 7])
+def test_rows_times_is_the_matrix_product(chunks):
+    """Chunks of rows, one BLAS product each, in parallel: ``a @ b`` whatever the chunks (7 chunks
+    of 5 rows: two empty)."""
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((5, 4)), rng.standard_normal((4, 6))
+    out = np.full((5, 6), np.nan)
+    _kernels.rows_times(a, b, out, chunks)
+    assert_rel(out, a @ b)
+
+
 def _dense_scalar(space, data):
     return space.scalar_matrix(data).toarray()
 

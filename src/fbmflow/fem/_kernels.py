@@ -119,6 +119,19 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
 
 
 @njit(parallel=True)
+def rows_times(a, b, out, chunks):
+    """``out = a @ b`` for C-contiguous float64 ``a (m, k)``, ``b (k, n)``, ``out (m, n)``: the
+    rows of ``a`` in ``chunks`` contiguous chunks, one BLAS product each, the chunks in parallel
+    (a batch's local matrices from its coefficients and a reference table on every thread; BLAS
+    itself on one thread, :func:`~fbmflow.fem.assembly.single_threaded_blas`)."""
+    m = a.shape[0]
+    for k in prange(chunks):
+        lo, hi = m * k // chunks, m * (k + 1) // chunks
+        if hi > lo:
+            np.dot(a[lo:hi], b, out[lo:hi])
+
+
+@njit(parallel=True)
 def mass_laplace_coefficients(detJw, Jinv, alpha, beta):
     """The coefficients of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace` per cell:
     ``alpha detJw[q]`` for every point ``q``, then ``beta detJw[q] (Jinv Jinv^T)[l, m]`` for every

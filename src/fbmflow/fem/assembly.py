@@ -30,22 +30,38 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
+from .._jit import numba_threads
 from . import _kernels
 from .space import FlowSpace
 
 
 @functools.cache
 def _threadpool_controller() -> ThreadpoolController:
+    import scipy.linalg.cython_blas  # noqa: F401  (the BLAS of Numba's np.dot, loaded before the look)
+
     return ThreadpoolController()
 
 
 def single_threaded_blas():
-    """Context in which BLAS runs on one thread.
+    """Context in which BLAS runs on one thread (NumPy's and the one Numba's kernels call).
 
     The assembly alternates small BLAS GEMMs with Numba parallel loops; with both thread pools
-    active on 2 cores they oversubscribe and each phase slows down several-fold (measured).
+    active on 2 cores they oversubscribe and each phase slows down several-fold (measured). The
+    GEMMs run on Numba's threads instead, a chunk of rows each (:func:`_times`).
     """
     return _threadpool_controller().limit(limits=1, user_api="blas")
+
+
+def _times(a: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """``a @ table`` (m, n) on every Numba thread, a chunk of ``a``'s rows each, inside
+    :func:`single_threaded_blas` (NumPy's product there runs on one core: some 0.3 s of a ten Cate
+    level-2 step, serial; 512 x 81 times 81 x 729, a 3D batch's convection: 1.95 times as fast on
+    2 cores)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    out = np.empty((a.shape[0], table.shape[1]))
+    _kernels.rows_times(a, np.ascontiguousarray(table, dtype=np.float64), out,
+                        max(1, min(a.shape[0], numba_threads())))
+    return out
 
 
 def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.ndarray:
@@ -65,9 +81,10 @@ def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.nda
         for cells in space.batches:
             c = cells.ravel()
             if axes is not None:
-                local = (axes[c] * scale) @ table
+                local = _times(axes[c] * scale, table)
             else:
-                local = _kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta) @ table
+                local = _times(_kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta),
+                               table)
             _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
     return data
 
@@ -105,9 +122,9 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
         for cells in space.batches:
             conv, react = _kernels.convection_coefficients(
                 cells.ravel(), uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
-            local = conv @ space.table_convection
+            local = _times(conv, space.table_convection)
             if newton:
-                _kernels.scatter_coupled(cells, local, react @ mass_upper, sym, scale, space.offsets,
+                _kernels.scatter_coupled(cells, local, _times(react, mass_upper), sym, scale, space.offsets,
                                          space.V.cell_dofs, space.indptr, d, newton_out)
             else:
                 local *= scale
