@@ -37,7 +37,8 @@ defaults with multigrid (``solver.linear = multigrid``):
   and FGMRES's basis; and the seconds per step left on the CPU, the step less the work a GPU
   does (the solves, the flow problem's residuals, the smoothers' factors and a moved Newton
   block's coefficients, timed; the copy of the factors, which a GPU computes where they stay,
-  counts as the CPU's);
+  counts as the CPU's) and less the copies to the device (timed and counted apart: NumPy's copies
+  of fresh memory here, a transfer on a GPU, whose speed is the ``gpu`` row's);
 * ``gpu``: ``solver.device = gpu`` (a machine with a GPU and the ``gpu`` extra), counting the GPU
   kernels' launches per step and the host's seconds in them (numba-cuda prepares a launch's
   arguments on the host: where those seconds approach the cycles', the cycles are bound by the
@@ -68,6 +69,7 @@ import resource
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 from studies.thread_scaling import BENCHMARKS, RESULTS, commit, machine
@@ -89,14 +91,15 @@ def _count_device_arrays(record: dict) -> None:
     import fbmflow.gpu.multigrid as gm
     import fbmflow.gpu.operator as go
     from fbmflow.fem import _kernels as cpu
-    from fbmflow.gpu.device import simulated_backend
+    from fbmflow.gpu.device import Backend, simulated_backend
     from fbmflow.solvers import _kernels as vanka_kernels
     from fbmflow.solvers.base import LinearSolver
 
-    record["device_work_s"] = 0.0
+    record["device_work_s"] = record["copy_s"] = record["copy_bytes"] = 0.0
 
-    def device_work(work):
-        """``work`` timed as the GPU's, out of a profile of the step (:func:`_profile_step`)."""
+    def device_work(work, key="device_work_s"):
+        """``work`` timed as the GPU's (``key``: or as the copies to it), out of a profile of the
+        step (:func:`_profile_step`)."""
         def timed(*args, **kwargs):
             if _PROFILER is not None:
                 _PROFILER.disable()
@@ -104,10 +107,17 @@ def _count_device_arrays(record: dict) -> None:
             try:
                 return work(*args, **kwargs)
             finally:
-                record["device_work_s"] += time.perf_counter() - t0
+                record[key] += time.perf_counter() - t0
                 if _PROFILER is not None:
                     _PROFILER.enable()
         return timed
+
+    copy = device_work(Backend.put, "copy_s")
+
+    def put(self, a, dtype=None):  # a copy to the device: on a GPU a transfer, not the CPU's work
+        out = copy(self, a, dtype)
+        record["copy_bytes"] += out.nbytes
+        return out
 
     def react(u, cell_dofs, phi, dphi, detJw, Jinv, out, threads):  # the CPU's kernel, no GPU here
         out[...] = cpu.reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv)
@@ -117,7 +127,13 @@ def _count_device_arrays(record: dict) -> None:
 
     go.reaction_coefficients, go.velocity_coefficients = device_work(react), device_work(drift)
     gm.gpu_problem = lambda: None
-    gm.gpu_backend = simulated_backend
+
+    def backend():
+        made = simulated_backend()
+        made.put = types.MethodType(put, made)
+        return made
+
+    gm.gpu_backend = backend
     gm.DeviceMultigridSolver.host_factors = True
     gm.DeviceMultigridSolver.velocity_operator = (
         lambda self, space: device_work(LinearSolver.velocity_operator(self, space)))
@@ -165,22 +181,24 @@ def measure(scene_name: str, level: int, row: str, steps: int, profile: Path | N
     for _ in range(steps):
         hierarchy[0] = hierarchy[1] = 0.0
         if "device_work_s" in record:
-            record["device_work_s"] = 0.0
+            record["device_work_s"] = record["copy_s"] = record["copy_bytes"] = 0.0
         before = dict(counts) if counts else None
         t0 = time.perf_counter()
         rep = sim.step(setup.dt)
         out.append(dict(wall_s=time.perf_counter() - t0, solves=rep.linear.solves,
                         cycles=rep.linear.iterations, linear_s=rep.linear.time_s, setup_s=hierarchy[0],
                         factors_s=hierarchy[1]))
-        if "device_work_s" in record:  # the step less what the GPU would do: the CPU's share
-            out[-1]["host_s"] = out[-1]["wall_s"] - record["device_work_s"]
+        if "device_work_s" in record:  # the step less what the GPU would do and the copies to it
+            out[-1]["host_s"] = out[-1]["wall_s"] - record["device_work_s"] - record["copy_s"]
+            out[-1].update(copy_s=record["copy_s"], copy_bytes=record["copy_bytes"])
         if counts:
             out[-1].update({key: counts[key] - before[key] for key in counts})
     velocity = sim.particles.velocity
     if profile:
         _profile_step(sim, setup.dt, profile, f"{scene_name} level {level}, row {row}: step {steps + 1}",
                       record)
-    record.pop("device_work_s", None)
+    for key in ("device_work_s", "copy_s", "copy_bytes"):
+        record.pop(key, None)
     return dict(scene=scene_name, level=level, row=row, unknowns=sim.flow.n_dofs, steps=out,
                 particle_velocity=[float(v) for v in velocity[0]] if len(velocity) else [],
                 solver=sim.flow.linear_solver_description,
@@ -192,7 +210,7 @@ def _profile_step(sim, dt: float, path: Path, title: str, record: dict) -> None:
     ``path``; in the arrays row without the work a GPU does (its seconds in the title)."""
     global _PROFILER
     profiler = _PROFILER = cProfile.Profile()
-    record["device_work_s"] = 0.0
+    record["device_work_s"] = record["copy_s"] = 0.0
     t0 = time.perf_counter()
     profiler.enable()
     sim.step(dt)
@@ -202,8 +220,10 @@ def _profile_step(sim, dt: float, path: Path, title: str, record: dict) -> None:
     text = io.StringIO()
     text.write(f"{title}, {wall:.2f} s under cProfile")
     if record["device_work_s"]:
+        left = wall - record["device_work_s"] - record["copy_s"]
         text.write(f", {record['device_work_s']:.2f} s of it the GPU's work (solves, residuals, factors, "
-                   f"coefficients), not profiled: {wall - record['device_work_s']:.2f} s left on the CPU")
+                   f"coefficients) and {record['copy_s']:.2f} s the copies to it, not profiled: "
+                   f"{left:.2f} s left on the CPU")
     text.write("\n")
     for order in ("tottime", "cumulative"):
         pstats.Stats(profiler, stream=text).sort_stats(order).print_stats(40)
@@ -222,11 +242,12 @@ def table(rows: list[dict]) -> str:
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
              "| s per step left on the CPU (arrays: the step less its solves, residuals, factors and "
-             "Newton coefficients) "
+             "Newton coefficients, and its copies to the device where the next column gives them) "
+             "| copies to the device per step: bytes per unknown (s as NumPy copies) "
              "| device bytes per unknown (hierarchy + basis) "
              "| GPU kernel launches per step (host s in them) "
              "| particle 0's vertical velocity after the steps | peak host GB | machine | measured | tag |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         later = r["steps"][1:] or r["steps"]
         step_s = sum(s["wall_s"] for s in later) / len(later)
@@ -248,6 +269,10 @@ def table(rows: list[dict]) -> str:
                 bound += f" / {step_s / (step_s - cycles_s - factors_s):.2f}"
         host = (f"{sum(s['host_s'] for s in later) / len(later):.2f}"
                 if all("host_s" in s for s in later) else "–")
+        copies = "–"
+        if all("copy_bytes" in s for s in later):
+            copies = (f"{sum(s['copy_bytes'] for s in later) / len(later) / r['unknowns']:.0f} "
+                      f"({sum(s['copy_s'] for s in later) / len(later):.2f})")
         cycle_s = (linear_s - sum(s.get("setup_s", 0.0) for s in later)) / max(cycles, 1)
         vertical = f"{r['particle_velocity'][-1]:.9g}" if r.get("particle_velocity") else "–"
         launches = "–"
@@ -256,7 +281,7 @@ def table(rows: list[dict]) -> str:
                         f"({sum(s['launch_s'] for s in later) / len(later):.2f})")
         lines.append(f"| {r['scene']} | {r['level']} | {r['unknowns']} | {r['row']} | {r['solver']} | "
                      f"{len(r['steps'])} | {step_s:.2f} | {cycles / max(solves, 1):.2f} | {cycle_s:.3f} | "
-                     f"{split} | {bound} | {host} | {device} | {launches} | {vertical} | "
+                     f"{split} | {bound} | {host} | {copies} | {device} | {launches} | {vertical} | "
                      f"{r['peak_rss_gb']:.2f} | {r['machine']} | "
                      f"{r['measured']} | {r['tag']} |")
     return "\n".join(lines) + "\n"
