@@ -96,11 +96,15 @@ def _count_device_arrays(record: dict) -> None:
     from fbmflow.solvers.base import LinearSolver
 
     record["device_work_s"] = record["copy_s"] = record["copy_bytes"] = 0.0
+    depth = [0]  # how many timed calls are under way: one inside another counts as the outer one
 
     def device_work(work, key="device_work_s"):
         """``work`` timed as the GPU's (``key``: or as the copies to it), out of a profile of the
-        step (:func:`_profile_step`)."""
+        step (:func:`_profile_step`); within another such call, part of that one's time."""
         def timed(*args, **kwargs):
+            if depth[0]:
+                return work(*args, **kwargs)
+            depth[0] += 1
             if _PROFILER is not None:
                 _PROFILER.disable()
             t0 = time.perf_counter()
@@ -108,15 +112,19 @@ def _count_device_arrays(record: dict) -> None:
                 return work(*args, **kwargs)
             finally:
                 record[key] += time.perf_counter() - t0
+                depth[0] -= 1
                 if _PROFILER is not None:
                     _PROFILER.enable()
         return timed
 
     copy = device_work(Backend.put, "copy_s")
 
-    def put(self, a, dtype=None):  # a copy to the device: on a GPU a transfer, not the CPU's work
+    def put(self, a, dtype=None):
+        """A copy to the device (on a GPU a transfer, not the CPU's work): a set-up's, counted,
+        or within a solve, part of the solve's time."""
+        outside = not depth[0]
         out = copy(self, a, dtype)
-        record["copy_bytes"] += out.nbytes
+        record["copy_bytes"] += out.nbytes if outside else 0
         return out
 
     def react(u, cell_dofs, phi, dphi, detJw, Jinv, out, threads):  # the CPU's kernel, no GPU here
