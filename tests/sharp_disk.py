@@ -2,9 +2,10 @@
 import numpy as np
 
 
-def sharp_disk_problem(mesh, centre, radius):
+def sharp_disk_problem(mesh, centre, radius, linear_solver=None):
     """A backward-Euler problem (dt 0.01, no-slip walls) on the 2D ``mesh`` with a sharp-boundary
-    disk of ``radius`` at ``centre`` moving down at 1, and its constraints."""
+    disk of ``radius`` at ``centre`` moving down at 1, and its constraints; ``linear_solver``: the
+    problem's (default: its own choice)."""
     from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
     from fbmflow.flow import NavierStokesProblem, NoSlip
     from fbmflow.particles import Ball
@@ -14,7 +15,10 @@ def sharp_disk_problem(mesh, centre, radius):
     def ball(V, t):
         owner = node_owner(V, centre, shapes)
         rigid = rigid_body_constraints(V, owner, centre, vel, ang)
+        if V is not prob.space.V:  # a coarser multigrid level: the nodes' constraints only
+            return rigid
         return sharp_boundary(prob.space, owner, centre, shapes).constraints(rigid, vel, ang)
 
-    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball)
+    prob = NavierStokesProblem(mesh, 0.01, {t: NoSlip() for t in mesh.tags}, extra_constraints=ball,
+                              linear_solver=linear_solver)
     return prob, prob.constraints()

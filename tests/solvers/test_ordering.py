@@ -5,8 +5,10 @@ import pytest
 import scipy.sparse as sp
 from sharp_disk import sharp_disk_problem
 
+from fbmflow.fem.continuity_block import ContinuityBlock
+from fbmflow.fem.velocity_block import VelocityBlock
 from fbmflow.mesh import StructuredMesh
-from fbmflow.solvers import ordering, vanka
+from fbmflow.solvers import MultigridSolver, ordering, vanka
 from fbmflow.solvers.sparse import PARALLEL_NNZ, matvec, rmatvec
 from fbmflow.solvers.system import as_csr
 
@@ -142,27 +144,35 @@ def test_transposed_matvec_matches_scipy_and_not_the_threads(n):
         numba.set_num_threads(threads)
 
 
-def _sharp_ball_system(mesh, centre, radius):
+def _sharp_ball_system(mesh, centre, radius, linear_solver=None):
     """The Picard system of a backward-Euler step (dt 0.01) in ``mesh`` (no-slip walls) with a
-    sharp-boundary disk of ``radius`` at ``centre`` moving down at 1."""
-    prob, con = sharp_disk_problem(mesh, centre, radius)
+    sharp-boundary disk of ``radius`` at ``centre`` moving down at 1 (with multigrid: the finest
+    level's, its velocity block stored once per scalar)."""
+    prob, con = sharp_disk_problem(mesh, centre, radius, linear_solver)
     system = prob.linear_system(prob.zero_state(), 100.0, 1.0, con)
     return system.preconditioner or system
 
 
-def test_unknown_reach_matches_numpy():
+@pytest.mark.parametrize("blocks", [False, True])
+def test_unknown_reach_matches_numpy(blocks):
     """The reach of every row against the same from the COO entries of the blocks: a periodic
     mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
-    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them."""
+    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them. With
+    ``blocks``, the multigrid's finest level, whose velocity block (every component's scalar
+    pattern and the replaced rows) and continuity rows (the level's and the changed ones) give
+    the reach of what they share from what the first call kept."""
     mesh = StructuredMesh.box((12, 10), periodic=(True, False))
-    system = _sharp_ball_system(mesh, [0.51, 0.47], 0.2)
+    system = _sharp_ball_system(mesh, [0.51, 0.47], 0.2, MultigridSolver() if blocks else None)
+    assert isinstance(system.A, VelocityBlock) == blocks and isinstance(system.BT, ContinuityBlock)
     reach = ordering.unknown_reach(system)
+    assert np.array_equal(ordering.unknown_reach(system), reach)
     points = ordering.lattice_points(system.space)
     periods = np.array([2 * mesh.shape[0], 0])
     expected = np.zeros(len(points), dtype=np.int64)
     n_u = system.n_u
-    for M, r, c in ((system.A, 0, 0), (system.gradient, 0, n_u), (as_csr(system.BT), n_u, 0),
-                    (system.pressure_block, n_u, n_u)):
+    velocity = system.A.parts() if blocks else [(system.A, 0)]
+    others = [(system.gradient, 0, n_u), (as_csr(system.BT), n_u, 0), (system.pressure_block, n_u, n_u)]
+    for M, r, c in [(M, r, r) for M, r in velocity] + others:
         if M is None:
             continue
         M = sp.coo_matrix(M)

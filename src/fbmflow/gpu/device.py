@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
-import weakref
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..kept import KeptByIdentity
 from ..solvers.newton import ConvergenceError
 
 
@@ -39,7 +39,7 @@ class Backend:
         self.out_of_memory = out_of_memory
         #: device copies of host objects that nothing writes to, by the host object's identity
         #: and what was made of it (:meth:`kept`)
-        self._kept: dict[tuple[int, str], object] = {}
+        self._kept = KeptByIdentity()
 
     def put(self, a, dtype=None):
         """A host array (or scalar sequence) as a contiguous device array: a copy, also under the
@@ -51,12 +51,7 @@ class Backend:
         ``host`` and ``what`` and kept while ``host`` lives. For what nothing writes to and many
         set-ups read (a level's divergence and transfers, a space's cells): copied once, not
         again by every set-up. ``what`` names what ``build`` makes of it."""
-        key = (id(host), what)
-        found = self._kept.get(key)
-        if found is None:
-            found = self._kept[key] = build(host)
-            weakref.finalize(host, self._kept.pop, key, None)  # before ``id(host)`` can be reused
-        return found
+        return self._kept.get(host, what, build)
 
     def get(self, a) -> np.ndarray:
         """A device array back on the host (a copy)."""

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 
 from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
+from ..kept import KeptByIdentity
 from . import _kernels
 
 #: a slab holds at least this many cell layers
@@ -116,14 +117,18 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
     lattice point (:func:`lattice_points`) to that of a column of its row in any block (velocity
     block ``A``, gradient, continuity rows ``B^T``, pressure block); (n_u + n_p,) int64. 2 in the
     plain Q2/P1disc discretisation; ghost-node rows of the sharp boundary and Galerkin coarse rows
-    near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it."""
+    near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it.
+    What a space and a level's divergence give every system (the lattice points, the reach of
+    the scalar pattern that a :class:`~fbmflow.fem.velocity_block.VelocityBlock` holds on every
+    component, the divergence's rows) is computed once and kept (:data:`_KEPT`)."""
     space, n_u = system.space, system.n_u
-    mesh = space.mesh
-    points = lattice_points(space)
-    periods = np.array([2 * n if periodic else 0 for n, periodic in zip(mesh.shape, mesh.periodic)],
-                       dtype=np.int64)
+    points, periods, scalar_reach = _KEPT.get(space, "reach", _space_reach)
     out = np.zeros(len(points), dtype=np.int64)
-    A = system.A.parts() if isinstance(system.A, VelocityBlock) else [(system.A, 0)]
+    if isinstance(system.A, VelocityBlock):  # the scalar pattern on every component, then the replaced rows
+        out[:n_u] = np.tile(scalar_reach, space.dim)
+        A = system.A.parts()[space.dim:]
+    else:
+        A = [(system.A, 0)]
     G = system.gradient if gradient is None else gradient
     D = system.BT
     block = isinstance(D, ContinuityBlock)
@@ -134,12 +139,37 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
             _kernels.row_reach(M.indptr, M.indices, points, periods, r, c, out)
     if block:  # the level's rows, then the changed rows in place of theirs
         reach = np.zeros_like(out)
-        _kernels.row_reach(D.base.indptr, D.base.indices, points, periods, n_u, 0, reach)
+        reach[n_u:] = _KEPT.get(D.base, "continuity reach",
+                                lambda base: _continuity_reach(base, points, periods))
         reach[n_u + D.dofs] = 0
         changed = D.changed_rows()
         _kernels.row_reach(changed.indptr, changed.indices, points, periods, n_u, 0, reach)
         np.maximum(out, reach, out=out)
     return out
+
+
+#: what :func:`unknown_reach` keeps of a space and of a level's divergence
+_KEPT = KeptByIdentity()
+
+
+def _space_reach(space) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A space's :func:`lattice_points`, its periods in half-cells (0: not periodic) (dim,) and
+    the reach of its scalar pattern's rows (n_v,) int64."""
+    mesh = space.mesh
+    points = lattice_points(space)
+    periods = np.array([2 * n if periodic else 0 for n, periodic in zip(mesh.shape, mesh.periodic)],
+                       dtype=np.int64)
+    scalar = np.zeros(space.n_v, dtype=np.int64)
+    _kernels.row_reach(space.indptr, space.indices, points, periods, 0, 0, scalar)
+    return points, periods, scalar
+
+
+def _continuity_reach(base: sp.csr_matrix, points: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    """The reach of the rows of a level's continuity block ``base`` (n_p, n_u), (n_p,) int64."""
+    n_p, n_u = base.shape
+    reach = np.zeros(n_u + n_p, dtype=np.int64)
+    _kernels.row_reach(base.indptr, base.indices, points, periods, n_u, 0, reach)
+    return reach[n_u:]
 
 
 def near_patches(reach: np.ndarray) -> np.ndarray:

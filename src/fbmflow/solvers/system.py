@@ -15,7 +15,6 @@ velocity sees (orphans) and makes continuity data solvable in closed domains.
 from __future__ import annotations
 
 import logging
-import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -25,6 +24,7 @@ import scipy.sparse.csgraph as csgraph
 
 from ..fem.continuity_block import ContinuityBlock, splice_rows, zero_columns
 from ..fem.velocity_block import VelocityBlock
+from ..kept import KeptByIdentity
 from .sparse import cell_transposed_matvec, matvec
 
 log = logging.getLogger(__name__)
@@ -320,7 +320,7 @@ def orphan_pressure_modes(BT: sp.csr_matrix, npl: int, tol: float = 1e-10,
 
 
 #: per divergence matrix (by identity, while it lives) :func:`_unseen_columns`'s answer
-_UNSEEN: dict[int, tuple[np.ndarray, float]] = {}
+_UNSEEN = KeptByIdentity()
 
 
 def _unseen_columns(BT: sp.csr_matrix, Bc: np.ndarray) -> tuple[np.ndarray, float]:
@@ -328,13 +328,11 @@ def _unseen_columns(BT: sp.csr_matrix, Bc: np.ndarray) -> tuple[np.ndarray, floa
     their rows sees, (k,) int64, and ``max |B|``: computed at the first call for ``BT`` and kept
     while it lives (a level's divergence, never written, that every linearisation's
     constraints ask about: ten Cate level 2, two passes over 530 MB each time)."""
-    key = id(BT)
-    found = _UNSEEN.get(key)
-    if found is None:
+    def look(_):
         unseen = np.flatnonzero((Bc == 0.0).all(axis=1).any(axis=1))
-        found = _UNSEEN[key] = (unseen, max(Bc.max(initial=0.0), -Bc.min(initial=0.0)))
-        weakref.finalize(BT, _UNSEEN.pop, key, None)  # before ``id(BT)`` can be reused
-    return found
+        return unseen, max(Bc.max(initial=0.0), -Bc.min(initial=0.0))
+
+    return _UNSEEN.get(BT, "unseen columns", look)
 
 
 def _rank_deficient(blocks: np.ndarray, threshold: float) -> np.ndarray:
