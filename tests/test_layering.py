@@ -9,7 +9,8 @@ import fbmflow
 ROOT = Path(fbmflow.__file__).parent
 #: the layers from the top down: each may import only those below it
 LAYERS = ["cli", "scenes", "simulation", "adaptive", "run", "io", "coupling", "contact", "particles", "flow",
-          "gpu", "solvers", "parallel", "fem", "mesh", "params", "config", "interrupt", "cores", "_jit"]
+          "gpu", "solvers", "parallel", "fem", "mesh", "params", "config", "interrupt", "kept", "cores",
+          "_jit"]
 #: packages that must not see some lower ones: particles and contact know nothing of meshes
 #: (they work on positions, velocities and shapes), and contact imports particles only
 UNSEEN = {"particles": {"flow", "solvers", "fem", "mesh"},

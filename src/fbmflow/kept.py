@@ -1,14 +1,15 @@
 """What was made of an object that nothing writes to, kept while the object lives
-(:class:`KeptByIdentity`): a level's divergence, a space's pattern, read by every set-up."""
+(:class:`~fbmflow.kept.KeptByIdentity`): a level's divergence, a space's pattern, read by every set-up."""
 from __future__ import annotations
 
 import weakref
 
 
 class KeptByIdentity:
-    """``build(host)`` made at the first :meth:`get` for ``host`` and ``what`` and kept while
-    ``host`` lives, by ``host``'s identity: for what many set-ups read of an object nothing
-    writes to (a level's divergence, a space's pattern), so that it is made once. ``host`` must
+    """``build(host)`` made at the first :meth:`~fbmflow.kept.KeptByIdentity.get` for ``host``
+    and ``what`` and kept while ``host`` lives, by ``host``'s identity: for what many set-ups
+    read of an object nothing writes to (a level's divergence, a space's pattern), so that it
+    is made once. ``host`` must
     take weak references; the entry goes when ``host`` does, before its ``id`` can be reused."""
 
     def __init__(self):

@@ -47,7 +47,7 @@ def single_threaded_blas():
 
     The assembly alternates small BLAS GEMMs with Numba parallel loops; with both thread pools
     active on 2 cores they oversubscribe and each phase slows down several-fold (measured). The
-    GEMMs run on Numba's threads instead, a chunk of rows each (:func:`_times`).
+    GEMMs run on Numba's threads instead, a chunk of rows each (``_times``).
     """
     return _threadpool_controller().limit(limits=1, user_api="blas")
 

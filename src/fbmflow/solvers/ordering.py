@@ -120,7 +120,7 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
     near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it.
     What a space and a level's divergence give every system (the lattice points, the reach of
     the scalar pattern that a :class:`~fbmflow.fem.velocity_block.VelocityBlock` holds on every
-    component, the divergence's rows) is computed once and kept (:data:`_KEPT`)."""
+    component, the divergence's rows) is computed once and kept (``_KEPT``)."""
     space, n_u = system.space, system.n_u
     points, periods, scalar_reach = _KEPT.get(space, "reach", _space_reach)
     out = np.zeros(len(points), dtype=np.int64)
