@@ -9,8 +9,8 @@ class KeptByIdentity:
     """``build(host)`` made at the first :meth:`~fbmflow.kept.KeptByIdentity.get` for ``host``
     and ``what`` and kept while ``host`` lives, by ``host``'s identity: for what many set-ups
     read of an object nothing writes to (a level's divergence, a space's pattern), so that it
-    is made once. ``host`` must
-    take weak references; the entry goes when ``host`` does, before its ``id`` can be reused."""
+    is made once. ``host`` must take weak references; the entry goes when ``host`` does, before
+    its ``id`` can be reused."""
 
     def __init__(self):
         self._made: dict[tuple[int, str], object] = {}
