@@ -16,12 +16,15 @@ the GPU takes over the cycles and the smoothers' local factors, and on this mach
 the set-up and the work outside the solves are 5.27 + 14.06 s of a 90.88 s ten Cate level-2 step,
 of which the factors are 64 % of the set-up (4.16 of 6.54 s): free cycles and factors would make it at
 most about 5.7x faster (4.70x with the factors on the CPU; level 1: 5.2x and 4.40x). Timed
-apart (the arrays row's column), the CPU keeps 6.99 / 7.33 s of a level-2 step after the steps
-that cut it on 2026-12-01 (7.73 / 9.64 s before), some 5 s of it serial.
+apart (the arrays row's column), the CPU keeps 4.11 s of a level-2 step (steps 2-5, mean) after
+the changes of 2026-12-01, 5.34 s before them, on one machine alone (3.66 s on a faster one),
+about two thirds of it serial; the copies to the device are 532 bytes per unknown per step.
+(The rows host-L2 and host-L2-cut ran beside another job: their figures are overstated.)
 Measured: 2026-11-30, commit ce687a0 (order), 5561688 (bytes, with the blocks on the device as on the
 CPU), e1a47de (split), 5f0607f (split-factors) and the rows shared after 85226ef
 (bytes-rows-shared); 2026-12-01, the copies kept across set-ups (kept, kept-L2, kept-2d), the CPU's
-share (host-L2 at 1a8e9f4, host-L2-cut, host-L1-threads1/2); quoted
+share (host-L2 at 1a8e9f4, host-L2-cut, host-L1-threads1/2, host-L2-copies, host-L2-kept);
+2026-12-02, the CPU's share before and after one machine alone (base-L2 at 1a8e9f4, now-L2); quoted
 in docs/validation/gpu.md, "Device memory" and "What the GPU path keeps on the CPU at level 2"
 Run: python -m fbmbench gpu_solver --rows slabs colours arrays (on a GPU: benchmarks/device/gpu.sh)
 
