@@ -247,8 +247,11 @@ def table(rows: list[dict]) -> str:
              "(one cycle each) per linear solve, over the steps after the first (the first includes the "
              "set-up and JIT compilation). Device bytes: per unknown of the finest level, the hierarchy's "
              "arrays (operators, smoothers' factors and colours, transfers; the coarsest level stays on the "
-             "CPU) and FGMRES's basis (2 x 30 + 1 vectors). Seconds compare only rows of one tag run alone "
-             "on their machine: the rows tagged order-bytes and bytes-shared ran beside another job.", "",
+             "CPU) and FGMRES's basis (2 x 30 + 1 vectors). Seconds compare only rows run alone on one "
+             "machine: the rows tagged order-bytes, bytes-shared, host-L2 and host-L2-cut ran beside "
+             "another job. A row's command, in benchmarks/ at the commit measured: `python -m fbmbench "
+             "gpu_solver --scenes SCENE --levels LEVEL --rows ROW --steps STEPS --tag TAG` (STEPS: the "
+             "steps column; base-L2 ran with the study file of now-L2).", "",
              "| scene | level | unknowns | row | solver | steps | s per step | cycles per solve "
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
