@@ -153,24 +153,12 @@ def _sharp_ball_system(mesh, centre, radius, linear_solver=None):
     return system.preconditioner or system
 
 
-@pytest.mark.parametrize("blocks", [False, True])
-def test_unknown_reach_matches_numpy(blocks):
-    """The reach of every row against the same from the COO entries of the blocks: a periodic
-    mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
-    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them. With
-    ``blocks``, the multigrid's finest level, whose velocity block (every component's scalar
-    pattern and the replaced rows) and continuity rows (the level's and the changed ones) give
-    the reach of what they share from what the first call kept."""
-    mesh = StructuredMesh.box((12, 10), periodic=(True, False))
-    system = _sharp_ball_system(mesh, [0.51, 0.47], 0.2, MultigridSolver() if blocks else None)
-    assert isinstance(system.A, VelocityBlock) == blocks and isinstance(system.BT, ContinuityBlock)
-    reach = ordering.unknown_reach(system)
-    assert np.array_equal(ordering.unknown_reach(system), reach)
+def _reach_from_coo(system, periods):
+    """Every row's reach from the COO entries of the system's blocks (its built gradient)."""
     points = ordering.lattice_points(system.space)
-    periods = np.array([2 * mesh.shape[0], 0])
     expected = np.zeros(len(points), dtype=np.int64)
     n_u = system.n_u
-    velocity = system.A.parts() if blocks else [(system.A, 0)]
+    velocity = system.A.parts() if isinstance(system.A, VelocityBlock) else [(system.A, 0)]
     others = [(system.gradient, 0, n_u), (as_csr(system.BT), n_u, 0), (system.pressure_block, n_u, n_u)]
     for M, r, c in [(M, r, r) for M, r in velocity] + others:
         if M is None:
@@ -179,7 +167,29 @@ def test_unknown_reach_matches_numpy(blocks):
         diff = points[c + M.col] - points[r + M.row]
         diff[:, 0] = (diff[:, 0] + periods[0] // 2) % periods[0] - periods[0] // 2
         np.maximum.at(expected, r + M.row, np.abs(diff).max(axis=1))
-    assert np.array_equal(reach, expected)
+    return expected
+
+
+@pytest.mark.parametrize("blocks", [False, True])
+def test_unknown_reach_matches_numpy(blocks):
+    """The reach of every row against the same from the COO entries of the blocks: a periodic
+    mesh (distances modulo the period) with a sharp-boundary ball, whose ghost rows reach further;
+    the patches that reach furthest are left out of the phases, at most FAR_SHARE of them. With
+    ``blocks``, the multigrid's finest level, whose velocity block (every component's scalar
+    pattern and the replaced rows) and continuity rows (the level's and the changed ones) give
+    the reach of what they share from what the first call kept; the gradient's reach is kept
+    from the level's divergence (``gradient_BT``), and without it found from the built ``B``."""
+    import dataclasses
+    mesh = StructuredMesh.box((12, 10), periodic=(True, False))
+    system = _sharp_ball_system(mesh, [0.51, 0.47], 0.2, MultigridSolver() if blocks else None)
+    assert isinstance(system.A, VelocityBlock) == blocks and isinstance(system.BT, ContinuityBlock)
+    assert system.gradient_BT is not None
+    periods = np.array([2 * mesh.shape[0], 0])
+    reach = ordering.unknown_reach(system)
+    assert np.array_equal(ordering.unknown_reach(system), reach)
+    assert np.array_equal(reach, _reach_from_coo(system, periods))
+    plain = dataclasses.replace(system, gradient_BT=None)  # B from its own B^T
+    assert np.array_equal(ordering.unknown_reach(plain), _reach_from_coo(plain, periods))
     assert reach.max() > 2 and np.median(reach) == 2
     near = ordering.near_patches(reach)
     assert (~near).sum() <= ordering.FAR_SHARE * reach.size and near[reach == 2].all()

@@ -120,7 +120,8 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
     near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it.
     What a space and a level's divergence give every system (the lattice points, the reach of
     the scalar pattern that a :class:`~fbmflow.fem.velocity_block.VelocityBlock` holds on every
-    component, the divergence's rows) is computed once and kept (``_KEPT``)."""
+    component, the divergence's rows, and the gradient's where the system's ``gradient_BT``
+    gives ``B``'s pattern) is computed once and kept (``_KEPT``)."""
     space, n_u = system.space, system.n_u
     points, periods, scalar_reach = _KEPT.get(space, "reach", _space_reach)
     out = np.zeros(len(points), dtype=np.int64)
@@ -129,7 +130,12 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
         A = system.A.parts()[space.dim:]
     else:
         A = [(system.A, 0)]
-    G = system.gradient if gradient is None else gradient
+    G = None
+    if system.gradient_BT is not None:  # B: gradient_BT transposed, its pattern whatever is zeroed
+        np.maximum(out[:n_u], _KEPT.get(system.gradient_BT, "gradient reach",
+                                        lambda BT: _gradient_reach(BT, points, periods)), out=out[:n_u])
+    else:
+        G = system.gradient if gradient is None else gradient
     D = system.BT
     block = isinstance(D, ContinuityBlock)
     for M, r, c in ([(M, r, r) for M, r in A] + [(G, 0, n_u), (None if block else D, n_u, 0),
@@ -170,6 +176,16 @@ def _continuity_reach(base: sp.csr_matrix, points: np.ndarray, periods: np.ndarr
     reach = np.zeros(n_u + n_p, dtype=np.int64)
     _kernels.row_reach(base.indptr, base.indices, points, periods, n_u, 0, reach)
     return reach[n_u:]
+
+
+def _gradient_reach(BT: sp.csr_matrix, points: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    """The reach of the rows of ``B``, whose pattern is that of ``BT`` (n_p, n_u) transposed,
+    (n_u,) int64."""
+    n_p, n_u = BT.shape
+    B = sp.csr_matrix(BT).T.tocsr()
+    reach = np.zeros(n_u + n_p, dtype=np.int64)
+    _kernels.row_reach(B.indptr, B.indices, points, periods, 0, n_u, reach)
+    return reach[:n_u]
 
 
 def near_patches(reach: np.ndarray) -> np.ndarray:
