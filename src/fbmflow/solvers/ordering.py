@@ -131,11 +131,12 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
     else:
         A = [(system.A, 0)]
     G = None
-    if system.gradient_BT is not None:  # B: gradient_BT transposed, its pattern whatever is zeroed
-        np.maximum(out[:n_u], _KEPT.get(system.gradient_BT, "gradient reach",
-                                        lambda BT: _gradient_reach(BT, points, periods)), out=out[:n_u])
-    else:
+    if system.gradient_BT is None:
         G = system.gradient if gradient is None else gradient
+    else:  # B's pattern is the level's gradient_BT's transposed: its rows' reach kept
+        kept = _KEPT.get(system.gradient_BT, "gradient reach", lambda _: _gradient_reach(
+            system.gradient if gradient is None else gradient, points, periods))
+        np.maximum(out[:n_u], kept, out=out[:n_u])
     D = system.BT
     block = isinstance(D, ContinuityBlock)
     for M, r, c in ([(M, r, r) for M, r in A] + [(G, 0, n_u), (None if block else D, n_u, 0),
@@ -178,11 +179,10 @@ def _continuity_reach(base: sp.csr_matrix, points: np.ndarray, periods: np.ndarr
     return reach[n_u:]
 
 
-def _gradient_reach(BT: sp.csr_matrix, points: np.ndarray, periods: np.ndarray) -> np.ndarray:
-    """The reach of the rows of ``B``, whose pattern is that of ``BT`` (n_p, n_u) transposed,
-    (n_u,) int64."""
-    n_p, n_u = BT.shape
-    B = sp.csr_matrix(BT).T.tocsr()
+def _gradient_reach(B: sp.csr_matrix, points: np.ndarray, periods: np.ndarray) -> np.ndarray:
+    """The reach of the rows of a level's gradient ``B`` (n_u, n_p), (n_u,) int64."""
+    n_u, n_p = B.shape
+    B = sp.csr_matrix(B)
     reach = np.zeros(n_u + n_p, dtype=np.int64)
     _kernels.row_reach(B.indptr, B.indices, points, periods, 0, n_u, reach)
     return reach[:n_u]
