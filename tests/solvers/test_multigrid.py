@@ -531,6 +531,33 @@ def test_the_gradient_applied_cell_by_cell_is_the_assembled_one(dim):
     assert np.allclose(fine.apply(x), K @ x, rtol=0.0, atol=1e-12 * np.abs(K @ x).max())
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_gradient_rows_read_cell_by_cell_are_the_built_ones(dim):
+    """``gradient_rows`` reads rows of ``B`` from the divergence cell by cell (the sharp boundary's
+    fine level): the same entries, pattern and order as the rows of the built ``B``, the zeroed
+    rows (constrained velocities) included with their zeros, for rows in any order; a divergence
+    out of its cell pattern (one column moved) is not read that way, and the rows are still the
+    built ones."""
+    import dataclasses
+
+    from fbmflow.solvers.system import cell_local
+    _, system, _ = _ball_system("sharp", n=16 if dim == 2 else 6, dim=dim)
+    fine = system.preconditioner
+    assert cell_local(fine.space, fine.gradient_BT)
+    rng = np.random.default_rng(11)
+    rows = rng.permutation(fine.n_u)[:fine.n_u // 3]
+    rows = np.union1d(rows, fine.gradient_zero[:5])[::-1]  # descending, some zeroed rows
+    got, want = fine.gradient_rows(rows), fine.gradient[rows]
+    assert np.array_equal(got.indptr, want.indptr) and np.array_equal(got.indices, want.indices)
+    assert np.array_equal(got.data, want.data)
+    assert (fine.gradient_rows(fine.gradient_zero).data == 0.0).all()
+    moved = fine.gradient_BT.copy()
+    moved.indices[0], moved.indices[1] = moved.indices[1], moved.indices[0]
+    assert not cell_local(fine.space, moved)
+    odd = dataclasses.replace(fine, gradient_BT=moved)
+    assert (odd.gradient_rows(rows) != odd.gradient[rows]).nnz == 0
+
+
 @pytest.mark.parametrize("dim, n", [(2, 32), (3, 8)])
 def test_multigrid_solves_the_sharp_boundary_in_a_closed_box(dim, n):
     """In a closed box the sharp system's left null vector has components on the ghost rows, so

@@ -125,6 +125,20 @@ class FlowSpace:
         return rank
 
     @cached_property
+    def node_cell_ranks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells of every Q2 node and the node's place in each: ``(ptr (n_v + 1,) int64,
+        cells int32, ranks uint8)``, node ``a`` in the cells ``cells[ptr[a]:ptr[a + 1]]``
+        (ascending) at the positions ``ranks[ptr[a]:ptr[a + 1]]`` of :attr:`local_rank`. What
+        reads the gradient ``B`` from the divergence cell by cell needs it (its row of node
+        ``a``, component ``i``, has the columns ``c (d + 1) + m`` of those cells)."""
+        flat = self.V.cell_dofs.ravel()
+        order = np.argsort(flat, kind="stable")
+        ptr = np.zeros(self.n_v + 1, dtype=np.int64)
+        np.cumsum(np.bincount(flat, minlength=self.n_v), out=ptr[1:])
+        cells = (order // self.V.cell_dofs.shape[1]).astype(np.int32)
+        return ptr, cells, self.local_rank.ravel()[order].astype(np.uint8)
+
+    @cached_property
     def node_cells(self) -> sp.csr_matrix:
         """Incidence of Q2 nodes and cells, (n_v, n_cells) CSR: row ``a`` lists the cells that
         hold node ``a``."""

@@ -368,6 +368,28 @@ def _gradient_dot(node, i, x, n_u, nc_ptr, nc_cell, nc_rank, gt):
     return s
 
 
+@njit(parallel=True)
+def gradient_rows(rows, indptr, n_v, nc_ptr, nc_cell, nc_rank, gt, zero, indices, data):
+    """Rows ``rows`` (k,) of ``B`` from the divergence in its cell-local pattern (the operator's
+    layout above: ``B[(i, a), c (d + 1) + m] = gt[c, m, i nl + nc_rank]``) into the CSR arrays
+    ``(indptr (k + 1,) int64, indices, data)`` of ``B[rows]``, ``indptr`` given (``d + 1``
+    entries per cell of the row's node), columns ascending; the rows where ``zero (n_u,)`` bool
+    is True keep their pattern with zero values. Rows in parallel."""
+    npl, w = gt.shape[1], gt.shape[2]
+    nl = w // (npl - 1)
+    for r in prange(rows.shape[0]):
+        u = rows[r]
+        i, a = u // n_v, u % n_v
+        k = indptr[r]
+        for j in range(nc_ptr[a], nc_ptr[a + 1]):
+            c = nc_cell[j]
+            col = i * nl + nc_rank[j]
+            for m in range(npl):
+                indices[k] = c * npl + m
+                data[k] = 0.0 if zero[u] else gt[c, m, col]
+                k += 1
+
+
 @jitable(inline=False)
 def _continuity_dot(row, x, gt, d_pos, d_ptr, d_idx, d_val, b_idx):
     """``(B^T x)[row]``, the continuity row as the operator holds it (see above)."""

@@ -58,7 +58,7 @@ def system_rows(system: SaddlePointSystem, rows: np.ndarray) -> sp.csr_matrix:
     ru, rp = rows[rows < n_u], rows[rows >= n_u] - n_u
     C = system.pressure_block
     C = sp.csr_matrix((system.n_p, system.n_p)) if C is None else sp.csr_matrix(C)
-    top = sp.hstack([system.A[ru], system.gradient[ru]], format="csr")
+    top = sp.hstack([system.A[ru], system.gradient_rows(ru)], format="csr")
     bottom = sp.hstack([system.BT[rp], C[rp]], format="csr")
     return sp.vstack([top, bottom], format="csr")
 

@@ -111,17 +111,17 @@ def nested_dissection(points: np.ndarray, leaf: int = DISSECTION_LEAF) -> np.nda
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
-def unknown_reach(system, gradient=None) -> np.ndarray:
+def unknown_reach(system) -> np.ndarray:
     """How far the row of every unknown of a saddle-point system reaches: the largest distance,
     in half-cells along any axis (modulo the period on a periodic axis), from the unknown's
     lattice point (:func:`lattice_points`) to that of a column of its row in any block (velocity
     block ``A``, gradient, continuity rows ``B^T``, pressure block); (n_u + n_p,) int64. 2 in the
     plain Q2/P1disc discretisation; ghost-node rows of the sharp boundary and Galerkin coarse rows
-    near a particle reach further. ``gradient``: the system's ``B`` where the caller has built it.
-    What a space and a level's divergence give every system (the lattice points, the reach of
-    the scalar pattern that a :class:`~fbmflow.fem.velocity_block.VelocityBlock` holds on every
-    component, the divergence's rows, and the gradient's where the system's ``gradient_BT``
-    gives ``B``'s pattern) is computed once and kept (``_KEPT``)."""
+    near a particle reach further. What a space and a level's divergence give every system (the
+    lattice points, the reach of the scalar pattern that a
+    :class:`~fbmflow.fem.velocity_block.VelocityBlock` holds on every component, the divergence's
+    rows, and the gradient's where the system's ``gradient_BT`` gives ``B``'s pattern) is
+    computed once and kept (``_KEPT``)."""
     space, n_u = system.space, system.n_u
     points, periods, scalar_reach = _KEPT.get(space, "reach", _space_reach)
     out = np.zeros(len(points), dtype=np.int64)
@@ -132,10 +132,10 @@ def unknown_reach(system, gradient=None) -> np.ndarray:
         A = [(system.A, 0)]
     G = None
     if system.gradient_BT is None:
-        G = system.gradient if gradient is None else gradient
+        G = system.gradient
     else:  # B's pattern is the level's gradient_BT's transposed: its rows' reach kept
         kept = _KEPT.get(system.gradient_BT, "gradient reach", lambda _: _gradient_reach(
-            system.gradient if gradient is None else gradient, points, periods))
+            system.gradient_rows(np.arange(n_u)), points, periods))
         np.maximum(out[:n_u], kept, out=out[:n_u])
     D = system.BT
     block = isinstance(D, ContinuityBlock)

@@ -25,7 +25,7 @@ from .._jit import numba_threads
 from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
 from . import _kernels, ordering
-from .system import SaddlePointSystem, as_csr, cell_blocks
+from .system import SaddlePointSystem, as_csr, cell_blocks, cell_local, cell_values
 
 
 class VankaSmoother:
@@ -103,19 +103,21 @@ ORDERS = ("slabs", "colours")
 
 
 def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None = None,
-                     gradient: sp.csr_matrix | None = None,
                      continuity: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(indptr, indices, data)`` of ``K = [[A, G], [D, C]]`` (the system's blocks, whatever
     their row patterns; ``C`` may be None): int64 row pointers, int32 column indices, ``dtype``
     values, (n_u + n_p + 1,), (nnz,), (nnz,). Velocity rows where ``keep_u`` (n_u,) bool is
-    False are left empty, and the continuity block ``D`` where ``continuity`` is False (the
-    pressure rows then hold ``C`` only). ``gradient``: the system's ``G`` where the caller has
-    built it."""
+    False are left empty (their rows of ``G`` not even made:
+    :meth:`~fbmflow.solvers.system.SaddlePointSystem.gradient_rows`), and the continuity block
+    ``D`` where ``continuity`` is False (the pressure rows then hold ``C`` only)."""
     n_u, n_p = system.n_u, system.n_p
     keep_u = np.ones(n_u, dtype=bool) if keep_u is None else keep_u
     blocks = []
     A = system.A.select(keep_u) if isinstance(system.A, VelocityBlock) else system.A
-    G = system.gradient if gradient is None else gradient
+    kept = system.gradient_rows(np.flatnonzero(keep_u))
+    lengths = np.zeros(n_u, dtype=np.int64)
+    lengths[keep_u] = np.diff(kept.indptr)
+    G = sp.csr_matrix((kept.data, kept.indices, np.concatenate([[0], np.cumsum(lengths)])), shape=(n_u, n_p))
     for M, shape in ((A, (n_u, n_u)), (G, (n_u, n_p)), (system.BT if continuity else None, (n_p, n_u)),
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else as_csr(M)
@@ -178,26 +180,14 @@ def _cell_gradient(system: SaddlePointSystem) -> tuple[np.ndarray, np.ndarray, n
     """The gradient rows of the free velocity DOFs as the kernels read them from the divergence
     in its cell-local pattern (``gradient_BT``, else ``BT``; see the operator's layout in
     :mod:`fbmflow.solvers._kernels`): ``(nc_ptr (n_v + 1,) int64, nc_cell int32, nc_rank uint8,
-    gt (n_cells, d + 1, d nl) float64)``, ``gt`` a view of the divergence's values. Raises
-    ValueError where the divergence is not in that pattern."""
-    space = system.space
-    cd = space.V.cell_dofs
-    n_cells, nl = cd.shape
-    d, n_v = space.dim, space.n_v
-    npl, width = d + 1, d * nl
+    gt (n_cells, d + 1, d nl) float64)`` (the space's
+    :attr:`~fbmflow.fem.space.FlowSpace.node_cell_ranks` and :func:`~fbmflow.solvers.system.cell_values`,
+    a view of the divergence's values). Raises ValueError where the divergence is not in that
+    pattern."""
     source = _divergence(system)
-    flat = cd.ravel()
-    order = np.argsort(flat, kind="stable")
-    nc_cell = (order // nl).astype(np.int32)
-    nc_rank = space.local_rank.ravel()[order].astype(np.uint8)
-    nc_ptr = np.zeros(n_v + 1, dtype=np.int64)
-    np.cumsum(np.bincount(flat, minlength=n_v), out=nc_ptr[1:])
-    uniform = (source.shape[0] == n_cells * npl and source.nnz == source.shape[0] * width
-               and np.array_equal(source.indptr, np.arange(source.shape[0] + 1) * width))
-    if not uniform or not np.array_equal(source.indices[nc_cell.astype(np.int64) * (npl * width) + nc_rank],
-                                         flat[order]):
+    if not cell_local(system.space, source):
         raise ValueError("the factored Vanka smoother needs the divergence in its cell-local pattern")
-    return nc_ptr, nc_cell, nc_rank, source.data.reshape(n_cells, npl, width)
+    return (*system.space.node_cell_ranks, cell_values(system.space, source))
 
 
 def partly_orphaned(system: SaddlePointSystem) -> bool:
@@ -338,9 +328,8 @@ class FactoredVankaSmoother:
             if dofs is not None:
                 held[dofs % n_v] = False
         held_u = np.tile(held, d)
-        G = system.gradient  # once: a system may build it anew on each access
         self.op = (held, *scalar_rows, *_cell_gradient(system), *_continuity_rows(system),
-                   *saddle_point_csr(system, dtype, ~held_u, G, continuity=False))
+                   *saddle_point_csr(system, dtype, ~held_u, continuity=False))
         sizes = np.concatenate([np.full(cells.size, cell_dofs.shape[1]),
                                 [m.size for m in merged]]).astype(np.int64)
         #: per patch the component inverses its Schur factors store (:func:`vanka_factor
@@ -367,7 +356,7 @@ class FactoredVankaSmoother:
         mesh = space.mesh
         self.n_cells = mesh.n_cells
         index = mesh.cell_indices()
-        reach = np.maximum.reduceat(ordering.unknown_reach(system, G)[self.dofs], self.ptr[:-1])  # per patch
+        reach = np.maximum.reduceat(ordering.unknown_reach(system)[self.dofs], self.ptr[:-1])  # per patch
         near = ordering.near_patches(reach[:cells.size])
         phased = ordering.slab_phases if order == "slabs" else ordering.colour_phases
         phases = phased(mesh.shape, mesh.periodic, index, cells[near],
@@ -377,7 +366,7 @@ class FactoredVankaSmoother:
         #: colours after them where the order is "colours")
         self.far = np.flatnonzero(~near).astype(np.int64)
         if order == "colours":
-            phases += self._colour_phases(system, self.far, G)
+            phases += self._colour_phases(system, self.far)
             self.far = self.far[:0]
         self.order = order
         self.sweeps = [(phases, self.far), (ordering.reversed_phases(phases), self.far[::-1].copy())]
@@ -390,13 +379,12 @@ class FactoredVankaSmoother:
         plain_interface = self.interface[self.interface < cells.size]
         #: the agglomerated patches in colours that touch nothing of each other (one parallel
         #: phase each), all of them and those at the fictitious boundaries
-        self.merged_phases = self._colour_phases(system, self.merged, G)
+        self.merged_phases = self._colour_phases(system, self.merged)
         merged_interface = self.interface[self.interface >= cells.size]
-        self.interface_merged_phases = self._colour_phases(system, merged_interface, G)
+        self.interface_merged_phases = self._colour_phases(system, merged_interface)
         interface_reach = int(reach[plain_interface].max(initial=0))
         self.interface_phases = [(gptr, plain_interface[k]) for gptr, k in phased(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
-        del G  # before the factors: the set-up's peak holds one of the two
         #: the factors' storage dtype and the Schur complements' pivot tolerance
         self.dtype = np.dtype(dtype)
         self.schur_tol = 10 * float(np.finfo(dtype).eps) if precision == "single" else 1e-13
@@ -413,7 +401,7 @@ class FactoredVankaSmoother:
                               *self.op)
         self.factor_time_s = time.perf_counter() - t0
 
-    def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray, gradient: sp.csr_matrix) -> list:
+    def _colour_phases(self, system: SaddlePointSystem, patches: np.ndarray) -> list:
         """``patches`` (m,) int64 in colours: two patches of one colour never touch an unknown the
         other reads (its rows' columns) or writes (:func:`~fbmflow.solvers._kernels.greedy_colours`
         on that conflict graph, in patch order), so that one colour's patches may be updated at the
@@ -433,7 +421,7 @@ class FactoredVankaSmoother:
         Pu, Pp = P[:, u], P[:, n_u + p]
         A = system.A if isinstance(system.A, VelocityBlock) else sp.csr_matrix(system.A)
         reads_u = Pu @ abs(A[u]) + Pp @ abs(system.BT[p])
-        reads_p = Pu @ abs(gradient[u])
+        reads_p = Pu @ abs(system.gradient_rows(u))
         if system.pressure_block is not None:
             reads_p = reads_p + Pp @ abs(system.pressure_block[p])
         touch = sp.hstack([reads_u, reads_p]).tocsr() @ P.T  # patch i reads what patch j writes
