@@ -195,6 +195,22 @@ def test_unknown_reach_matches_numpy(blocks):
     assert (~near).sum() <= ordering.FAR_SHARE * reach.size and near[reach == 2].all()
 
 
+def test_reversed_phases_reverse_every_group_in_its_place():
+    """The backward sweep against the same in Python: the phases in reverse, each group's patches
+    in reverse, the groups where they were (groups of one patch, as in colour order, and of
+    several)."""
+    rng = np.random.default_rng(3)
+    phases = []
+    for sizes in ([1] * 7, [3, 1, 4, 2], [5]):
+        gptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        phases.append((gptr, rng.permutation(100)[:gptr[-1]].astype(np.int64)))
+    got = ordering.reversed_phases(phases)
+    assert len(got) == len(phases)
+    for (gptr, order), (rptr, rorder) in zip(phases[::-1], got):
+        want = np.concatenate([order[gptr[g]:gptr[g + 1]][::-1] for g in range(gptr.size - 1)])
+        assert np.array_equal(rptr, gptr) and np.array_equal(rorder, want)
+
+
 def test_greedy_colours_match_python():
     """The kernel against the same greedy rule in Python, on a random symmetric graph: a proper
     colouring (no edge within a colour), each vertex the smallest colour its earlier neighbours
