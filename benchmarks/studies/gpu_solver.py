@@ -251,7 +251,8 @@ def table(rows: list[dict]) -> str:
              "machine: the rows tagged order-bytes, bytes-shared, host-L2 and host-L2-cut ran beside "
              "another job. A row's command, in benchmarks/ at the commit measured: `python -m fbmbench "
              "gpu_solver --scenes SCENE --levels LEVEL --rows ROW --steps STEPS --tag TAG` (STEPS: the "
-             "steps column; base-L2 ran with the study file of now-L2).", "",
+             "steps column; base-L2 ran with the study file of now-L2; now-L2-rows-1thread with "
+             "NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 before it).", "",
              "| scene | level | unknowns | row | solver | steps | s per step | cycles per solve "
              "| s per cycle | s per step in cycles / set-up (of it the smoothers' factors) "
              "/ outside the solves | bound on a faster solver's speed-up: set-up on the CPU / factors not "
