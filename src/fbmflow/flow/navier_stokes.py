@@ -290,11 +290,16 @@ class NavierStokesProblem:
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """Pressure modes that no free velocity sees under the constraints ``con`` (those of the
         last ``con`` asked for are kept: a Newton solve's residuals and linear systems share
-        them)."""
+        them, and so do the next constraints on the same DOFs with the same continued cells,
+        which is what they depend on: a coupling iteration's other particle velocities)."""
         if self.extra_constraints is None:
             return None
-        if self._orphans is not None and self._orphans[0] is con:
-            return self._orphans[1]
+        if self._orphans is not None:
+            last, P = self._orphans
+            if last is con or (np.array_equal(last.dofs, con.dofs)
+                               and _same_dofs(last.extension, con.extension)):
+                self._orphans = (con, P)
+                return P
         P = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None,
                                   zero=con.dofs)
         if con.extension is not None:
@@ -575,3 +580,10 @@ class NavierStokesProblem:
         log.info("steady solve: %d Newton iterations, |F| %.2e -> %.2e", report.iterations,
                  report.residuals[0], report.residuals[-1])
         return x, report
+
+
+def _same_dofs(a, b) -> bool:
+    """Whether two pressure extensions (or None) continue the same pressure DOFs."""
+    if a is None or b is None:
+        return a is b
+    return np.array_equal(a.dofs, b.dofs)
