@@ -224,3 +224,23 @@ def test_pressure_dofmap(dim):
     coords = mesh.cell_coordinates()
     np.testing.assert_allclose(Q.centre, coords.mean(axis=1))
     np.testing.assert_allclose(Q.scale, 0.5 * (coords.max(axis=1) - coords.min(axis=1)))
+
+
+@pytest.mark.parametrize("shape", [(5, 4), (3, 4, 2)])
+def test_node_cell_ranks_and_incidence(shape):
+    """Every node's cells (ascending) and its place among each one's nodes in ascending order,
+    against the cell-DOF table directly; the node-cell incidence is the same cells."""
+    import scipy.sparse as sp
+
+    from fbmflow.fem.space import FlowSpace
+    s = FlowSpace(StructuredMesh.box(shape))
+    cd = s.V.cell_dofs
+    ptr, cells, ranks = s.node_cell_ranks
+    nodes = np.repeat(np.arange(s.n_v), np.diff(ptr))
+    assert np.array_equal(np.sort(cd, axis=1)[cells, ranks], nodes)
+    assert np.array_equal(np.bincount(cd.ravel(), minlength=s.n_v), np.diff(ptr))
+    assert all(np.all(np.diff(cells[ptr[a]:ptr[a + 1]]) > 0) for a in range(s.n_v))
+    n_cells, nl = cd.shape
+    ref = sp.csr_matrix((np.ones(n_cells * nl), (cd.ravel(), np.repeat(np.arange(n_cells), nl))),
+                        shape=(s.n_v, n_cells))
+    assert (s.node_cells != ref).nnz == 0

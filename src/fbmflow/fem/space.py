@@ -141,11 +141,10 @@ class FlowSpace:
     @cached_property
     def node_cells(self) -> sp.csr_matrix:
         """Incidence of Q2 nodes and cells, (n_v, n_cells) CSR: row ``a`` lists the cells that
-        hold node ``a``."""
-        n_cells, nl = self.V.cell_dofs.shape
-        return sp.csr_matrix((np.ones(n_cells * nl, dtype=np.int8),
-                              (self.V.cell_dofs.ravel(), np.repeat(np.arange(n_cells), nl))),
-                             shape=(self.n_v, n_cells))
+        hold node ``a``, ascending (the arrays of :attr:`node_cell_ranks`)."""
+        ptr, cells, _ = self.node_cell_ranks
+        return sp.csr_matrix((np.ones(cells.size, dtype=np.int8), cells, ptr),
+                             shape=(self.n_v, self.mesh.n_cells))
 
     @cached_property
     def batches(self) -> list[np.ndarray]:
