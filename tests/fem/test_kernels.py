@@ -20,7 +20,6 @@ from fbmflow.fem import (
     assemble_laplace,
     assemble_load,
     assemble_mass,
-    expand_to_coupled,
     pressure_mean_weights,
 )
 from fbmflow.fem.constraints import DirichletConstraints
@@ -340,11 +339,10 @@ def test_scatter_coupled(space):
     ia, ib = np.triu_indices(nl)
     out = rng.normal(size=d * d * space.nnz)
     ref = space.coupled_matrix(out.copy()).toarray()
-    scale = 0.7
     for cells in _batches(space):
         conv = rng.normal(size=(cells.size, nl * nl))
         react = rng.normal(size=(cells.size * d * d, ia.size))
-        _kernels.scatter_coupled(cells, conv, react, sym, scale, space.offsets, space.V.cell_dofs,
+        _kernels.scatter_coupled(cells, conv, react, sym, space.offsets, space.V.cell_dofs,
                                  space.indptr, d, out)
         for e, c in enumerate(cells.ravel()):
             if c < 0:
@@ -357,18 +355,7 @@ def test_scatter_coupled(space):
                     block[ib, ia] = react[(e * d + i) * d + k]
                     if i == k:
                         block += conv[e].reshape(nl, nl)
-                    ref[np.ix_(i * n + dofs, k * n + dofs)] += scale * block
-    assert_rel(space.coupled_matrix(out).toarray(), ref)
-
-
-def test_init_coupled(space):
-    rng = np.random.default_rng(23)
-    d = space.dim
-    scalar = rng.normal(size=space.nnz)
-    out = rng.normal(size=d * d * space.nnz)
-    other = rng.normal(size=space.nnz)
-    ref = np.kron(np.eye(d), 0.5 * _dense_scalar(space, scalar) - 2.0 * _dense_scalar(space, other))
-    _kernels.init_coupled(0.5, scalar, -2.0, other, space.indptr, d, out)
+                    ref[np.ix_(i * n + dofs, k * n + dofs)] += block
     assert_rel(space.coupled_matrix(out).toarray(), ref)
 
 
@@ -449,9 +436,12 @@ def test_assemble_laplace(case):
     np.testing.assert_allclose(K.sum(axis=1), 0.0, atol=1e-12 * np.abs(K).max())
 
 
+@pytest.mark.parametrize("mass_laplace", [None, (2.0, -0.5)], ids=["convection", "with-mass-laplace"])
 @pytest.mark.parametrize("newton", [True, False])
 @pytest.mark.parametrize("batch_size", [None, 1])
-def test_assemble_convection(case, newton, batch_size):
+def test_assemble_convection(case, newton, batch_size, mass_laplace):
+    """The convection (and Newton) terms added to what is there; with ``mass_laplace`` the mass
+    and Laplace terms from the same products (on every diagonal block of the coupled matrix)."""
     space, ref = case
     if batch_size:
         space = FlowSpace(space.mesh, batch_size=batch_size)
@@ -461,16 +451,18 @@ def test_assemble_convection(case, newton, batch_size):
     scale = -1.3
     scalar0 = rng.normal(size=space.nnz)
     coupled0 = rng.normal(size=d * d * space.nnz)
+    K = np.zeros((space.n_v, space.n_v)) if mass_laplace is None else (
+        mass_laplace[0] * ref.mass() + mass_laplace[1] * ref.laplace())
     if newton:
         newton_out = coupled0.copy()
-        assemble_convection(space, u, scale, newton_out=newton_out)
+        assemble_convection(space, u, scale, newton_out=newton_out, mass_laplace=mass_laplace)
         assert_rel(space.coupled_matrix(newton_out).toarray() - space.coupled_matrix(coupled0).toarray(),
-                   scale * (np.kron(np.eye(d), ref.convection(u)) + ref.newton(u)))
+                   scale * (np.kron(np.eye(d), ref.convection(u)) + ref.newton(u)) + np.kron(np.eye(d), K))
     else:
         scalar_out = scalar0.copy()
-        assemble_convection(space, u, scale, scalar_out=scalar_out)
+        assemble_convection(space, u, scale, scalar_out=scalar_out, mass_laplace=mass_laplace)
         assert_rel(_dense_scalar(space, scalar_out) - _dense_scalar(space, scalar0),
-                   scale * ref.convection(u))
+                   scale * ref.convection(u) + K)
 
 
 def test_assemble_convection_needs_one_output(case):
@@ -496,19 +488,6 @@ def test_convection_newton_is_jacobian(case):
     eps = 1e-3  # residual is quadratic: the central difference is exact up to round-off
     fd = (residual(u + eps * du) - residual(u - eps * du)) / (2 * eps)
     assert_rel(space.coupled_matrix(Jd) @ du, fd, rtol=1e-9)
-
-
-def test_expand_to_coupled(case):
-    space, ref = case
-    rng = np.random.default_rng(32)
-    d = space.dim
-    scalar = assemble_laplace(space)
-    out = rng.normal(size=d * d * space.nnz)  # overwritten, not added to
-    expand_to_coupled(space, out, 3.0, scalar)
-    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), 3.0 * ref.laplace()))
-    mass = assemble_mass(space)
-    expand_to_coupled(space, out, 2.0, mass, -1.0, scalar)
-    assert_rel(space.coupled_matrix(out).toarray(), np.kron(np.eye(d), 2.0 * ref.mass() - ref.laplace()))
 
 
 def test_assemble_divergence(case):
@@ -615,6 +594,10 @@ def test_assemble_mass_laplace_on_axis_aligned_cells(axes):
     K = _dense_scalar(space, assemble_mass_laplace(space, 2.0, -0.5))
     assert_rel(K, 2.0 * ref.mass() - 0.5 * ref.laplace())
     assert_rel(_dense_scalar(space, assemble_mass(space)), ref.mass())
+    u = np.random.default_rng(33).normal(size=space.n_u)
+    S = np.zeros(space.nnz)
+    assemble_convection(space, u, 0.7, scalar_out=S, mass_laplace=(2.0, -0.5))
+    assert_rel(_dense_scalar(space, S), 0.7 * ref.convection(u) + 2.0 * ref.mass() - 0.5 * ref.laplace())
     assert FlowSpace(deformed_mesh(space.dim, seed=3)).cell_axes is None
 
 

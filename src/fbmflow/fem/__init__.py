@@ -9,7 +9,6 @@ from .assembly import (
                        assemble_load,
                        assemble_mass,
                        assemble_mass_laplace,
-                       expand_to_coupled,
                        pressure_mean_weights,
                        reaction_coefficients,
                        velocity_coefficients,
@@ -21,6 +20,6 @@ from .space import FlowSpace
 
 __all__ = ["FlowSpace", "DofMap", "PressureDofMap", "ElementQ1", "ElementQ2", "ElementP1Disc",
            "gauss_tensor", "assemble_mass", "assemble_laplace", "assemble_convection",
-           "assemble_divergence", "assemble_load", "expand_to_coupled", "pressure_mean_weights",
+           "assemble_divergence", "assemble_load", "pressure_mean_weights",
            "apply_convection", "apply_reaction", "apply_mass_laplace", "assemble_mass_laplace",
            "reaction_coefficients", "velocity_coefficients"]

@@ -263,8 +263,8 @@ def scatter_scalar(cells, local, offsets, cell_dofs, indptr, out):
 
 
 @njit(parallel=True)
-def scatter_coupled(cells, conv, react, sym, scale, offsets, cell_dofs, indptr, d, out):
-    """Scatter ``scale * (delta_ik N + R_ik)`` into the coupled velocity matrix.
+def scatter_coupled(cells, conv, react, sym, offsets, cell_dofs, indptr, d, out):
+    """Scatter ``delta_ik N + R_ik`` into the coupled velocity matrix.
 
     The coupled matrix has rows ``(i, r)`` = ``i * n + r`` and, within a row, the columns of
     component 0, then 1, ... each in the order of the scalar pattern. Hence the entry
@@ -298,31 +298,8 @@ def scatter_coupled(cells, conv, react, sym, scale, offsets, cell_dofs, indptr, 
                         off = base + offsets[c, a, b]
                         t = sym[a, b]
                         for k in range(d):
-                            out[off + k * ln] += scale * react[row + k, t]
-                        out[off + i * ln] += scale * conv[e, a * nl + b]
-
-
-@njit(parallel=True)
-def init_coupled(alpha, X, beta, Y, indptr, d, out):
-    """Overwrite coupled data with ``alpha X + beta Y`` on the diagonal blocks, zero elsewhere.
-
-    alpha, beta float; X, Y (nnz,) float64 on the scalar pattern; indptr (n + 1,) int64;
-    out (d * d * nnz,) float64. Forming the combination here avoids two large temporaries.
-    """
-    n = indptr.shape[0] - 1
-    nnz = indptr[-1]
-    for r in prange(n):
-        start = indptr[r]
-        ln = indptr[r + 1] - start
-        for i in range(d):
-            base = i * d * nnz + d * start
-            for k in range(d):
-                if k == i:
-                    for off in range(ln):
-                        out[base + k * ln + off] = alpha * X[start + off] + beta * Y[start + off]
-                else:
-                    for off in range(ln):
-                        out[base + k * ln + off] = 0.0
+                            out[off + k * ln] += react[row + k, t]
+                        out[off + i * ln] += conv[e, a * nl + b]
 
 
 @njit(parallel=True)

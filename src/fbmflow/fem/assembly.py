@@ -64,27 +64,27 @@ def _times(a: np.ndarray, table: np.ndarray) -> np.ndarray:
     return out
 
 
-def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.ndarray:
-    """Data (nnz,) of ``alpha M + beta L`` on ``space``'s scalar pattern, one GEMM per batch: the
-    cells' weights of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace_axes` (``1 + d``
-    per cell) where the cells are axis-aligned boxes (:attr:`~fbmflow.fem.space.FlowSpace.cell_axes`),
-    else the coefficients of :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace` at every
-    point (the Laplacian's symmetric pairs of axes folded, 7 rows per point in 3D)."""
-    data = np.zeros(space.nnz)
+def _mass_laplace_coefficients(space: FlowSpace, cells: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    """The coefficients of ``alpha M + beta L`` on ``cells`` (m,) for the rows of
+    :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace_cells`: the cells' weights of
+    :attr:`~fbmflow.fem.space.FlowSpace.cell_axes` (``1 + d`` per cell) where the cells are
+    axis-aligned boxes, else the coefficients at every point (the Laplacian's symmetric pairs of
+    axes folded, 7 rows per point in 3D); (m, k) float64."""
     axes = space.cell_axes
     if axes is not None:
-        table = space.table_mass_laplace_axes
-        scale = np.array([alpha] + [beta] * space.dim)
-    else:
-        table = space.table_mass_laplace
+        return axes[cells] * np.array([alpha] + [beta] * space.dim)
+    return _kernels.mass_laplace_coefficients(space.detJw[cells], space.Jinv[cells], alpha, beta)
+
+
+def assemble_mass_laplace(space: FlowSpace, alpha: float, beta: float) -> np.ndarray:
+    """Data (nnz,) of ``alpha M + beta L`` on ``space``'s scalar pattern, one GEMM per batch with
+    :attr:`~fbmflow.fem.space.FlowSpace.table_mass_laplace_cells` (with a convection term:
+    :func:`assemble_convection`'s ``mass_laplace``, the same GEMM)."""
+    data = np.zeros(space.nnz)
+    table = space.table_mass_laplace_cells
     with single_threaded_blas():
         for cells in space.batches:
-            c = cells.ravel()
-            if axes is not None:
-                local = _times(axes[c] * scale, table)
-            else:
-                local = _times(_kernels.mass_laplace_coefficients(space.detJw[c], space.Jinv[c], alpha, beta),
-                               table)
+            local = _times(_mass_laplace_coefficients(space, cells.ravel(), alpha, beta), table)
             _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr, data)
     return data
 
@@ -101,8 +101,16 @@ def assemble_laplace(space: FlowSpace) -> np.ndarray:
 
 def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
                         scalar_out: np.ndarray | None = None,
-                        newton_out: np.ndarray | None = None) -> None:
-    """Add ``scale * N(u)`` to ``scalar_out``, or ``scale * (N(u) + R(u))`` to ``newton_out``.
+                        newton_out: np.ndarray | None = None,
+                        mass_laplace: tuple[float, float] | None = None) -> None:
+    """Add ``scale * N(u)`` to ``scalar_out``, or ``scale * (N(u) + R(u))`` to ``newton_out``;
+    with ``mass_laplace = (alpha, beta)`` also ``alpha M + beta L`` (on every diagonal block of
+    ``newton_out``).
+
+    The mass and Laplace terms' coefficients join the convection's: one GEMM per batch with
+    :attr:`~fbmflow.fem.space.FlowSpace.table_convection_mass_laplace` and one scatter, where
+    :func:`assemble_mass_laplace` and this function apart write and scatter every local matrix
+    twice.
 
     Parameters
     ----------
@@ -111,6 +119,7 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
     scalar_out : (nnz,) float64, scalar pattern data, updated in place (Picard operator)
     newton_out : (dim * dim * nnz,) float64, coupled pattern data, updated in place (Newton
         Jacobian: the convection on the diagonal blocks plus the Newton blocks ``R_ik``)
+    mass_laplace : (alpha, beta), or None for the convection alone
     """
     if (scalar_out is None) == (newton_out is None):
         raise ValueError("give exactly one of scalar_out and newton_out")
@@ -118,25 +127,23 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
     uu = np.ascontiguousarray(u.reshape(d, space.n_v))
     newton = newton_out is not None
     mass_upper, sym = space.table_mass_upper
+    table = space.table_convection if mass_laplace is None else space.table_convection_mass_laplace
     with single_threaded_blas():
         for cells in space.batches:
+            c = cells.ravel()
             conv, react = _kernels.convection_coefficients(
-                cells.ravel(), uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
-            local = _times(conv, space.table_convection)
+                c, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
+            conv *= scale
+            if mass_laplace is not None:
+                conv = np.hstack([conv, _mass_laplace_coefficients(space, c, *mass_laplace)])
+            local = _times(conv, table)
             if newton:
-                _kernels.scatter_coupled(cells, local, _times(react, mass_upper), sym, scale, space.offsets,
+                react *= scale
+                _kernels.scatter_coupled(cells, local, _times(react, mass_upper), sym, space.offsets,
                                          space.V.cell_dofs, space.indptr, d, newton_out)
             else:
-                local *= scale
                 _kernels.scatter_scalar(cells, local, space.offsets, space.V.cell_dofs, space.indptr,
                                         scalar_out)
-
-
-def expand_to_coupled(space: FlowSpace, out: np.ndarray, alpha: float, X: np.ndarray,
-                      beta: float = 0.0, Y: np.ndarray | None = None) -> None:
-    """Overwrite coupled data ``out`` (dim * dim * nnz,) with the scalar operator ``alpha X + beta Y``
-    (data on the scalar pattern) on every diagonal block and zeros elsewhere."""
-    _kernels.init_coupled(alpha, X, beta, X if Y is None else Y, space.indptr, space.dim, out)
 
 
 def assemble_divergence(space: FlowSpace) -> sp.csr_matrix:

@@ -261,6 +261,18 @@ class FlowSpace:
         laplace = table[nq:].reshape(nq, pairs, -1)
         return np.vstack([w @ table[:nq]] + [w @ laplace[:, k] for k in diagonal])
 
+    @cached_property
+    def table_mass_laplace_cells(self) -> np.ndarray:
+        """The mass and Laplace table of this space's cells: :attr:`table_mass_laplace_axes`
+        where :attr:`cell_axes` are there, else :attr:`table_mass_laplace`."""
+        return self.table_mass_laplace_axes if self.cell_axes is not None else self.table_mass_laplace
+
+    @cached_property
+    def table_convection_mass_laplace(self) -> np.ndarray:
+        """:attr:`table_convection`'s rows, then :attr:`table_mass_laplace_cells`': the local
+        ``s N + alpha M + beta L`` from one product."""
+        return np.vstack([self.table_convection, self.table_mass_laplace_cells])
+
     # -- helpers ------------------------------------------------------------------------------
     def free_node_components(self, free: np.ndarray) -> np.ndarray:
         """Labels (n_v,) int64 of the connected components of the ``free`` (n_v,) bool velocity

@@ -17,7 +17,6 @@ from ..fem import (
     assemble_laplace,
     assemble_mass,
     assemble_mass_laplace,
-    expand_to_coupled,
     pressure_mean_weights,
     reaction_coefficients,
     velocity_coefficients,
@@ -263,9 +262,11 @@ class FlowLevel:
         newton = convection and a != 0.0 and newton
         rows = con.rows.dofs if con.rows is not None else None
         if not newton:  # block diagonal: the same scalar operator for every component, stored once
-            S = assemble_mass_laplace(s, m * rho, a * mu)
             if convection and a != 0.0:
-                assemble_convection(s, u, a * rho, scalar_out=S)
+                S = np.zeros(s.nnz)
+                assemble_convection(s, u, a * rho, scalar_out=S, mass_laplace=(m * rho, a * mu))
+            else:
+                S = assemble_mass_laplace(s, m * rho, a * mu)
             R = None if rows is None else sp.diags(self.row_scale(rows, m, a, rho, mu)) @ con.rows.matrix
             A = VelocityBlock(s, S, con.fixed, rows, R)
         else:
@@ -276,8 +277,8 @@ class FlowLevel:
                 if self._jacobian_data is None or self._jacobian_data.size != size:
                     self._jacobian_data = np.empty(size)
                 J = self._jacobian_data
-            expand_to_coupled(s, J, 1.0, assemble_mass_laplace(s, m * rho, a * mu))
-            assemble_convection(s, u, a * rho, newton_out=J)
+            J.fill(0.0)
+            assemble_convection(s, u, a * rho, newton_out=J, mass_laplace=(m * rho, a * mu))
             A = s.coupled_matrix(J)
             con.zero_rows(A)
             if rows is not None:
