@@ -208,9 +208,10 @@ def test_particle_within_a_cell_of_a_wall_of_a_closed_box_still_solves(gap_cells
 def test_orphaned_modes_are_kept_for_constraints_on_the_same_dofs(monkeypatch):
     """The orphaned modes depend on which DOFs are constrained, not on their values: constraints on
     the same DOFs with other particle velocities (a coupling iteration's) get the modes already
-    found, without a search; constraints on other DOFs (the disk moved) get a new search, whose
-    modes are those of a fresh problem."""
-    import fbmflow.flow.navier_stokes as ns
+    found, without a search, and so does a level's linear system under them (every level keeps
+    its own); constraints on other DOFs (the disk moved) get a new search, whose modes are those
+    of a fresh problem."""
+    import fbmflow.flow.levels as levels
     from fbmflow.flow import NavierStokesProblem, NoSlip
 
     mesh = StructuredMesh.box((8, 8))
@@ -224,20 +225,22 @@ def test_orphaned_modes_are_kept_for_constraints_on_the_same_dofs(monkeypatch):
         return NavierStokesProblem(mesh, 1.0, {t: NoSlip() for t in mesh.tags}, convection=False,
                                    linear_solver=DirectSolver(), extra_constraints=constraints)
 
-    searches, search = [], ns.orphan_pressure_modes
+    searches, search = [], levels.orphan_pressure_modes
 
     def counted(*args, **kwargs):
         searches.append(1)
         return search(*args, **kwargs)
 
-    monkeypatch.setattr(ns, "orphan_pressure_modes", counted)
+    monkeypatch.setattr(levels, "orphan_pressure_modes", counted)
     flow = problem()
     first = flow.orphans(flow.constraints(0.0))
     assert first is not None and len(searches) == 1
     where["U"] = np.array([[0.3, -2.0]])
     other = flow.constraints(0.0)
-    assert not np.array_equal(other.values, flow._orphans[0].values)
+    assert not np.array_equal(other.values, flow.fine._orphans[0].values)
     assert flow.orphans(other) is first and len(searches) == 1
+    system = flow.fine.system(np.zeros(flow.space.n_u), 1.0, 1.0, 1.0, 1.0, False, con=other.homogeneous())
+    assert len(searches) == 1 and abs(system.orphans - first).max() == 0.0
     where["centre"] = np.array([[0.5, 0.6]])  # other DOFs: a new search
     moved = flow.constraints(0.0)
     found = flow.orphans(moved)

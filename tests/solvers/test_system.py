@@ -93,7 +93,7 @@ def test_a_newton_solve_finds_the_orphaned_modes_once(sharp, monkeypatch):
         return search(*args, **kwargs)
 
     monkeypatch.setattr(system_module, "orphan_pressure_modes", counted)
-    monkeypatch.setattr("fbmflow.flow.navier_stokes.orphan_pressure_modes", counted)
+    monkeypatch.setattr("fbmflow.flow.levels.orphan_pressure_modes", counted)
     x, report = prob.solve(prob.zero_state(), 100.0, 1.0, prob.load(), 0.0)
     assert report.converged and report.iterations >= 1
     assert len(calls) == 1

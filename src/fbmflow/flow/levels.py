@@ -27,6 +27,7 @@ from ..fem.velocity_block import VelocityBlock
 from ..mesh import StructuredMesh
 from ..solvers import SaddlePointSystem
 from ..solvers.sparse import matvec
+from ..solvers.system import orphan_pressure_modes
 from ..solvers.transfer import injection_q2, prolongation_p1disc, prolongation_q2
 from .boundary import build_constraints
 
@@ -207,6 +208,7 @@ class FlowLevel:
         self.boundary_constraints = build_constraints(space.V, boundary, 0.0)
         self.extra_constraints = extra_constraints
         self._jacobian_data: np.ndarray | None = None
+        self._orphans = None  # (constraints, their orphaned pressure modes) last found
         self.prolongation: tuple | None = None  # from the next coarser level
         self.injection: np.ndarray | None = None  # fine DOF of every DOF of this level
 
@@ -219,6 +221,29 @@ class FlowLevel:
         if extra is not None:
             con = con.merged(extra(self.space.V, t))
         return con.homogeneous()
+
+    def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
+        """Pressure modes that no free velocity sees under the constraints ``con``: the projector
+        (n_p, n_p) CSR of :func:`~fbmflow.solvers.system.orphan_pressure_modes` on this level's
+        divergence with ``con``'s DOFs zero, the continued cells' modes left out; or None.
+
+        They depend on which DOFs are constrained and which cells' pressures are continued, not
+        on the values: those of the last ``con`` are kept for the next on the same DOFs (a
+        coupling iteration's other particle velocities, a Newton solve's residuals and linear
+        systems, every level's next linearisation while the particles stay on the same nodes).
+        """
+        if self._orphans is not None:
+            last, P = self._orphans
+            if last is con or (np.array_equal(last.dofs, con.dofs)
+                               and _same_dofs(last.extension, con.extension)):
+                self._orphans = (con, P)
+                return P
+        P = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None,
+                                  zero=con.dofs)
+        if con.extension is not None:
+            P = con.extension.exclude(P)
+        self._orphans = (con, P)
+        return P
 
     def close_pockets(self, con: DirichletConstraints, partition=None) -> DirichletConstraints:
         """Hold still the fluid nodes cut off from the main fluid by constrained nodes
@@ -255,10 +280,14 @@ class FlowLevel:
         of this level that the next call overwrites: use the returned system before linearising
         again (or pass ``own_buffer`` to get a fresh array that nothing else writes to).
         ``orphans``: the orphaned pressure modes under ``con`` where the caller has them (an empty
-        matrix: none), else they are computed (:class:`~fbmflow.solvers.system.SaddlePointSystem`).
+        matrix: none), else this level's (:meth:`orphans`, kept for constraints on the same DOFs).
         """
         s = self.space
         con = con or self.homogeneous_constraints()
+        if orphans is None:
+            orphans = self.orphans(con)
+            if orphans is None:  # none: the system looks for none either
+                orphans = sp.csr_matrix((s.n_p, s.n_p))
         newton = convection and a != 0.0 and newton
         rows = con.rows.dofs if con.rows is not None else None
         if not newton:  # block diagonal: the same scalar operator for every component, stored once
@@ -349,3 +378,10 @@ def inject_velocity(u: np.ndarray, level: FlowLevel, n_v_fine: int) -> np.ndarra
     """Velocity (dim * n_v_fine,) restricted by injection to ``level``'s nodes."""
     d = level.space.dim
     return u.reshape(d, n_v_fine)[:, level.injection].ravel()
+
+
+def _same_dofs(a, b) -> bool:
+    """Whether two pressure extensions (or None) continue the same pressure DOFs."""
+    if a is None or b is None:
+        return a is b
+    return np.array_equal(a.dofs, b.dofs)

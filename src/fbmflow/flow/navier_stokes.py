@@ -30,7 +30,7 @@ from ..solvers.choice import choose_linear_solver
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.reports import LinearWork
 from ..solvers.sparse import cell_transposed_matvec
-from ..solvers.system import balance_volume, orphan_pressure_modes
+from ..solvers.system import balance_volume
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, NewtonBlock, coarse_levels, inject_velocity
 
@@ -116,7 +116,6 @@ class NavierStokesProblem:
         self._steady_bc = not any(isinstance(b, Dirichlet) and callable(b.value) for b in boundary.values())
         self._constraints: DirichletConstraints | None = None
         self._linearisation = None  # (m, a, constraints, solve, system) of the last Newton step
-        self._orphans = None  # (constraints, their orphaned pressure modes) last computed
         self.linear_work = LinearWork()  # every linear solve of this problem, counted
         #: ``on_linear_solve(report, system)``, called after every linear solve with its
         #: :class:`~fbmflow.solvers.reports.LinearReport` and the
@@ -288,24 +287,13 @@ class NavierStokesProblem:
                               dot=self._pressure_dot)
 
     def orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
-        """Pressure modes that no free velocity sees under the constraints ``con`` (those of the
-        last ``con`` asked for are kept: a Newton solve's residuals and linear systems share
-        them, and so do the next constraints on the same DOFs with the same continued cells,
-        which is what they depend on: a coupling iteration's other particle velocities)."""
+        """Pressure modes that no free velocity sees under the constraints ``con``
+        (:meth:`FlowLevel.orphans <fbmflow.flow.levels.FlowLevel.orphans>` of the fine level,
+        kept for the next constraints on the same DOFs); None without extra constraints (the
+        systems find those of the walls themselves)."""
         if self.extra_constraints is None:
             return None
-        if self._orphans is not None:
-            last, P = self._orphans
-            if last is con or (np.array_equal(last.dofs, con.dofs)
-                               and _same_dofs(last.extension, con.extension)):
-                self._orphans = (con, P)
-                return P
-        P = orphan_pressure_modes(self.BT, self.space.dim + 1, closed=self.mean_weights is not None,
-                                  zero=con.dofs)
-        if con.extension is not None:
-            P = con.extension.exclude(P)
-        self._orphans = (con, P)
-        return P
+        return self.fine.orphans(con)
 
     def _known_orphans(self, con: DirichletConstraints) -> sp.csr_matrix | None:
         """The fine level system's orphaned modes where this problem computes them (an empty
@@ -581,9 +569,3 @@ class NavierStokesProblem:
                  report.residuals[0], report.residuals[-1])
         return x, report
 
-
-def _same_dofs(a, b) -> bool:
-    """Whether two pressure extensions (or None) continue the same pressure DOFs."""
-    if a is None or b is None:
-        return a is b
-    return np.array_equal(a.dofs, b.dofs)
