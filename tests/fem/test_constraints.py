@@ -29,15 +29,3 @@ def test_the_replaced_rows_product_equals_the_copied_matrix(sparse):
     assert np.allclose(out, ref, rtol=0, atol=1e-14)
     assert not np.allclose(out, (BT @ U).toarray() if sparse else BT @ U)  # the rows were replaced
     assert np.array_equal(BT.data, before)
-
-
-def test_among_sorted_is_isin():
-    """The binary search against ``np.isin``: values below, between, on and above the sorted
-    array's, an empty array on either side."""
-    from fbmflow.fem.constraints import _among_sorted
-    rng = np.random.default_rng(7)
-    b = np.unique(rng.integers(10, 1000, 300))
-    a = rng.integers(0, 1100, 500)
-    assert np.array_equal(_among_sorted(a, b), np.isin(a, b)) and _among_sorted(a, b).any()
-    assert not _among_sorted(a, b[:0]).any() and _among_sorted(a[:0], b).shape == (0,)
-    assert _among_sorted(b, b).all()

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _kernels
+from .sorted_sets import union_sorted
 
 
 def splice_rows(M: sp.csr_matrix, rows: np.ndarray, R: sp.csr_matrix) -> sp.csr_matrix:
@@ -197,7 +198,7 @@ class ContinuityBlock:
 
     def _with(self, rows: np.ndarray, R: sp.csr_matrix) -> "ContinuityBlock":
         """The block with the rows ``rows`` (ascending) those of ``R`` (CSR, sorted indices)."""
-        dofs = np.union1d(self.dofs, rows)
+        dofs = union_sorted(self.dofs, rows)
         source = np.zeros(dofs.size, dtype=np.int64)  # row of [self.rows; R] for every new dof
         source[np.searchsorted(dofs, self.dofs)] = np.arange(self.dofs.size)
         source[np.searchsorted(dofs, rows)] = self.dofs.size + np.arange(rows.size)

@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _kernels
+from .sorted_sets import difference_sorted
 from .space import FlowSpace
 
 #: blocks with at least this many stored scalar entries are applied in parallel
@@ -57,7 +58,7 @@ class VelocityBlock:
         self.shape = (d * n_v, d * n_v)
         fixed = np.asarray(fixed, dtype=np.int64)
         rows = np.zeros(0, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
-        fixed = np.setdiff1d(fixed, rows)
+        fixed = difference_sorted(fixed, rows)
         parts = [sp.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)),
                                shape=(fixed.size, self.shape[1]))]
         if rows.size:
@@ -75,7 +76,9 @@ class VelocityBlock:
         self._pos[self.dofs] = np.arange(self.dofs.size, dtype=np.int32)
         # nodes whose d rows are one scalar row: those without replaced rows, and those whose
         # replaced rows are shifted copies (all components fixed; one stencil for all of them)
-        nodes = np.unique(self.dofs % n_v)
+        replaced = np.zeros(n_v, dtype=bool)
+        replaced[self.dofs % n_v] = True
+        nodes = np.flatnonzero(replaced)
         pos = self._pos.reshape(d, n_v)[:, nodes].T.astype(np.int64)
         self.regular = np.ones(n_v, dtype=bool)
         self.regular[nodes] = _kernels.shifted_copies(R.indptr, R.indices, R.data, pos, n_v)

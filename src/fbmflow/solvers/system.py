@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 
 from ..fem.continuity_block import ContinuityBlock, splice_rows, zero_columns
+from ..fem.sorted_sets import union_sorted
 from ..fem.velocity_block import VelocityBlock
 from ..kept import KeptByIdentity
 from . import _kernels
@@ -160,7 +161,7 @@ class SaddlePointSystem:
         stands for ``B``."""
         if self.gradient_BT is None or self.fixed is None:
             return self.rows
-        return self.fixed if self.rows is None else np.union1d(self.fixed, self.rows)
+        return self.fixed if self.rows is None else union_sorted(self.fixed, self.rows)
 
     def apply_gradient(self, p: np.ndarray) -> np.ndarray:
         """``B p`` for a pressure (n_p,) -> (n_u,): from ``gradient_BT`` cell by cell where it is
