@@ -79,6 +79,11 @@ def test_products_match_the_assembled_copy(kind):
         V = sp.random(n_u, 4, density=0.4, random_state=2, format="csr")
         out = D @ V
         assert sp.issparse(out) and abs(out - M @ V).max() < 1e-14
+        # a lifting's few non-zero rows: the rows of the base that reach them only, the same sums
+        few = sp.csr_matrix(V.multiply(np.isin(np.arange(n_u), [1, n_u // 2])[:, None]))
+        out = D @ few
+        assert 0 < np.count_nonzero(np.diff(out.indptr)) < n_p
+        assert np.array_equal(out.toarray(), (M @ few).toarray())
     S = sp.random(5, n_p, density=0.15, random_state=3, format="csr")
     assert _same((S @ D).tocsr(), (S @ M).tocsr())
 

@@ -105,7 +105,8 @@ class ContinuityRows:
         then the replaced rows from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or
         sparse."""
         npl, width = self.data.shape[1:]
-        out = (BT @ U).toarray() if sp.issparse(U) else ContinuityBlock(BT) @ U  # dense: rows in parallel
+        out = ContinuityBlock(BT) @ U  # dense: rows in parallel; sparse: the rows that reach U's
+        out = out.toarray() if sp.issparse(out) else out
         if self.cells.size:
             rows = (self.cells[:, None] * npl + np.arange(npl)).ravel()
             columns = BT.indices.reshape(-1, npl, width)[self.cells].ravel()

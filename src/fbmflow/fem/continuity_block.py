@@ -152,7 +152,7 @@ class ContinuityBlock:
         """Product with a vector (n_u,) (float64 result, rows in parallel), a dense matrix
         (n_u, k) (dense, column by column) or a sparse one (CSR)."""
         if sp.issparse(v):
-            out = sp.csr_matrix(self.base @ v)
+            out = self._base_times_sparse(sp.csr_matrix(v))
             keep = np.ones(self.shape[0])
             keep[self.dofs] = 0.0
             return (sp.diags(keep) @ out + self.changed_rows() @ v).tocsr()
@@ -165,6 +165,21 @@ class ContinuityBlock:
         R = self.rows
         _kernels.override_rows(self.dofs, R.indptr, R.indices, R.data, v, out)
         return out
+
+    def _base_times_sparse(self, v: sp.csr_matrix) -> sp.csr_matrix:
+        """``base @ v`` (n_p, k) CSR for a sparse ``v`` (n_u, k) from the rows of ``base`` that
+        reach ``v``'s non-zero rows only (a particle's liftings: the cells about it, where SciPy's
+        product runs through every row: at ten Cate level 2, 23 M entries for each product);
+        the same sums in the same order."""
+        reach = np.zeros(self.shape[1], dtype=np.bool_)
+        reach[np.diff(v.indptr) > 0] = True
+        rows = np.flatnonzero(_kernels.rows_touching(self.base.indices, self.shape[0], self.width, reach))
+        part = sp.csr_matrix(self.base[rows] @ v)
+        lengths = np.zeros(self.shape[0], dtype=np.int64)
+        lengths[rows] = np.diff(part.indptr)
+        indptr = np.zeros(self.shape[0] + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        return sp.csr_matrix((part.data, part.indices, indptr), shape=(self.shape[0], v.shape[1]))
 
     def __rmatmul__(self, S) -> sp.csr_matrix:
         """``S @ D`` for a sparse ``S`` (k, n_p) with few non-zero columns, CSR: the same sums in

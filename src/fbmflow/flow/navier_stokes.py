@@ -274,7 +274,8 @@ class NavierStokesProblem:
         box, the volume defect of the prescribed velocities taken out as the linear solvers do
         (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense."""
         if con.continuity is None:
-            Fp = (self.BT @ U).toarray() if sp.issparse(U) else ContinuityBlock(self.BT) @ U
+            Fp = ContinuityBlock(self.BT) @ U
+            Fp = Fp.toarray() if sp.issparse(Fp) else Fp
         else:  # without a copy of B^T, which would raise the Newton iteration's peak
             Fp = con.continuity.product(self.BT, U)
         if con.extension is not None:
