@@ -58,6 +58,20 @@ def cell_geometry(cell_coords, dN, weights):
 
 
 @njit(inline="always")
+def _point_convection(e, c, q, uq, detJw, Jinv, conv):
+    """``conv[e, q d + ax] = w (Jinv uq)_ax`` at point ``q`` of cell ``c`` for the velocity ``uq``
+    (d,) there; returns the point's weight ``w = detJw[c, q]``."""
+    d = uq.shape[0]
+    w = detJw[c, q]
+    for ax in range(d):
+        s = 0.0
+        for i in range(d):
+            s += Jinv[c, q, ax, i] * uq[i]
+        conv[e, q * d + ax] = w * s
+    return w
+
+
+@njit(inline="always")
 def _convection_cell(e, c, u, cell_dofs, phi, detJw, Jinv, conv):
     """:func:`convection_coefficients`' ``conv`` row ``e`` of cell ``c``."""
     nq, nl = phi.shape
@@ -69,12 +83,7 @@ def _convection_cell(e, c, u, cell_dofs, phi, detJw, Jinv, conv):
             dof = cell_dofs[c, a]
             for i in range(d):
                 uq[i] += u[i, dof] * phi[q, a]
-        w = detJw[c, q]
-        for ax in range(d):
-            s = 0.0
-            for i in range(d):
-                s += Jinv[c, q, ax, i] * uq[i]
-            conv[e, q * d + ax] = w * s
+        _point_convection(e, c, q, uq, detJw, Jinv, conv)
 
 
 @njit(inline="always")
@@ -94,12 +103,7 @@ def _newton_cell(e, c, u, cell_dofs, phi, dphi, detJw, Jinv, conv, react):
                 uq[i] += ua * phi[q, a]
                 for ax in range(d):
                     gref[i, ax] += ua * dphi[q, a, ax]
-        w = detJw[c, q]
-        for ax in range(d):
-            s = 0.0
-            for i in range(d):
-                s += Jinv[c, q, ax, i] * uq[i]
-            conv[e, q * d + ax] = w * s
+        w = _point_convection(e, c, q, uq, detJw, Jinv, conv)
         for i in range(d):
             for k in range(d):
                 s = 0.0
