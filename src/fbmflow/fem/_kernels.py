@@ -774,13 +774,13 @@ def gather_lengths(rows, indptr, n_v, o_pos, o_ptr):
     return ptr
 
 
-@njit
+@njit(parallel=True)
 def gather_rows(rows, indptr, indices, data, n_v, o_pos, o_ptr, o_idx, o_val, shift, ptr, idx, val):
     """Write the rows ``rows (k,)`` of ``diag(S, ..., S)`` (scalar CSR ``S``), the rows with
     ``o_pos[r] >= 0`` replaced by row ``o_pos[r]`` of ``O``, into the CSR arrays ``(ptr, idx,
     val)`` (``ptr`` from :func:`gather_lengths`); columns into the whole velocity vector, or,
-    where ``shift`` is False, the scalar rows' node columns (``S``'s own)."""
-    for j in range(rows.shape[0]):
+    where ``shift`` is False, the scalar rows' node columns (``S``'s own). Rows in parallel."""
+    for j in prange(rows.shape[0]):
         r = rows[j]
         q = o_pos[r]
         s = ptr[j]

@@ -275,25 +275,23 @@ def _copy_row(src_ptr, src_idx, src_val, q, offset, idx, val, pos):
     return pos
 
 
-@njit
+@njit(parallel=True)
 def merge_blocks(a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val, c_ptr, c_idx, c_val,
                  keep_u, ptr, idx, val):
-    """The CSR arrays of ``K = [[A, G], [D, C]]`` from those of its blocks (``A`` (n_u, n_u),
-    ``G`` (n_u, n_p), ``D`` (n_p, n_u), ``C`` (n_p, n_p)) into ``ptr (n_u + n_p + 1,)``, ``idx``
-    and ``val``, filled in place; row by row, left block first. Velocity rows with ``keep_u``
-    (n_u,) False stay empty."""
+    """The CSR arrays ``idx`` and ``val`` of ``K = [[A, G], [D, C]]`` from those of its blocks
+    (``A`` (n_u, n_u), ``G`` (n_u, n_p), ``D`` (n_p, n_u), ``C`` (n_p, n_p)), filled in place
+    at the row pointers ``ptr (n_u + n_p + 1,)`` (the rows' lengths summed: a kept velocity row
+    ``A``'s and ``G``'s, a pressure row ``D``'s and ``C``'s); row by row, left block first, rows
+    in parallel. Velocity rows with ``keep_u`` (n_u,) False stay empty."""
     n_u, n_p = a_ptr.shape[0] - 1, d_ptr.shape[0] - 1
-    pos = 0
-    ptr[0] = 0
-    for q in range(n_u):
-        if keep_u[q]:
-            pos = _copy_row(a_ptr, a_idx, a_val, q, 0, idx, val, pos)
-            pos = _copy_row(g_ptr, g_idx, g_val, q, n_u, idx, val, pos)
-        ptr[q + 1] = pos
-    for q in range(n_p):
-        pos = _copy_row(d_ptr, d_idx, d_val, q, 0, idx, val, pos)
-        pos = _copy_row(c_ptr, c_idx, c_val, q, n_u, idx, val, pos)
-        ptr[n_u + q + 1] = pos
+    for q in prange(n_u + n_p):
+        if q < n_u:
+            if keep_u[q]:
+                pos = _copy_row(a_ptr, a_idx, a_val, q, 0, idx, val, ptr[q])
+                _copy_row(g_ptr, g_idx, g_val, q, n_u, idx, val, pos)
+        else:
+            pos = _copy_row(d_ptr, d_idx, d_val, q - n_u, 0, idx, val, ptr[q])
+            _copy_row(c_ptr, c_idx, c_val, q - n_u, n_u, idx, val, pos)
 
 
 @njit
@@ -627,17 +625,17 @@ def vanka_factor(store, lu_ptr, piv, ptr, dofs, blocks, d_read, nl, d, n_chunks,
             factor_patch(k, patches, op, schur_tol, loc, work, A, Ainv, Y, Sc, Sinv, p_work, e, col)
 
 
-@njit
+@njit(parallel=True)
 def continuity_in_patch_order(ptr, dofs, blocks, nu, npl, n_u, d_pos, d_ptr, d_idx, b_idx):
     """Whether each Schur patch's (``blocks[k] > 0``) continuity rows, those of its pressures
     ``dofs[ptr[k] + nu:]`` (the operator's, see above: rows of the CSR ``(d_ptr, d_idx)`` where
     ``d_pos`` says so, else the divergence's with the columns ``b_idx``), hold exactly its
     velocities ``dofs[ptr[k]:ptr[k] + nu]``, in that order (a cell's rows of the divergence in
     its cell-local pattern, the patch's nodes in ascending order): its ``D`` is then those
-    rows' values. (n_patches,) bool."""
+    rows' values. (n_patches,) bool; patches in parallel."""
     m = ptr.shape[0] - 1
     out = np.zeros(m, dtype=np.bool_)
-    for k in range(m):
+    for k in prange(m):
         if blocks[k] <= 0 or ptr[k + 1] - ptr[k] != nu + npl:
             continue
         ok = True

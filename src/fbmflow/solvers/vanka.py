@@ -24,6 +24,7 @@ import scipy.sparse.csgraph as csgraph
 from .._jit import numba_threads
 from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
+from ..kept import KeptByIdentity
 from . import _kernels, ordering
 from .system import SaddlePointSystem, as_csr, cell_blocks, cell_local, cell_values
 
@@ -122,10 +123,11 @@ def saddle_point_csr(system: SaddlePointSystem, dtype, keep_u: np.ndarray | None
                      (system.pressure_block, (n_p, n_p))):
         M = sp.csr_matrix(shape) if M is None else as_csr(M)
         blocks += [M.indptr, M.indices, M.data]
-    lengths = np.diff(blocks[0]) + np.diff(blocks[3])
-    nnz = int(lengths[keep_u].sum()) + blocks[8].size + blocks[11].size
-    ptr, idx, val = (np.empty(n_u + n_p + 1, dtype=np.int64), np.empty(nnz, dtype=np.int32),
-                     np.empty(nnz, dtype=dtype))
+    ptr = np.zeros(n_u + n_p + 1, dtype=np.int64)
+    ptr[1:n_u + 1] = np.where(keep_u, np.diff(blocks[0]) + np.diff(blocks[3]), 0)
+    ptr[n_u + 1:] = np.diff(blocks[6]) + np.diff(blocks[9])
+    np.cumsum(ptr, out=ptr)
+    idx, val = np.empty(ptr[-1], dtype=np.int32), np.empty(ptr[-1], dtype=dtype)
     _kernels.merge_blocks(*blocks, keep_u, ptr, idx, val)
     return ptr, idx, val
 
@@ -151,6 +153,21 @@ def _clusters(system: SaddlePointSystem, npl: int) -> list[np.ndarray]:
     n_parts, label = csgraph.connected_components(graph, directed=False)
     size = np.bincount(label, minlength=n_parts)
     return [np.flatnonzero(label == part) for part in np.flatnonzero(size > 1)]
+
+
+def _cell_patches(space) -> np.ndarray:
+    """Every cell's patch of ``space``: its nodes in ascending order (its divergence rows' order)
+    on each velocity component, then its ``d + 1`` pressures; (n_cells, d nl + d + 1) int32 indices
+    of the saddle-point unknowns."""
+    d, n_v = space.dim, space.n_v
+    nodes = np.sort(space.V.cell_dofs, axis=1).astype(np.int32)
+    n_cells, npl = nodes.shape[0], d + 1
+    pressures = (d * n_v + np.arange(n_cells, dtype=np.int32)[:, None] * npl + np.arange(npl, dtype=np.int32))
+    return np.concatenate([nodes + np.int32(i * n_v) for i in range(d)] + [pressures], axis=1)
+
+
+#: what every set-up on a space reads of it, made once (:func:`_cell_patches`)
+_KEPT = KeptByIdentity()
 
 
 def _divergence(system: SaddlePointSystem) -> sp.csr_matrix:
@@ -275,10 +292,7 @@ class FactoredVankaSmoother:
         d, npl, n_u, n_v = space.dim, space.dim + 1, system.n_u, space.n_v
         cd = space.V.cell_dofs
         n_cells, nl = cd.shape
-        nodes = np.sort(cd, axis=1)  # a cell patch's nodes ascending: its divergence rows' order
-        cell_dofs = np.concatenate([nodes + i * n_v for i in range(d)]
-                                   + [n_u + np.arange(n_cells)[:, None] * npl + np.arange(npl)], axis=1)
-        del nodes
+        cell_dofs = _KEPT.get(space, "cell patches", _cell_patches)
         plain = np.ones(n_cells, dtype=bool) if cells is None else np.array(cells, dtype=bool)
         merged = []
         if system.extension is not None:
@@ -341,7 +355,7 @@ class FactoredVankaSmoother:
         self.ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         #: the patches' unknowns, int32 (an unknown's index fits: 2^31 unknowns would need some
         #: 3 TB): 12 bytes per unknown fewer on a fine 3D level than int64
-        self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int32)
+        self.dofs = np.concatenate([cell_dofs[cells].ravel()] + merged).astype(np.int32, copy=False)
         #: per patch whether its Schur factors leave ``D`` out, the solve reading it from the
         #: continuity rows (a cell whose rows are the divergence's in its own pattern; ten Cate
         #: level 2: 46 bytes per unknown)
@@ -381,7 +395,8 @@ class FactoredVankaSmoother:
         #: phase each), all of them and those at the fictitious boundaries
         self.merged_phases = self._colour_phases(system, self.merged)
         merged_interface = self.interface[self.interface >= cells.size]
-        self.interface_merged_phases = self._colour_phases(system, merged_interface)
+        self.interface_merged_phases = (self.merged_phases if np.array_equal(merged_interface, self.merged)
+                                        else self._colour_phases(system, merged_interface))
         interface_reach = int(reach[plain_interface].max(initial=0))
         self.interface_phases = [(gptr, plain_interface[k]) for gptr, k in phased(
             mesh.shape, mesh.periodic, index, cells[plain_interface], interface_reach)]
