@@ -119,6 +119,24 @@ def test_saddle_point_csr_matches_scipy():
     K = sp.csr_matrix((val, idx, ptr), shape=(n, n))
     ref = sp.bmat([[system.A, system.gradient], [as_csr(system.BT), system.pressure_block]], format="csr")
     assert abs(K - ref).max() == 0.0
+    # some velocity rows left empty, no continuity rows: the rows in parallel at their pointers
+    keep = np.random.default_rng(4).random(system.n_u) < 0.5
+    ptr, idx, val = saddle_point_csr(system, np.float32, keep, continuity=False)
+    K = sp.csr_matrix((val, idx, ptr), shape=(n, n))
+    rows = np.concatenate([keep, np.ones(system.n_p, dtype=bool)]).astype(float)
+    ref = sp.diags(rows) @ sp.bmat([[system.A, system.gradient], [None, system.pressure_block]], format="csr")
+    assert K.dtype == np.float32 and abs(K - ref.astype(np.float32)).max() == 0.0
+
+
+def test_patch_max_against_numpy():
+    """The per-patch maximum over the patches' unknowns against NumPy's ``reduceat``."""
+    from fbmflow.solvers._kernels import patch_max
+    rng = np.random.default_rng(6)
+    sizes = rng.integers(1, 9, 40)
+    ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    dofs = rng.integers(0, 100, ptr[-1]).astype(np.int32)
+    for values in (rng.integers(0, 7, 100), (rng.random(100) < 0.1).astype(np.uint8)):
+        assert np.array_equal(patch_max(ptr, dofs, values), np.maximum.reduceat(values[dofs], ptr[:-1]))
 
 
 # -- convergence -------------------------------------------------------------------------------

@@ -294,6 +294,20 @@ def merge_blocks(a_ptr, a_idx, a_val, g_ptr, g_idx, g_val, d_ptr, d_idx, d_val, 
             _copy_row(c_ptr, c_idx, c_val, q - n_u, n_u, idx, val, pos)
 
 
+@njit(parallel=True)
+def patch_max(ptr, dofs, values):
+    """The largest of ``values`` over each patch's unknowns ``dofs[ptr[k]:ptr[k + 1]]`` (patches
+    not empty), (n_patches,) of ``values``' dtype; patches in parallel."""
+    m = ptr.shape[0] - 1
+    out = np.empty(m, dtype=values.dtype)
+    for k in prange(m):
+        best = values[dofs[ptr[k]]]
+        for j in range(ptr[k] + 1, ptr[k + 1]):
+            best = max(best, values[dofs[j]])
+        out[k] = best
+    return out
+
+
 @njit
 def regular_nodes(a_ptr, a_idx, a_val, n_v, d):
     """Nodes whose ``d`` velocity rows of the CSR block ``A`` (n_u, n_u, component-blocked, sorted

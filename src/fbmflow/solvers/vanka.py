@@ -370,7 +370,7 @@ class FactoredVankaSmoother:
         mesh = space.mesh
         self.n_cells = mesh.n_cells
         index = mesh.cell_indices()
-        reach = np.maximum.reduceat(ordering.unknown_reach(system)[self.dofs], self.ptr[:-1])  # per patch
+        reach = _kernels.patch_max(self.ptr, self.dofs, ordering.unknown_reach(system))  # per patch
         near = ordering.near_patches(reach[:cells.size])
         phased = ordering.slab_phases if order == "slabs" else ordering.colour_phases
         phases = phased(mesh.shape, mesh.periodic, index, cells[near],
@@ -463,16 +463,15 @@ class FactoredVankaSmoother:
     def _interface_patches(self, system: SaddlePointSystem) -> np.ndarray:
         """Patches (cells and agglomerated ones) holding a constrained velocity (fixed or
         row-constrained, not a wall's), (k,) int64."""
-        constrained = np.zeros(system.n_u + system.n_p, dtype=bool)
+        constrained = np.zeros(system.n_u + system.n_p, dtype=np.uint8)
         for dofs in (system.fixed, system.rows):
             if dofs is not None:
-                constrained[dofs] = True
+                constrained[dofs] = 1
         if system.fixed_always is not None:
-            constrained[system.fixed_always] = False
+            constrained[system.fixed_always] = 0
         if not constrained.any():
             return np.zeros(0, dtype=np.int64)
-        hits = np.add.reduceat(constrained[self.dofs].astype(np.int64), self.ptr[:-1])
-        return np.flatnonzero(hits > 0).astype(np.int64)
+        return np.flatnonzero(_kernels.patch_max(self.ptr, self.dofs, constrained)).astype(np.int64)
 
     def update(self, patches: np.ndarray, b: np.ndarray, x: np.ndarray, omega: float | None = None) -> None:
         """Add ``omega`` times the correction of each of ``patches`` to ``x``, one after the
