@@ -89,7 +89,8 @@ def _count_device_arrays(record: dict) -> None:
     """Make ``solver.device = gpu`` build its device hierarchy from NumPy arrays (the simulator's
     backend; the smoothers' factors and a Newton block's coefficients computed by the CPU's
     kernels, as many bytes) and solve on the CPU
-    hierarchy under it, its residuals on the CPU too, recording the device bytes per unknown
+    hierarchy under it, its residuals' products (the velocity operator, the gradient and the
+    continuity rows) on the CPU too, timed as the GPU's work, recording the device bytes per unknown
     (the space's cells, which the residuals share with the Newton terms, counted once)."""
     import fbmflow.gpu.multigrid as gm
     import fbmflow.gpu.operator as go
@@ -148,6 +149,14 @@ def _count_device_arrays(record: dict) -> None:
     gm.DeviceMultigridSolver.host_factors = True
     gm.DeviceMultigridSolver.velocity_operator = (
         lambda self, space: device_work(LinearSolver.velocity_operator(self, space)))
+
+    def divergence_products(self, space, BT):  # the CPU's products, timed as the GPU's
+        products = LinearSolver.divergence_products(self, space, BT)
+        products.gradient = device_work(products.gradient)
+        products.continuity = device_work(products.continuity)
+        return products
+
+    gm.DeviceMultigridSolver.divergence_products = divergence_products
     vanka_kernels.vanka_factor = device_work(vanka_kernels.vanka_factor)
 
     def solve(self, f, g, rtol=None):

@@ -7,7 +7,9 @@ hierarchy, the mean-pressure border, agglomerated patches) and a 3D box whose Ne
 moved to another iterate (the reaction term and the drift's convection applied without a matrix).
 The flow problem with the device's solver computes its Newton residual and its time step's
 mass and spatial terms on the device (:class:`fbmflow.gpu.space.DeviceSpace`, the space's cells
-copied once, shared with the Newton block's terms). Prints one line per case; exits 1 where the
+copied once, shared with the Newton block's terms; the residual's gradient and continuity rows by
+:class:`fbmflow.gpu.operator.DeviceDivergenceProducts`, from the operator's copies of the
+divergence and its transpose). Prints one line per case; exits 1 where the
 cycles differ or the velocities by more than 1e-10 relative (the two sum in different orders; a
 wrong operation shows at the solves' tolerance, 1e-6), where the residual and terms differ from
 the CPU's by more than 1e-13 relative or are not computed on the device, where a level's
@@ -27,6 +29,7 @@ from fbmflow.coupling import node_owner, rigid_body_constraints, sharp_boundary
 from fbmflow.flow import NavierStokesProblem, NoSlip
 from fbmflow.gpu.device import gpu_backend, simulated_backend
 from fbmflow.gpu.multigrid import DeviceHierarchy, DeviceMultigridSolver
+from fbmflow.gpu.operator import DeviceDivergenceProducts, kept_continuity, kept_gradient
 from fbmflow.gpu.space import DeviceSpace, device_space
 from fbmflow.mesh import StructuredMesh
 from fbmflow.particles import Ball
@@ -91,9 +94,14 @@ for name in sys.argv[1:] or cases:
         results.append((np.concatenate([u, p]), report, factor, ops, prob))
     (x_cpu, cpu, _, ops_cpu, _), (x_gpu, gpu, device, ops_gpu, prob) = results
     assert isinstance(device, DeviceHierarchy)
-    on_device = isinstance(getattr(prob._mass_laplace, "__self__", None), DeviceSpace)
-    # one copy of the space's cells on the device: the Newton block's terms use the residual's
-    one_copy = not device.operator.free or device.operator.space is device_space(prob.space, backend)
+    on_device = (isinstance(getattr(prob._mass_laplace, "__self__", None), DeviceSpace)
+                 and isinstance(prob._divergence, DeviceDivergenceProducts))
+    # one copy of the space's cells on the device: the Newton block's terms use the residual's;
+    # one of the divergence and its transpose: the residual's gradient and continuity rows use
+    # the operator's
+    one_copy = ((not device.operator.free or device.operator.space is device_space(prob.space, backend))
+                and kept_gradient(backend, prob.BT) is device.operator.blocks.B
+                and kept_continuity(backend, prob.BT) is device.operator.blocks.D)
     # a moved Newton block's coefficients computed on the device, the CPU's left unmade, equal
     # to the CPU's when it makes them
     coefficients = "-"

@@ -13,8 +13,9 @@ def test_a_solve_on_the_device_under_the_simulator_is_the_cpus_in_colour_order()
     velocity to 1e-10 relative, on a 2D sharp-boundary disk in a closed box (the Picard
     hierarchy, the mean-pressure border) and on a 3D Newton block moved to another iterate (the
     Newton terms applied without a matrix on the device); the flow problem with the device's
-    solver computes its Newton residual and its time step's mass and spatial terms on the device,
-    the CPU's to 1e-13 relative, from one copy of the space's cells that the Newton terms share.
+    solver computes its Newton residual (operator, gradient, continuity rows) and its time step's
+    mass and spatial terms on the device, the CPU's to 1e-13 relative, from one copy of the
+    space's cells that the Newton terms share and the operator's copies of the divergence.
     Every level's operator and transfers are the CPU level's to 1e-14 relative, its divergence
     and transfers are copied once for every set-up, and a moved Newton block's coefficients are
     computed on the device alone, the CPU's bit for bit."""

@@ -100,13 +100,15 @@ class ContinuityRows:
         R = sp.csr_matrix((self.data.ravel(), current.indices, current.indptr), shape=current.shape)
         return D.splice(rows, R)
 
-    def product(self, BT: sp.csr_matrix, U) -> np.ndarray:
+    def product(self, BT: sp.csr_matrix, U, base: np.ndarray | None = None) -> np.ndarray:
         """``apply(ContinuityBlock(BT)) @ U`` for the level's divergence ``BT`` (CSR): ``BT @ U``,
         then the replaced rows from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or
-        sparse."""
+        sparse. ``base``: ``BT @ U`` (n_p, k) where the caller has it (made elsewhere: on the
+        linear solver's device), its replaced rows then written in place."""
         npl, width = self.data.shape[1:]
-        out = ContinuityBlock(BT) @ U  # dense: rows in parallel; sparse: the rows that reach U's
-        out = out.toarray() if sp.issparse(out) else out
+        if base is None:
+            base = ContinuityBlock(BT) @ U  # dense: rows in parallel; sparse: the rows that reach U's
+        out = base.toarray() if sp.issparse(base) else base
         if self.cells.size:
             rows = (self.cells[:, None] * npl + np.arange(npl)).ravel()
             columns = BT.indices.reshape(-1, npl, width)[self.cells].ravel()

@@ -29,7 +29,6 @@ from ..solvers.base import Factorization, LinearSolver
 from ..solvers.choice import choose_linear_solver
 from ..solvers.galerkin import dilate_cells, galerkin_coarse_system
 from ..solvers.reports import LinearWork
-from ..solvers.sparse import cell_transposed_matvec
 from ..solvers.system import balance_volume
 from .boundary import Dirichlet, build_constraints, check_boundary, pressure_is_determined
 from .levels import FlowLevel, NewtonBlock, coarse_levels, inject_velocity
@@ -107,6 +106,9 @@ class NavierStokesProblem:
         #: applies it (:meth:`~fbmflow.solvers.base.LinearSolver.velocity_operator`)
         self._mass_laplace = linear_solver.velocity_operator(self.space)
         self.BT = self.fine.BT
+        #: the gradient ``B p`` and continuity rows ``B^T u`` of the residuals, where the linear
+        #: solver applies them (:meth:`~fbmflow.solvers.base.LinearSolver.divergence_products`)
+        self._divergence = linear_solver.divergence_products(self.space, self.BT)
         self.mean_weights = self.fine.mean_weights
         self._pressure_fixed = pressure_fixed
         self.coarse_cells = coarse_cells
@@ -256,10 +258,9 @@ class NavierStokesProblem:
         """
         n_u = self.space.n_u
         u, p = x[:n_u], x[n_u:]
-        gradient = cell_transposed_matvec(self.BT, p, self.space.colour_groups, self.space.dim + 1)
-        Fu = self._apply_operator(u, m, a) + gradient - rhs
+        Fu = self._apply_operator(u, m, a) + self._divergence.gradient(p) - rhs
         Fu[con.dofs] = 0.0
-        Fp = self._continuity(u[:, None], con, orphans)[:, 0]
+        Fp = self._continuity(u[:, None], con, orphans, base=self._divergence.continuity(u)[:, None])[:, 0]
         if con.rows is not None:  # row constraints, scaled as in the linear system
             scale = self.fine.row_scale(con.rows.dofs, m, a, self.rho, self.mu)
             Fu[con.rows.dofs] = scale * con.rows.residual(u)
@@ -268,16 +269,17 @@ class NavierStokesProblem:
         return np.concatenate([Fu, Fp])
 
     def _continuity(self, U: np.ndarray, con: DirichletConstraints,
-                    orphans: sp.csr_matrix | None) -> np.ndarray:
+                    orphans: sp.csr_matrix | None, base: np.ndarray | None = None) -> np.ndarray:
         """Continuity residuals ``B u`` of velocities ``U (n_u, k)`` (dense, or sparse: liftings
         are non-zero on a particle's nodes only) with the orphaned modes dropped and, in a closed
         box, the volume defect of the prescribed velocities taken out as the linear solvers do
-        (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense."""
+        (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense. ``base``: the level
+        divergence's ``BT @ U`` (n_p, k) where the caller has it, overwritten."""
         if con.continuity is None:
-            Fp = ContinuityBlock(self.BT) @ U
+            Fp = ContinuityBlock(self.BT) @ U if base is None else base
             Fp = Fp.toarray() if sp.issparse(Fp) else Fp
         else:  # without a copy of B^T, which would raise the Newton iteration's peak
-            Fp = con.continuity.product(self.BT, U)
+            Fp = con.continuity.product(self.BT, U, base)
         if con.extension is not None:
             Fp = con.extension.transfer(Fp)
         if orphans is not None:

@@ -37,7 +37,7 @@ from ..solvers.multigrid import (
 )
 from ..solvers.reports import LinearReport
 from .device import Backend, gpu_backend, gpu_problem, nbytes
-from .operator import DeviceOperator
+from .operator import DeviceDivergenceProducts, DeviceOperator
 from .space import device_space
 from .vanka import FACTOR_SCRATCH, DeviceVanka
 
@@ -240,6 +240,14 @@ class DeviceMultigridSolver(MultigridSolver):
             self.backend = gpu_backend()
         with self.backend.memory_guard("copying the mesh's cells"):
             return device_space(space, self.backend).apply_mass_laplace
+
+    def divergence_products(self, space, BT):
+        """The flow problem's gradient and continuity products on the device
+        (:class:`~fbmflow.gpu.operator.DeviceDivergenceProducts`; the level's divergence copied
+        once, shared with the operators)."""
+        if self.backend is None:
+            self.backend = gpu_backend()
+        return DeviceDivergenceProducts(BT, self.backend)
 
     def _factor(self, system) -> Factorization:
         host = super()._factor(system)

@@ -30,6 +30,43 @@ from .operators import apply_cell_operator, apply_reaction, reaction_coefficient
 from .space import device_space
 
 
+def kept_continuity(backend: Backend, BT):
+    """The device's copy of a level's divergence ``BT (n_p, n_u)`` (CSR), made once and kept
+    (:meth:`Backend.kept <fbmflow.gpu.device.Backend.kept>`): for the operators' continuity rows,
+    the smoothers' and the flow problem's residuals."""
+    return backend.kept(BT, "csr", backend.csr)
+
+
+def kept_gradient(backend: Backend, BT):
+    """The device's copy of ``BT``'s transpose (the gradient ``B``, CSR), made once and kept."""
+    return backend.kept(BT, "transposed", lambda M: backend.csr(M.T))
+
+
+class DeviceDivergenceProducts:
+    """The gradient ``B p`` and the continuity rows ``B^T u`` of a level's divergence ``BT``
+    on the device of ``backend``, host arrays in and out, as
+    :class:`~fbmflow.solvers.sparse.DivergenceProducts` on the CPU: the flow problem's residuals'
+    products, from the copies the operators read (:func:`kept_gradient`,
+    :func:`kept_continuity`), made at the first product. The sums run in CuPy's order, equal to
+    the CPU's to rounding."""
+
+    def __init__(self, BT, backend: Backend):
+        self.BT, self.backend = BT, backend
+
+    def _times(self, M, x: np.ndarray) -> np.ndarray:
+        backend = self.backend
+        with backend.memory_guard("applying the divergence"):
+            return backend.get(M(backend, self.BT) @ backend.put(x, np.float64))
+
+    def gradient(self, p: np.ndarray) -> np.ndarray:
+        """``B p`` for host pressures ``p (n_p,)`` -> host (n_u,) float64."""
+        return self._times(kept_gradient, p)
+
+    def continuity(self, u: np.ndarray) -> np.ndarray:
+        """``B^T u`` for host velocities ``u (n_u,)`` -> host (n_p,) float64."""
+        return self._times(kept_continuity, u)
+
+
 def _matrix_free(A) -> bool:
     """Whether the velocity block ``A`` applies Newton terms without a matrix (duck-typed: the
     flow problem's ``NewtonBlock`` lives in a layer above)."""
@@ -69,7 +106,7 @@ class _Blocks:
             own = [self.A]
         self.zero = None
         if system.gradient_BT is not None:
-            self.B = backend.kept(system.gradient_BT, "transposed", lambda M: csr(M.T))
+            self.B = kept_gradient(backend, system.gradient_BT)
             self.kept.append(self.B)
             zero = system.gradient_zero
             if zero is not None and zero.size:
@@ -83,7 +120,7 @@ class _Blocks:
         self.divergence = D.base if isinstance(D, ContinuityBlock) else None
         self.changed = self.changed_rows = None
         if self.divergence is not None:
-            self.D = backend.kept(D.base, "csr", csr)
+            self.D = kept_continuity(backend, D.base)
             self.kept.append(self.D)
             if D.dofs.size:
                 self.changed, self.changed_rows = put(D.dofs), csr(D.rows)

@@ -17,9 +17,11 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..fem import FlowSpace, apply_mass_laplace
 from .reports import LinearReport
+from .sparse import DivergenceProducts
 from .system import SaddlePointSystem
 
 
@@ -113,6 +115,14 @@ class LinearSolver(ABC):
         default is the CPU's (:func:`~fbmflow.fem.assembly.apply_mass_laplace`); a solver on a device
         applies it there (:mod:`fbmflow.gpu`)."""
         return functools.partial(apply_mass_laplace, space)
+
+    def divergence_products(self, space: FlowSpace, BT: sp.csr_matrix) -> DivergenceProducts:
+        """``gradient(p)``: ``B p`` (n_u,), and ``continuity(u)``: ``B^T u`` (n_p,), of the
+        level's divergence ``BT (n_p, n_u)`` on ``space``, host arrays in and out, which the flow
+        problem's residuals apply. The default is the CPU's
+        (:class:`~fbmflow.solvers.sparse.DivergenceProducts`); a solver on a device applies them
+        there, from its copy of ``BT`` (:mod:`fbmflow.gpu`)."""
+        return DivergenceProducts(space, BT)
 
     def forget(self) -> None:
         """Drop what the solver keeps between factorisations (the default keeps nothing): the

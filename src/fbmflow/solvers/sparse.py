@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._jit import njit, prange
+from ..fem.continuity_block import ContinuityBlock
 
 #: matrices with at least this many stored entries are multiplied in parallel (about 1 ms of work
 #: on one thread)
@@ -104,3 +105,22 @@ def cell_transposed_matvec(M: sp.csr_matrix, x: np.ndarray, colours: list[np.nda
     for cells in colours:
         _cell_rows_transposed(cells, npl, M.indptr, M.indices, M.data, x, out)
     return out
+
+
+class DivergenceProducts:
+    """The gradient ``B p`` and the continuity rows ``B^T u`` of a level's divergence ``BT (n_p,
+    n_u)`` CSR in the cell-local pattern (:func:`~fbmflow.fem.assembly.assemble_divergence`:
+    ``dim + 1`` rows per cell, in cell order) on ``space``, host arrays in and out, on the CPU's
+    threads: the gradient by :func:`cell_transposed_matvec` (the space's cells in colours), the
+    continuity rows by :class:`~fbmflow.fem.continuity_block.ContinuityBlock`'s product."""
+
+    def __init__(self, space, BT: sp.csr_matrix):
+        self.space, self.BT = space, BT
+
+    def gradient(self, p: np.ndarray) -> np.ndarray:
+        """``B p`` for pressures ``p (n_p,)`` -> (n_u,) float64."""
+        return cell_transposed_matvec(self.BT, p, self.space.colour_groups, self.space.dim + 1)
+
+    def continuity(self, u: np.ndarray) -> np.ndarray:
+        """``B^T u`` for velocities ``u (n_u,)`` -> (n_p,) float64."""
+        return ContinuityBlock(self.BT) @ u
