@@ -94,7 +94,10 @@ def machine() -> str:
 
 def commit() -> str:
     """The short git commit of this tree ("+" when its package has changes), "this tree" without
-    git."""
+    git; or ``FBMFLOW_BENCH_COMMIT`` when set (a run of a source snapshot outside the repository,
+    as :func:`fbmbench.common.commit`)."""
+    if os.environ.get("FBMFLOW_BENCH_COMMIT"):
+        return os.environ["FBMFLOW_BENCH_COMMIT"]
     try:
         head = subprocess.run(["git", "rev-parse", "--short=7", "HEAD"], cwd=BENCHMARKS, capture_output=True,
                               text=True, check=True).stdout.strip()
