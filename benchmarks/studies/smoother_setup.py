@@ -4,13 +4,15 @@ Question: how long does the factored Vanka smoother take to set up (patches, the
 reach, colours; no local factors: the GPU path's set-up, on the CPU at every linearisation) on each
 level of a scene's first linear system?
 Answer: ten Cate E4 level 2 (2 012 403 unknowns on the finest of 4 levels, 2 cores), repeats 2-8:
-the three smoothers 0.375-0.452 s per set-up (median 0.408 s; the finest 0.335-0.394 s) with the
-gradient's rows read from the divergence cell by cell, against 0.709-1.697 s (median 0.790 s; the
-finest 0.627-1.612 s) at dd47fbe, which built the whole gradient at each set-up: 0.52 of the
-median; results/smoother_setup.md.
-Measured: 2026-12-02, commit 21475c4, and dd47fbe before it (in a git worktree,
-``FBMFLOW_BENCH_COMMIT=dd47fbe``), one after the other; quoted in docs/validation/gpu.md,
-"Not measured yet: the speed"
+the three smoothers 0.240-0.286 s per set-up (median 0.275 s; the finest 0.207-0.249 s) with the
+cell patches' unknowns kept per space, the patches' reach and interface found by a parallel kernel
+and the rows merged in parallel (tag kept-patches, 2a6c098), against 0.459-0.488 s (median 0.471 s;
+the finest 0.405-0.432 s) at 522b7e5 the same hour (session-head): 0.58 of the median. Earlier,
+another hour: 0.408 s (gradient-rows, 21475c4, the gradient's rows read from the divergence cell
+by cell) against 0.790 s at dd47fbe, which built the whole gradient at each set-up;
+results/smoother_setup.md.
+Measured: 2026-12-02, commits 2a6c098 and 522b7e5 (in a git worktree, ``FBMFLOW_BENCH_COMMIT=522b7e5``),
+one after the other; 21475c4 and dd47fbe likewise, earlier; quoted in docs/validation/gpu.md
 Run: python -m fbmbench smoother_setup --tag now
 
 The scene is built at its defaults with ``solver.linear=multigrid``; its first time step runs up to
