@@ -11,8 +11,9 @@ the finest 0.405-0.432 s) at 522b7e5 the same hour (session-head): 0.58 of the m
 another hour: 0.408 s (gradient-rows, 21475c4, the gradient's rows read from the divergence cell
 by cell) against 0.790 s at dd47fbe, which built the whole gradient at each set-up;
 results/smoother_setup.md.
-Measured: 2026-12-02, commit 2a6c098 and 522b7e5 before it (in a git worktree, ``FBMFLOW_BENCH_COMMIT=522b7e5``),
-one after the other; 21475c4 and dd47fbe likewise, earlier; quoted in docs/validation/gpu.md
+Measured: 2026-12-02, commit 2a6c098 and 522b7e5 before it (in a git worktree,
+``FBMFLOW_BENCH_COMMIT=522b7e5``), one after the other; 21475c4 and dd47fbe likewise, earlier;
+quoted in docs/validation/gpu.md
 Run: python -m fbmbench smoother_setup --tag now
 
 The scene is built at its defaults with ``solver.linear=multigrid``; its first time step runs up to

@@ -104,7 +104,7 @@ class ContinuityRows:
         """``apply(ContinuityBlock(BT)) @ U`` for the level's divergence ``BT`` (CSR): ``BT @ U``,
         then the replaced rows from ``data`` alone, (n_p, k) dense for ``U`` (n_u, k) dense or
         sparse. ``base``: ``BT @ U`` (n_p, k) where the caller has it (made elsewhere: on the
-        linear solver's device), its replaced rows then written in place."""
+        linear solver's device), its replaced rows then written in place where it is dense."""
         npl, width = self.data.shape[1:]
         if base is None:
             base = ContinuityBlock(BT) @ U  # dense: rows in parallel; sparse: the rows that reach U's

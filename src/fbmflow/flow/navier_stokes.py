@@ -274,7 +274,8 @@ class NavierStokesProblem:
         are non-zero on a particle's nodes only) with the orphaned modes dropped and, in a closed
         box, the volume defect of the prescribed velocities taken out as the linear solvers do
         (:func:`~fbmflow.solvers.system.balance_volume`), (n_p, k) dense. ``base``: the level
-        divergence's ``BT @ U`` (n_p, k) where the caller has it, overwritten."""
+        divergence's ``BT @ U`` (n_p, k) where the caller has it, which may be overwritten or
+        returned."""
         if con.continuity is None:
             Fp = ContinuityBlock(self.BT) @ U if base is None else base
             Fp = Fp.toarray() if sp.issparse(Fp) else Fp

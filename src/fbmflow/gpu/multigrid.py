@@ -247,7 +247,7 @@ class DeviceMultigridSolver(MultigridSolver):
         once, shared with the operators)."""
         if self.backend is None:
             self.backend = gpu_backend()
-        return DeviceDivergenceProducts(BT, self.backend)
+        return DeviceDivergenceProducts(space, BT, self.backend)
 
     def _factor(self, system) -> Factorization:
         host = super()._factor(system)

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..fem.continuity_block import ContinuityBlock
 from ..fem.velocity_block import VelocityBlock
+from ..solvers.sparse import DivergenceProducts
 from ..solvers.system import SaddlePointSystem, as_csr
 from .colours import DeviceColours
 from .device import Backend, nbytes
@@ -42,7 +43,7 @@ def kept_gradient(backend: Backend, BT):
     return backend.kept(BT, "transposed", lambda M: backend.csr(M.T))
 
 
-class DeviceDivergenceProducts:
+class DeviceDivergenceProducts(DivergenceProducts):
     """The gradient ``B p`` and the continuity rows ``B^T u`` of a level's divergence ``BT``
     on the device of ``backend``, host arrays in and out, as
     :class:`~fbmflow.solvers.sparse.DivergenceProducts` on the CPU: the flow problem's residuals'
@@ -50,8 +51,9 @@ class DeviceDivergenceProducts:
     :func:`kept_continuity`), made at the first product. The sums run in CuPy's order, equal to
     the CPU's to rounding."""
 
-    def __init__(self, BT, backend: Backend):
-        self.BT, self.backend = BT, backend
+    def __init__(self, space, BT, backend: Backend):
+        super().__init__(space, BT)
+        self.backend = backend
 
     def _times(self, M, x: np.ndarray) -> np.ndarray:
         backend = self.backend
