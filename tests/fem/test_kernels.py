@@ -254,14 +254,15 @@ def test_cell_geometry_orientation():
     assert_rel(Jinv_m, np.linalg.inv(J_m))
 
 
+@pytest.mark.parametrize("chunks", [1, 3, 16])  # one, some, more chunks than cells
 @pytest.mark.parametrize("newton", [True, False])
-def test_convection_coefficients(space, newton):
+def test_convection_coefficients(space, newton, chunks):
     d, nq = space.dim, len(space.weights)
     rng = np.random.default_rng(20)
     u = np.ascontiguousarray(rng.normal(size=(d, space.n_v)))
     cells = np.array([3, 0, -1, 2], dtype=np.int64)  # any subset, any order, -1 = padding
     conv, react = _kernels.convection_coefficients(cells, u, space.V.cell_dofs, space.phi,
-                                                   space.dphi, space.detJw, space.Jinv, newton)
+                                                   space.dphi, space.detJw, space.Jinv, newton, chunks)
     conv_ref = np.zeros((len(cells), nq * d))
     react_ref = np.zeros((len(cells) * d * d, nq))
     for e, c in enumerate(cells):

@@ -72,37 +72,45 @@ def _point_convection(e, c, q, uq, detJw, Jinv, conv):
 
 
 @njit(inline="always")
-def _convection_cell(e, c, u, cell_dofs, phi, detJw, Jinv, conv):
-    """:func:`convection_coefficients`' ``conv`` row ``e`` of cell ``c``."""
+def _cell_velocities(c, u, cell_dofs, ul):
+    """The nodal velocities of cell ``c`` into ``ul (d, nl)``: ``ul[i, a] = u[i, cell_dofs[c, a]]``
+    (read once, not once per point)."""
+    for a in range(cell_dofs.shape[1]):
+        dof = cell_dofs[c, a]
+        for i in range(ul.shape[0]):
+            ul[i, a] = u[i, dof]
+
+
+@njit(inline="always")
+def _convection_cell(e, c, ul, phi, detJw, Jinv, conv, uq):
+    """:func:`convection_coefficients`' ``conv`` row ``e`` of cell ``c`` from its nodal velocities
+    ``ul (d, nl)`` (``uq (d,)`` work)."""
     nq, nl = phi.shape
-    d = u.shape[0]
-    uq = np.zeros(d)
     for q in range(nq):
-        uq[:] = 0.0
-        for a in range(nl):
-            dof = cell_dofs[c, a]
-            for i in range(d):
-                uq[i] += u[i, dof] * phi[q, a]
+        for i in range(ul.shape[0]):
+            s = 0.0
+            for a in range(nl):
+                s += ul[i, a] * phi[q, a]
+            uq[i] = s
         _point_convection(e, c, q, uq, detJw, Jinv, conv)
 
 
 @njit(inline="always")
-def _newton_cell(e, c, u, cell_dofs, phi, dphi, detJw, Jinv, conv, react):
+def _newton_cell(e, c, ul, phi, dphi, detJw, Jinv, conv, react, uq, gref):
     """:func:`convection_coefficients`' ``conv`` row ``e`` and ``react`` rows ``e d d ...`` of
-    cell ``c``."""
+    cell ``c`` from its nodal velocities ``ul (d, nl)`` (``uq (d,)``, ``gref (d, d)`` work)."""
     nq, nl, d = dphi.shape
-    uq = np.zeros(d)
-    gref = np.zeros((d, d))
     for q in range(nq):
-        uq[:] = 0.0
-        gref[:, :] = 0.0
-        for a in range(nl):
-            dof = cell_dofs[c, a]
-            for i in range(d):
-                ua = u[i, dof]
-                uq[i] += ua * phi[q, a]
-                for ax in range(d):
-                    gref[i, ax] += ua * dphi[q, a, ax]
+        for i in range(d):
+            s = 0.0
+            for a in range(nl):
+                s += ul[i, a] * phi[q, a]
+            uq[i] = s
+            for ax in range(d):
+                g = 0.0
+                for a in range(nl):
+                    g += ul[i, a] * dphi[q, a, ax]
+                gref[i, ax] = g
         w = _point_convection(e, c, q, uq, detJw, Jinv, conv)
         for i in range(d):
             for k in range(d):
@@ -113,7 +121,7 @@ def _newton_cell(e, c, u, cell_dofs, phi, dphi, detJw, Jinv, conv, react):
 
 
 @njit(parallel=True)
-def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton):
+def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton, chunks):
     """Quadrature-point coefficients of the convection and Newton (reaction) terms.
 
     With ``u_h = sum_a u_a phi_a`` (component-wise) the local matrices are
@@ -122,6 +130,7 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
         R_ik[a, b] = sum_q react[i, k, q] phi_a(q) phi_b(q)                      (grad u) term
 
     where ``conv[q, l] = detJw (Jinv u_h)_l`` and ``react[i, k, q] = detJw d u_i / d x_k``.
+    The cells in ``chunks`` contiguous chunks in parallel, each with its own work arrays.
 
     Parameters
     ----------
@@ -131,6 +140,7 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
     phi : (nq, nl), dphi : (nq, nl, d) float64   reference tabulation
     detJw : (n_cells, nq), Jinv : (n_cells, nq, d, d) float64
     newton : bool                   also compute ``react``
+    chunks : int                    chunks of cells (a few per thread)
 
     Returns
     -------
@@ -141,14 +151,18 @@ def convection_coefficients(cells, u, cell_dofs, phi, dphi, detJw, Jinv, newton)
     nq, nl, d = dphi.shape
     conv = np.zeros((nb, nq * d))
     react = np.zeros((nb * d * d, nq)) if newton else np.zeros((0, nq))
-    for e in prange(nb):
-        c = cells[e]
-        if c < 0:
-            continue
-        if newton:
-            _newton_cell(e, c, u, cell_dofs, phi, dphi, detJw, Jinv, conv, react)
-        else:  # the velocity alone: the gradient's loop left out, 2.5x as fast
-            _convection_cell(e, c, u, cell_dofs, phi, detJw, Jinv, conv)
+    n_chunks = max(1, min(nb, chunks))
+    for t in prange(n_chunks):
+        ul, uq, gref = np.empty((d, nl)), np.empty(d), np.empty((d, d))
+        for e in range(t * nb // n_chunks, (t + 1) * nb // n_chunks):
+            c = cells[e]
+            if c < 0:
+                continue
+            _cell_velocities(c, u, cell_dofs, ul)
+            if newton:
+                _newton_cell(e, c, ul, phi, dphi, detJw, Jinv, conv, react, uq, gref)
+            else:  # the velocity alone: the gradient's loop left out, 2.5x as fast
+                _convection_cell(e, c, ul, phi, detJw, Jinv, conv, uq)
     return conv, react
 
 

@@ -128,11 +128,12 @@ def assemble_convection(space: FlowSpace, u: np.ndarray, scale: float,
     newton = newton_out is not None
     mass_upper, sym = space.table_mass_upper
     table = space.table_convection if mass_laplace is None else space.table_convection_mass_laplace
+    chunks = 4 * numba_threads()
     with single_threaded_blas():
         for cells in space.batches:
             c = cells.ravel()
             conv, react = _kernels.convection_coefficients(
-                c, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton)
+                c, uu, space.V.cell_dofs, space.phi, space.dphi, space.detJw, space.Jinv, newton, chunks)
             conv *= scale
             if mass_laplace is not None:
                 conv = np.hstack([conv, _mass_laplace_coefficients(space, c, *mass_laplace)])
