@@ -305,6 +305,50 @@ def test_rows_times_is_the_matrix_product(chunks):
     assert_rel(out, a @ b)
 
 
+
+def test_stack_rows_and_continuity_rows_against_scipy():
+    """stack_rows: the rows of two CSR matrices in any order (empty rows among them) as SciPy's
+    vstack and row selection give them; continuity_rows: rows of a uniform-width base or of the
+    changed rows, with and without zeroed columns, as SciPy and np.where give them."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(8)
+
+    def random_csr(m, n):
+        M = sp.random(m, n, density=0.3, random_state=rng, format="csr")
+        M.sort_indices()
+        return M
+
+    A, B = random_csr(5, 9), random_csr(5, 9)
+    second = np.array([True, False, False, True, True, False, True])
+    pos = np.array([3, 0, 4, 0, 2, 2, 1])
+    expected = sp.vstack([A, B], format="csr")[np.where(second, A.shape[0] + pos, pos)]
+    ptr = np.zeros(pos.size + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum(np.where(second, np.diff(B.indptr)[pos], np.diff(A.indptr)[pos]))
+    idx, val = np.empty(ptr[-1], dtype=np.int32), np.empty(ptr[-1])
+    _kernels.stack_rows(second, pos, A.indptr, A.indices, A.data, B.indptr, B.indices, B.data, ptr, idx, val)
+    assert np.array_equal(ptr, expected.indptr) and np.array_equal(idx, expected.indices)
+    assert np.array_equal(val, expected.data)
+
+    width, n_rows = 3, 6
+    columns = np.sort(np.argsort(rng.random((n_rows, 9)), axis=1)[:, :width], axis=1)  # distinct, sorted
+    base = sp.csr_matrix((rng.normal(size=n_rows * width), columns.ravel(),
+                          np.arange(0, n_rows * width + 1, width)), shape=(n_rows, 9))
+    position = np.array([-1, 1, -1, 0, -1, -1], dtype=np.int32)  # rows 3 and 1: B's rows 0 and 1
+    rows = np.array([5, 1, 3, 0, 3])
+    for zero in (np.zeros(0, dtype=bool), rng.random(9) < 0.4):
+        lengths = np.where(position[rows] >= 0, np.diff(B.indptr)[np.maximum(position[rows], 0)], width)
+        ptr = np.concatenate([[0], np.cumsum(lengths)])
+        idx, val = np.empty(ptr[-1], dtype=np.int32), np.empty(ptr[-1])
+        _kernels.continuity_rows(rows, position, width, base.indices, base.data, B.indptr, B.indices, B.data,
+                                 zero, ptr, idx, val)
+        own = [B[position[r]] if position[r] >= 0 else base[r] for r in rows]
+        assert np.array_equal(idx, np.concatenate([m.indices for m in own]))
+        data = np.concatenate([m.data for m in own])
+        if zero.size:
+            data = np.where(zero[idx], 0.0, data)
+        assert np.array_equal(val, data)
+
 def _dense_scalar(space, data):
     return space.scalar_matrix(data).toarray()
 

@@ -169,3 +169,48 @@ def test_orphaned_modes_from_a_column_mask_equal_those_of_the_zeroed_copy(closed
     out = system_module.orphan_pressure_modes(prob.BT, 3, closed=closed, zero=con.dofs)
     assert ref is not None and ref.nnz
     assert abs(out - ref).max() < 1e-13
+
+
+def test_balance_volume_keeps_its_vectors_by_identity():
+    """balance_volume against the formula made afresh, for one and several right-hand sides: the
+    same bits on the first call and on a call that finds ``q`` and ``w`` kept; other orphans (a
+    new matrix, equal to the first in pattern but not in values) and a pressure extension made
+    afresh; the kept vectors read-only."""
+    import scipy.sparse as sp
+
+    from fbmflow.solvers.system import _null_and_expansion, balance_volume
+
+    rng = np.random.default_rng(5)
+    npl, n = 4, 40
+    weights = rng.random(n)
+
+    def fresh(g, orphans, extension=None):
+        q = np.zeros(n)
+        q[::npl] = 1.0
+        q = q - orphans @ q
+        w = weights - orphans @ weights
+        if extension is not None:
+            q[extension.dofs] = 0.0
+            w = extension.transfer(w)
+        lam = (q @ g) / (q @ w)
+        return g - np.multiply.outer(w, lam)
+
+    class Extension:  # continued cells: their rows moved to their neighbours'
+        dofs = np.array([8, 9, 10, 11])
+
+        def transfer(self, r):
+            out = r.copy()
+            out[:4] += r[self.dofs]
+            out[self.dofs] = 0.0
+            return out
+
+    for values in (0.5, 0.25):
+        orphans = sp.csr_matrix((np.full(2, values), ([4, 5], [4, 5])), shape=(n, n))
+        for extension in (None, Extension()):
+            for g in (rng.normal(size=n), rng.normal(size=(n, 3))):
+                first = balance_volume(g, weights, orphans, npl, extension)
+                again = balance_volume(g, weights, orphans, npl, extension)
+                assert np.array_equal(first, fresh(g, orphans, extension)) and np.array_equal(again, first)
+            q, w, _ = _null_and_expansion(weights, orphans, npl, extension)
+            assert q is _null_and_expansion(weights, orphans, npl, extension)[0]
+            assert not q.flags.writeable and not w.flags.writeable and weights.flags.writeable

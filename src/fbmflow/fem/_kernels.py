@@ -809,3 +809,49 @@ def gather_rows(rows, indptr, indices, data, n_v, o_pos, o_ptr, o_idx, o_val, sh
                 idx[s] = indices[t] + off
                 val[s] = data[t]
                 s += 1
+
+
+@njit(parallel=True)
+def continuity_rows(rows, position, width, b_idx, b_val, o_ptr, o_idx, o_val, zero, ptr, idx, val):
+    """Write the rows ``rows (k,)`` of a continuity block into the CSR arrays ``(ptr, idx, val)``
+    (``ptr`` the rows' pointers): row ``r`` the changed row ``position[r]`` of ``O`` (``o_ptr,
+    o_idx, o_val``) where that is ``>= 0``, else the base's (``width`` entries a row, its indices
+    and values row after row); the values in the columns set in ``zero`` (bool, or of size 0:
+    none) then written as 0.0, the pattern kept. Rows in parallel, each copied as a slice (3.7
+    times as fast as an entry-by-entry loop with the mask's test: every 7th row of a 40 x 36 x 48
+    box's divergence, 39 k rows, 3.1 against 11.5 ms on 2 cores)."""
+    masked = zero.shape[0] > 0
+    for j in prange(rows.shape[0]):
+        r = rows[j]
+        q = position[r]
+        s = ptr[j]
+        if q >= 0:
+            a, b = o_ptr[q], o_ptr[q + 1]
+            idx[s:s + b - a] = o_idx[a:b]
+            val[s:s + b - a] = o_val[a:b]
+        else:
+            a = r * width
+            idx[s:s + width] = b_idx[a:a + width]
+            val[s:s + width] = b_val[a:a + width]
+        if masked:
+            for t in range(ptr[j], ptr[j + 1]):
+                if zero[idx[t]]:
+                    val[t] = 0.0
+
+
+@njit(parallel=True)
+def stack_rows(second, pos, a_ptr, a_idx, a_val, b_ptr, b_idx, b_val, ptr, idx, val):
+    """Write row ``j`` of the CSR arrays ``(ptr, idx, val)`` (``ptr`` the rows' pointers) as row
+    ``pos[j]`` of ``B`` (``b_ptr, b_idx, b_val``) where ``second[j]``, else of ``A``: the rows of
+    two CSR matrices taken in any order (SciPy's ``vstack`` and row selection without the
+    stacked copy). Rows in parallel, each copied as a slice."""
+    for j in prange(pos.shape[0]):
+        q, s = pos[j], ptr[j]
+        if second[j]:
+            a, b = b_ptr[q], b_ptr[q + 1]
+            idx[s:s + b - a] = b_idx[a:b]
+            val[s:s + b - a] = b_val[a:b]
+        else:
+            a, b = a_ptr[q], a_ptr[q + 1]
+            idx[s:s + b - a] = a_idx[a:b]
+            val[s:s + b - a] = a_val[a:b]

@@ -108,21 +108,24 @@ class ContinuityBlock:
         """The rows ``rows`` (k,) int (or a boolean mask) of the block, CSR (k, n_u), sorted
         indices."""
         rows = np.asarray(rows)
-        rows = np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.int64)
+        return self._rows(np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.int64))
+
+    def _rows(self, rows: np.ndarray, zero: np.ndarray | None = None) -> sp.csr_matrix:
+        """The rows ``rows`` (k,) int64 as :meth:`__getitem__` gives them, the values in the
+        columns where ``zero`` (n_u,) bool is set written as zeros (the pattern kept); gathered
+        by :func:`~fbmflow.fem._kernels.continuity_rows`, rows in parallel."""
         pos = self.position[rows]
         own = pos >= 0
         lengths = np.full(rows.size, self.width, dtype=np.int64)
         lengths[own] = np.diff(self.rows.indptr)[pos[own]]
         indptr = np.zeros(rows.size + 1, dtype=np.int64)
         np.cumsum(lengths, out=indptr[1:])
-        from_base = np.repeat(~own, lengths)
         indices = np.empty(indptr[-1], dtype=self.base.indices.dtype)
         values = np.empty(indptr[-1])
-        plain = rows[~own]
-        indices[from_base] = self.base.indices.reshape(-1, self.width)[plain].ravel()
-        values[from_base] = self.base.data.reshape(-1, self.width)[plain].ravel()
-        changed = self.rows[pos[own]]
-        indices[~from_base], values[~from_base] = changed.indices, changed.data
+        R = self.rows
+        _kernels.continuity_rows(rows, self.position, self.width, self.base.indices, self.base.data, R.indptr,
+                                 R.indices, R.data, np.zeros(0, dtype=np.bool_) if zero is None else zero,
+                                 indptr, indices, values)
         return sp.csr_matrix((values, indices, indptr), shape=(rows.size, self.shape[1]))
 
     def tocsr(self) -> sp.csr_matrix:
@@ -209,16 +212,31 @@ class ContinuityBlock:
         touched = _kernels.rows_touching(self.base.indices, self.shape[0], self.width, mask)
         touched[self.dofs] = True  # the changed rows, whatever their pattern
         rows = np.flatnonzero(touched)
-        return self._with(rows, zero_columns(self[rows], columns))
+        return self._with(rows, self._rows(rows, mask))
 
     def _with(self, rows: np.ndarray, R: sp.csr_matrix) -> "ContinuityBlock":
-        """The block with the rows ``rows`` (ascending) those of ``R`` (CSR, sorted indices)."""
+        """The block with the rows ``rows`` (ascending) those of ``R`` (CSR, sorted indices): the
+        changed rows, old and new, gathered into one CSR matrix by
+        :func:`~fbmflow.fem._kernels.stack_rows`."""
+        R = sp.csr_matrix(R)
         dofs = union_sorted(self.dofs, rows)
-        source = np.zeros(dofs.size, dtype=np.int64)  # row of [self.rows; R] for every new dof
-        source[np.searchsorted(dofs, self.dofs)] = np.arange(self.dofs.size)
-        source[np.searchsorted(dofs, rows)] = self.dofs.size + np.arange(rows.size)
-        stacked = sp.vstack([self.rows, sp.csr_matrix(R)], format="csr")
-        return ContinuityBlock(self.base, dofs, stacked[source])
+        second = np.zeros(dofs.size, dtype=np.bool_)  # the row from R, else from self.rows
+        pos = np.zeros(dofs.size, dtype=np.int64)  # ... its row there
+        pos[np.searchsorted(dofs, self.dofs)] = np.arange(self.dofs.size)
+        new = np.searchsorted(dofs, rows)
+        second[new], pos[new] = True, np.arange(rows.size)
+        old = self.rows
+        lengths = np.empty(dofs.size, dtype=np.int64)
+        lengths[~second] = np.diff(old.indptr)[pos[~second]]
+        lengths[second] = np.diff(R.indptr)[pos[second]]
+        indptr = np.zeros(dofs.size + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        indices = np.empty(indptr[-1], dtype=self.base.indices.dtype)
+        values = np.empty(indptr[-1])
+        _kernels.stack_rows(second, pos, old.indptr, old.indices, old.data, R.indptr, R.indices, R.data,
+                            indptr, indices, values)
+        return ContinuityBlock(self.base, dofs, sp.csr_matrix((values, indices, indptr),
+                                                              shape=(dofs.size, self.shape[1])))
 
     def __repr__(self) -> str:
         return f"ContinuityBlock(n_p={self.shape[0]}, n_u={self.shape[1]}, changed rows={self.dofs.size})"
