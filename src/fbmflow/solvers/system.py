@@ -432,7 +432,7 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     For compatible data ``lambda`` is round-off and nothing changes. ``dot``: the inner product of
     pressure vectors (default ``q @ g``; one process's part: the sum over the cells it owns).
     ``q`` and ``w`` are kept for the last few ``(mean_weights, orphans, extension)``
-    (:func:`_null_and_expansion`).
+    (``_null_and_expansion``).
     """
     q, w, qw = _null_and_expansion(mean_weights, orphans, npl, extension)
     if dot is None:
