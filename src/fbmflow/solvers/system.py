@@ -431,7 +431,7 @@ def balance_volume(g: np.ndarray, mean_weights: np.ndarray, orphans: sp.csr_matr
     fluid: the Lagrange multiplier that the mean-pressure border row ``w · p = 0`` would carry.
     For compatible data ``lambda`` is round-off and nothing changes. ``dot``: the inner product of
     pressure vectors (default ``q @ g``; one process's part: the sum over the cells it owns).
-    ``q`` and ``w`` are kept for the last few ``(mean_weights, orphans, extension)``
+    ``q`` and ``w`` are kept for the last two ``(mean_weights, orphans, extension)``
     (``_null_and_expansion``).
     """
     q, w, qw = _null_and_expansion(mean_weights, orphans, npl, extension)
@@ -453,8 +453,8 @@ def _null_and_expansion(mean_weights: np.ndarray, orphans: sp.csr_matrix | None,
     """The continuity rows' left null vector ``q = 1 - C 1`` (the continued cells' zero), the
     expansion column ``w`` (:func:`expansion`) and ``q · w``: (n_p,), (n_p,), float. Kept for the
     last two sets of arguments, found again by identity (none of them is ever written): a step's
-    residuals and solves ask about the same constraints some ten times (ten Cate level 2: 7 ms a
-    call made afresh, the page faults of four new arrays of n_p each, 2 x 2.4 MB)."""
+    residuals and solves ask about the same constraints some ten times (a call at ten Cate level
+    2's size, 276 480 pressures, measured alone: 9.2-9.8 ms made afresh, 0.11 ms kept)."""
     for (mw, C, ext, n), found in _NULL_AND_EXPANSION:
         if mw is mean_weights and C is orphans and ext is extension and n == npl:
             return found
