@@ -18,6 +18,8 @@ import logging
 
 import numpy as np
 
+from .device import launch_views
+
 log = logging.getLogger(__name__)
 
 #: every colour in one cooperative launch (the default); False: one launch per colour (the
@@ -40,6 +42,7 @@ class DeviceColours:
         self.host_starts = np.cumsum([0] + sizes, dtype=np.int64)
         self.order = put(np.concatenate(groups) if groups else np.zeros(0), np.int64)
         self.starts = put(self.host_starts, np.int64)
+        self._order, self._starts = launch_views(self.order, self.starts)  # as the launches pass them
         #: the most items of a colour
         self.largest = max(sizes, default=0)
         self.nbytes = int(self.order.nbytes + self.starts.nbytes)
@@ -55,21 +58,24 @@ class DeviceColours:
         :data:`ONE_LAUNCH`), else ``each(order, first, last, *args)`` once per colour, ``first``
         and ``last`` its bounds in ``order``; a block takes ``per_block`` items at once (default
         ``threads``: one per thread). The kernels are looked up at each call (so that
-        :func:`~fbmflow.gpu.launches.count_launches` counts them)."""
+        :func:`~fbmflow.gpu.launches.count_launches` counts them); ``args`` pass as
+        :func:`~fbmflow.gpu.device.launch_view` makes them (a caller that launches often with the
+        same arrays passes their views, made once)."""
         from . import _kernels
 
         if not self.largest:
             return
+        args = launch_views(*args)
         per_block = per_block or threads
         blocks = -(-self.largest // per_block)
         most = self._cooperative_blocks(sweep, threads, args) if ONE_LAUNCH and sweep not in _REFUSED else 0
         if most:
-            getattr(_kernels, sweep)[min(blocks, most), threads](self.order, self.starts, *args)
+            getattr(_kernels, sweep)[min(blocks, most), threads](self._order, self._starts, *args)
             return
         kernel = getattr(_kernels, each)
         for first, last in zip(self.host_starts[:-1].tolist(), self.host_starts[1:].tolist()):
             if last > first:
-                kernel[-(-(last - first) // per_block), threads](self.order, first, last, *args)
+                kernel[-(-(last - first) // per_block), threads](self._order, first, last, *args)
 
     def _cooperative_blocks(self, sweep: str, threads: int, args: tuple) -> int:
         """The most blocks of ``threads`` the kernel ``sweep`` can launch cooperatively with these
@@ -86,7 +92,7 @@ class DeviceColours:
             if not cuda_simulated():
                 kernel = getattr(_kernels, sweep)
                 try:
-                    types = tuple(kernel.typeof_pyval(a) for a in (self.order, self.starts, *args))
+                    types = tuple(kernel.typeof_pyval(a) for a in (self._order, self._starts, *args))
                     most = int(kernel.compile(types).max_cooperative_grid_blocks(threads))
                     why = f"no block of {threads} threads fits" if most < 1 else ""
                 except Exception as err:  # numba-cuda's errors have no common base

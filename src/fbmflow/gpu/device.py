@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import sys
 
 import numpy as np
 import scipy.sparse as sp
@@ -101,6 +102,34 @@ def nbytes(*held) -> int:
         elif a is not None:
             total += int(a.nbytes)
     return total
+
+
+def launch_view(a):
+    """``a`` as a kernel launch takes it with the least host work: a CuPy array as numba-cuda's
+    device array over the same memory (:func:`numba.cuda.as_cuda_array`: no copy, and it keeps
+    ``a`` alive), anything else as it is.
+
+    numba-cuda makes such a device array of every CUDA-array-interface argument (CuPy's) at every
+    launch and, as version 3 of the interface asks by default, synchronises the stream the array
+    names (CuPy's legacy default stream): a Vanka sweep's launch, with 31 arrays, waited for the
+    GPU to finish all it had been given (and synchronised 30 times more), so that the host's
+    preparation of a launch never overlapped the GPU's work. The view here is made without that synchronisation
+    (``sync=False``): CuPy's operations and numba-cuda's launches both go to the legacy default
+    stream (fbmflow sets no other), which runs them in the order given. A view made once, where
+    the arrays are set up, passes a launch as numba-cuda's own arrays do: numba-cuda's maintainers
+    measured arrays passed through the interface 3-7 times slower to pass (numba-cuda pull
+    request 539, issue 578)."""
+    cupy = sys.modules.get("cupy")
+    if cupy is not None and isinstance(a, cupy.ndarray):
+        from .._jit import cuda_target
+
+        return cuda_target().as_cuda_array(a, sync=False)
+    return a
+
+
+def launch_views(*args) -> tuple:
+    """:func:`launch_view` of each of ``args``."""
+    return tuple(launch_view(a) for a in args)
 
 
 def gpu_backend() -> Backend:

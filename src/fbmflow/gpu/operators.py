@@ -13,6 +13,8 @@ import functools
 import numpy as np
 import scipy.sparse as sp
 
+from .device import launch_views
+
 
 def cell_colours(cell_dofs: np.ndarray) -> list[np.ndarray]:
     """The cells in colours, no two cells of a colour sharing a node (greedy, in cell order),
@@ -66,7 +68,8 @@ def velocity_coefficients(u, cell_dofs, phi, detJw, conv, threads: int = 128) ->
     float64, as ``fbmflow.fem._kernels.velocity_coefficients`` returns it on the CPU."""
     from ._kernels import velocity_rows
 
-    velocity_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](u, cell_dofs, phi, detJw, conv)
+    velocity_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](*launch_views(u, cell_dofs, phi, detJw,
+                                                                                    conv))
 
 
 def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv, react, threads: int = 128) -> None:
@@ -75,5 +78,5 @@ def reaction_coefficients(u, cell_dofs, phi, dphi, detJw, Jinv, react, threads: 
     on the CPU)."""
     from ._kernels import reaction_rows
 
-    reaction_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](u, cell_dofs, phi, dphi, detJw, Jinv,
-                                                                       react)
+    reaction_rows[max(1, -(-cell_dofs.shape[0] // threads)), threads](*launch_views(u, cell_dofs, phi, dphi,
+                                                                                    detJw, Jinv, react))

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..solvers.vanka import FactoredVankaSmoother
 from .colours import DeviceColours
-from .device import Backend
+from .device import Backend, launch_view, launch_views
 
 #: the most device memory the factors' kernel takes for its threads' work arrays [bytes]: a
 #: launch factors as many patches as their work fits (a 3D cell patch, 85 unknowns: 86 kB each)
@@ -99,6 +99,9 @@ class DeviceVanka:
                      xp.empty((largest, width)), xp.empty((largest, width)))
         self.nbytes = int(sum(a.nbytes for a in self.patches[:7] + own + self.work)
                           + sum(c.nbytes for c in self.sweeps + [self.interface, self.merged]))
+        #: the sweeps' arguments but the vectors, as their launches pass them (made once:
+        #: :func:`~fbmflow.gpu.device.launch_view`)
+        self._args = launch_views(*self.patches, *self.op, *self.work)
 
     def _factor(self, ptr: np.ndarray, dofs: np.ndarray, schur_tol: float, backend: Backend) -> None:
         """The local factors of the patches ``dofs[ptr[k]:ptr[k + 1]]`` (each ascending: the
@@ -114,6 +117,7 @@ class DeviceVanka:
         sizes = np.diff(ptr)
         xp = backend.xp
         nl, d = self.patches[7], self.patches[8]
+        arrays = launch_views(*self.patches, *self.op)
         npl = d + 1
         for width in np.unique(sizes):
             patches = np.flatnonzero(sizes == width)
@@ -127,7 +131,7 @@ class DeviceVanka:
             for first in range(0, patches.size, chunk):
                 part = backend.put(patches[first:first + chunk])
                 launch = vanka_factors[max(1, -(-part.shape[0] // self.threads)), self.threads]
-                launch(part, float(schur_tol), *self.patches, *self.op, *work)
+                launch(launch_view(part), float(schur_tol), *arrays, *launch_views(*work))
 
     def sweep_colours(self, colours, b, x) -> None:
         """The patches of every colour of ``colours`` (:class:`~fbmflow.gpu.colours.DeviceColours`)
@@ -137,7 +141,7 @@ class DeviceVanka:
         threads take a colour's patches, each with its rows of the work arrays."""
         lanes = self.lanes
         colours.launch("vanka_patches", "vanka_sweep", self.threads, lanes, b, x, float(self.omega),
-                       *self.patches, *self.op, *self.work, per_block=self.threads // lanes)
+                       *self._args, per_block=self.threads // lanes)
 
     def smooth(self, b, x, sweeps: int, first: int = 0) -> None:
         """``sweeps`` sweeps on ``K x = b`` (device arrays), as
