@@ -111,14 +111,14 @@ def launch_view(a):
 
     numba-cuda makes such a device array of every CUDA-array-interface argument (CuPy's) at every
     launch and, as version 3 of the interface asks by default, synchronises the stream the array
-    names (CuPy's legacy default stream): a Vanka sweep's launch, with 31 arrays, waited for the
-    GPU to finish all it had been given (and synchronised 30 times more), so that the host's
-    preparation of a launch never overlapped the GPU's work. The view here is made without that synchronisation
+    names (CuPy's legacy default stream): a Vanka sweep's launch, with 31 arrays, waited for the GPU
+    to finish all it had been given (and synchronised 30 times more), so that the host's preparation
+    of a launch never overlapped the GPU's work. The view here is made without that synchronisation
     (``sync=False``): CuPy's operations and numba-cuda's launches both go to the legacy default
-    stream (fbmflow sets no other), which runs them in the order given. A view made once, where
-    the arrays are set up, passes a launch as numba-cuda's own arrays do: numba-cuda's maintainers
-    measured arrays passed through the interface 3-7 times slower to pass (numba-cuda pull
-    request 539, issue 578)."""
+    stream (fbmflow sets no other), which runs them in the order given. A view made once, where the
+    arrays are set up, passes a launch as numba-cuda's own arrays do: numba-cuda's maintainers
+    measured arrays passed through the interface 3-7 times slower to pass (numba-cuda pull request
+    539, issue 578)."""
     cupy = sys.modules.get("cupy")
     if cupy is not None and isinstance(a, cupy.ndarray):
         from .._jit import cuda_target
