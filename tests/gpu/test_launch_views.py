@@ -47,7 +47,8 @@ def fake_cupy(monkeypatch):
         return a.view(np.ndarray)
 
     monkeypatch.setattr(cuda_target(), "as_cuda_array", as_cuda_array)
-    for name in ("vanka_sweep", "vanka_patches", "vanka_factors", "velocity_rows", "reaction_rows"):
+    for name in ("vanka_sweep", "vanka_patches", "vanka_factors", "velocity_rows", "reaction_rows",
+                 "apply_cells_sweep", "apply_cells"):
         record["kernels"][name] = Recorder()
         monkeypatch.setattr(_kernels, name, record["kernels"][name])
     return record
@@ -66,16 +67,12 @@ def test_a_smoothers_launches_pass_views_made_once_without_a_sync(fake_cupy, mon
     factors, operator and work arrays were made views at set-up), in one launch per sweep and in
     one launch per colour. Checked to fail with the launches passing CuPy's arrays."""
     from fbmflow.gpu import colours
-    from fbmflow.gpu.device import Backend
     from fbmflow.gpu.vanka import DeviceVanka
 
     prob, con = sharp_disk_problem(StructuredMesh.box((12, 12)), [0.513, 0.521], 0.3)
     system = prob.linear_system(prob.zero_state(), 100.0, 1.0, con)
     system = system.preconditioner or system
-    xp = types.SimpleNamespace(empty=lambda *a, **k: fake(np.empty(*a, **k)),
-                               zeros=lambda *a, **k: fake(np.zeros(*a, **k)))
-    backend = Backend(xp, None, "stand-in", 128, 32)
-    backend.put = lambda a, dtype=None: fake(np.array(a, dtype=dtype))
+    backend = fake_backend()
     monkeypatch.setattr(colours, "ONE_LAUNCH", one_launch)
     monkeypatch.setattr(colours.DeviceColours, "_cooperative_blocks", lambda self, sweep, threads, args: 1)
     smoother = DeviceVanka(FactoredVankaSmoother(system, order="colours", factor=False), backend)
@@ -95,6 +92,36 @@ def test_a_smoothers_launches_pass_views_made_once_without_a_sync(fake_cupy, mon
     assert arrays and not any(isinstance(a, FakeCupyArray) for a in arrays)
     assert not any(fake_cupy["sync"])
     assert len(fake_cupy["sync"]) - made == 2 * len(swept)  # b and x, once per sweep's colours
+
+
+def fake_backend():
+    """A backend of stand-in CuPy arrays (NumPy's underneath)."""
+    from fbmflow.gpu.device import Backend
+
+    xp = types.SimpleNamespace(empty=lambda *a, **k: fake(np.empty(*a, **k)),
+                               zeros=lambda *a, **k: fake(np.zeros(*a, **k)))
+    backend = Backend(xp, None, "stand-in", 128, 32)
+    backend.put = lambda a, dtype=None: fake(np.array(a, dtype=dtype))
+    return backend
+
+
+def test_a_spaces_operator_passes_its_cells_as_views_made_once(fake_cupy, monkeypatch):
+    """A :class:`~fbmflow.gpu.space.DeviceSpace` holds its cells' geometry as views (made once,
+    with ``sync=False``): its operator's launch is passed no CuPy array and makes views of its two
+    vectors only."""
+    from fbmflow.fem import FlowSpace
+    from fbmflow.gpu import colours, operators
+    from fbmflow.gpu.space import DeviceSpace
+
+    monkeypatch.setattr(colours.DeviceColours, "_cooperative_blocks", lambda self, sweep, threads, args: 1)
+    monkeypatch.setattr(operators, "_no_convection", lambda: np.zeros((1, 1, 1)))  # numba-cuda's, no GPU here
+    space = DeviceSpace(FlowSpace(StructuredMesh.box((3, 3, 2))), fake_backend())
+    assert not any(isinstance(a, FakeCupyArray) for a in space.geometry)
+    made = len(fake_cupy["sync"])
+    space.apply_mass_laplace(1.0, 0.5, np.ones(space.dim * space.n_v))
+    launches = fake_cupy["kernels"]["apply_cells_sweep"].calls
+    assert len(launches) == 1 and not any(isinstance(a, FakeCupyArray) for a in launches[0])
+    assert len(fake_cupy["sync"]) - made == 2 and not any(fake_cupy["sync"])
 
 
 def test_the_coefficients_launches_pass_views_and_numpy_arrays_pass_as_they_are(fake_cupy):

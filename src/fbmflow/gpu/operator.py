@@ -26,7 +26,7 @@ from ..fem.velocity_block import VelocityBlock
 from ..solvers.sparse import DivergenceProducts
 from ..solvers.system import SaddlePointSystem, as_csr
 from .colours import DeviceColours
-from .device import Backend, nbytes
+from .device import Backend, launch_view, nbytes
 from .operators import apply_cell_operator, apply_reaction, reaction_coefficients, velocity_coefficients
 from .space import device_space
 
@@ -221,7 +221,8 @@ class DeviceOperator:
         CPU's per-cell bodies (:func:`~fbmflow.gpu.operators.reaction_coefficients`,
         :func:`~fbmflow.gpu.operators.velocity_coefficients`): a copy of each velocity, not of
         the coefficients (about four times their bytes in 3D), and the CPU computes none of
-        them. Nothing for an assembled block."""
+        them; the coefficients are held as the launches that read them pass them
+        (:func:`~fbmflow.gpu.device.launch_view`). Nothing for an assembled block."""
         if not self.free or self.moves == self.system.A.moves:
             return
         A, put, xp, space = self.system.A, self.backend.put, self.backend.xp, self.space
@@ -230,11 +231,11 @@ class DeviceOperator:
         n_cells, nq = space.detJw.shape
         d, n_v = self.d, self.n_v
         if A.reacting is not None:
-            self.react = xp.empty((n_cells, nq, d, d), dtype=np.float32)
+            self.react = launch_view(xp.empty((n_cells, nq, d, d), dtype=np.float32))
             reaction_coefficients(put(A.reacting.reshape(d, n_v)), space.cell_dofs, space.phi, space.dphi,
                                   space.detJw, space.Jinv, self.react, threads=threads)
         if A.drifting is not None:
-            self.drift = xp.empty((n_cells, nq, d))
+            self.drift = launch_view(xp.empty((n_cells, nq, d)))
             velocity_coefficients(put(A.drifting.reshape(d, n_v)), space.cell_dofs, space.phi, space.detJw,
                                   self.drift, threads=threads)
             self.drift_colours = DeviceColours([c[A.drift_cells[c]] for c in space.host_colours

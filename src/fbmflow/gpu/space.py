@@ -9,24 +9,25 @@ from __future__ import annotations
 import numpy as np
 
 from .colours import DeviceColours
-from .device import Backend
+from .device import Backend, launch_views
 from .operators import apply_cell_operator, cell_colours
 
 
 class DeviceSpace:
     """The arrays of ``space``'s cells on the device of ``backend``: ``detJw (n_cells, nq)``,
     ``Jinv (n_cells, nq, d, d)``, ``cell_dofs (n_cells, nl)``, ``phi (nq, nl)``, ``dphi (nq, nl, d)``
-    (the CPU's), and the cells in ``colours`` that share no node
-    (:class:`~fbmflow.gpu.colours.DeviceColours` of :func:`~fbmflow.gpu.operators.cell_colours`;
-    the host's list in ``host_colours``). ``nbytes``: the
-    device memory they take [bytes]."""
+    (the CPU's; nothing but the kernels reads them, so on a GPU they are held as the launches pass
+    them, :func:`~fbmflow.gpu.device.launch_view`), and the cells in ``colours`` that share no
+    node (:class:`~fbmflow.gpu.colours.DeviceColours` of
+    :func:`~fbmflow.gpu.operators.cell_colours`; the host's list in ``host_colours``). ``nbytes``:
+    the device memory they take [bytes]."""
 
     def __init__(self, space, backend: Backend):
         put = backend.put
         self.backend = backend
         self.dim, self.n_v = space.dim, space.n_v
-        self.detJw, self.Jinv, self.cell_dofs, self.phi, self.dphi = (
-            put(a) for a in (space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi))
+        self.detJw, self.Jinv, self.cell_dofs, self.phi, self.dphi = launch_views(*(
+            put(a) for a in (space.detJw, space.Jinv, space.V.cell_dofs, space.phi, space.dphi)))
         self.host_colours = cell_colours(space.V.cell_dofs)
         self.colours = DeviceColours(self.host_colours, put)
         self.nbytes = self.colours.nbytes + sum(int(a.nbytes) for a in self.geometry)
