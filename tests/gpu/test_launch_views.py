@@ -35,7 +35,7 @@ class Recorder:
 def fake_cupy(monkeypatch):
     """CuPy as a module whose ``ndarray`` is :class:`FakeCupyArray`, numba-cuda's ``as_cuda_array``
     recording its ``sync`` and returning a plain NumPy view, and recording stand-ins for the kernels
-    a smoother and the coefficients launch; yields the record."""
+    a smoother, a space and the coefficients launch; returns the record."""
     from fbmflow._jit import cuda_target
     from fbmflow.gpu import _kernels
 
@@ -52,6 +52,17 @@ def fake_cupy(monkeypatch):
         record["kernels"][name] = Recorder()
         monkeypatch.setattr(_kernels, name, record["kernels"][name])
     return record
+
+
+def fake_backend():
+    """A backend of stand-in CuPy arrays (NumPy's underneath)."""
+    from fbmflow.gpu.device import Backend
+
+    xp = types.SimpleNamespace(empty=lambda *a, **k: fake(np.empty(*a, **k)),
+                               zeros=lambda *a, **k: fake(np.zeros(*a, **k)))
+    backend = Backend(xp, None, "stand-in", 128, 32)
+    backend.put = lambda a, dtype=None: fake(np.array(a, dtype=dtype))
+    return backend
 
 
 def passed_arrays(recorder):
@@ -92,17 +103,6 @@ def test_a_smoothers_launches_pass_views_made_once_without_a_sync(fake_cupy, mon
     assert arrays and not any(isinstance(a, FakeCupyArray) for a in arrays)
     assert not any(fake_cupy["sync"])
     assert len(fake_cupy["sync"]) - made == 2 * len(swept)  # b and x, once per sweep's colours
-
-
-def fake_backend():
-    """A backend of stand-in CuPy arrays (NumPy's underneath)."""
-    from fbmflow.gpu.device import Backend
-
-    xp = types.SimpleNamespace(empty=lambda *a, **k: fake(np.empty(*a, **k)),
-                               zeros=lambda *a, **k: fake(np.zeros(*a, **k)))
-    backend = Backend(xp, None, "stand-in", 128, 32)
-    backend.put = lambda a, dtype=None: fake(np.array(a, dtype=dtype))
-    return backend
 
 
 def test_a_spaces_operator_passes_its_cells_as_views_made_once(fake_cupy, monkeypatch):
